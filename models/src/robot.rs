@@ -1,0 +1,488 @@
+//! The kinematic tree: links, joints, end effectors, forward kinematics and Jacobians.
+
+use std::collections::HashSet;
+
+use nalgebra::{DVector, Isometry3, Matrix6xX, Point3, Vector3};
+
+use crate::error::ModelError;
+use crate::geometry::PlacedShape;
+use crate::joint::{Joint, JointKind, JointLimits};
+
+/// A rigid body of the tree with its collision shapes (in the link frame).
+#[derive(Debug, Clone)]
+pub struct Link {
+    pub name: String,
+    /// The joint whose child this link is; `None` for the root.
+    pub parent_joint: Option<usize>,
+    pub shapes: Vec<PlacedShape>,
+}
+
+/// An end effector: a flange frame (a link frame) and a tool frame fixed to it.
+#[derive(Debug, Clone)]
+pub struct EndEffector {
+    pub name: String,
+    /// The link whose frame is the flange.
+    pub link: usize,
+    /// Tool frame relative to the flange.
+    pub tool: Isometry3<f64>,
+}
+
+/// A robot: a kinematic tree of joints (revolute, continuous, prismatic, fixed) with limits,
+/// collision shapes per link and a self-collision pair filter.
+///
+/// Links are stored so that a parent always precedes its children; the configuration vector
+/// `q` holds one value per degree of freedom, in [`Robot::dof_joints`] order.
+#[derive(Debug, Clone)]
+pub struct Robot {
+    name: String,
+    provenance: String,
+    links: Vec<Link>,
+    joints: Vec<Joint>,
+    dof_joints: Vec<usize>,
+    end_effectors: Vec<EndEffector>,
+    home: Vec<f64>,
+    disabled_pairs: HashSet<(usize, usize)>,
+    base: Isometry3<f64>,
+}
+
+/// Builds a [`Robot`] link by link; [`RobotBuilder::build`] checks and orders the tree.
+#[derive(Debug, Clone)]
+pub struct RobotBuilder {
+    name: String,
+    provenance: String,
+    links: Vec<Link>,
+    joints: Vec<Joint>,
+    end_effectors: Vec<(String, String, Isometry3<f64>)>,
+    home: Option<Vec<f64>>,
+    disabled: Vec<(String, String)>,
+    pending_mimic: Vec<(usize, String, f64, f64)>,
+    base: Isometry3<f64>,
+}
+
+impl RobotBuilder {
+    pub fn new(name: impl Into<String>) -> Self {
+        Self {
+            name: name.into(),
+            provenance: String::new(),
+            links: Vec::new(),
+            joints: Vec::new(),
+            end_effectors: Vec::new(),
+            home: None,
+            disabled: Vec::new(),
+            pending_mimic: Vec::new(),
+            base: Isometry3::identity(),
+        }
+    }
+    /// Where the numbers come from (shown in `--help` and `embodied model`).
+    pub fn provenance(mut self, text: impl Into<String>) -> Self {
+        self.provenance = text.into();
+        self
+    }
+    /// Placement of the root link in the world.
+    pub fn base(mut self, base: Isometry3<f64>) -> Self {
+        self.base = base;
+        self
+    }
+    /// Add a link; returns its index (before reordering).
+    pub fn link(&mut self, name: impl Into<String>, shapes: Vec<PlacedShape>) -> usize {
+        self.links.push(Link { name: name.into(), parent_joint: None, shapes });
+        self.links.len() - 1
+    }
+    /// Index of a link by name.
+    pub fn link_index(&self, name: &str) -> Option<usize> {
+        self.links.iter().position(|l| l.name == name)
+    }
+    /// Attach more shapes to a link.
+    pub fn add_shapes(&mut self, link: usize, shapes: impl IntoIterator<Item = PlacedShape>) {
+        self.links[link].shapes.extend(shapes);
+    }
+    /// Add a joint between two existing links (indices from [`RobotBuilder::link`]).
+    #[allow(clippy::too_many_arguments)]
+    pub fn joint(
+        &mut self,
+        name: impl Into<String>,
+        kind: JointKind,
+        parent: usize,
+        child: usize,
+        origin: Isometry3<f64>,
+        axis: Vector3<f64>,
+        offset: f64,
+        post: Isometry3<f64>,
+        limits: JointLimits,
+    ) -> usize {
+        let axis = nalgebra::Unit::try_new(axis, 1e-12).unwrap_or(Vector3::z_axis());
+        self.joints.push(Joint {
+            name: name.into(),
+            kind,
+            parent_link: parent,
+            child_link: child,
+            origin,
+            axis,
+            offset,
+            post,
+            limits,
+            dof_index: None,
+            mimic: None,
+        });
+        self.joints.len() - 1
+    }
+    /// Make a joint follow another (by joint name): value = multiplier * q(other) + offset.
+    pub fn mimic(&mut self, joint: usize, other: String, multiplier: f64, offset: f64) {
+        self.pending_mimic.push((joint, other, multiplier, offset));
+    }
+    /// Declare an end effector: flange = the named link's frame; tool relative to it.
+    pub fn end_effector(&mut self, name: impl Into<String>, link: impl Into<String>, tool: Isometry3<f64>) {
+        self.end_effectors.push((name.into(), link.into(), tool));
+    }
+    /// The configuration reported as "home" (default: zeros clamped into limits).
+    pub fn home(&mut self, q: Vec<f64>) {
+        self.home = Some(q);
+    }
+    /// A link pair never to be checked for self-collision (SRDF `<disable_collisions>`).
+    pub fn disable_collisions(&mut self, a: impl Into<String>, b: impl Into<String>) {
+        self.disabled.push((a.into(), b.into()));
+    }
+
+    /// Check the tree, order links parent-first, number the degrees of freedom.
+    pub fn build(self) -> Result<Robot, ModelError> {
+        let invalid = |message: String| ModelError::Invalid { robot: self.name.clone(), message };
+        let n = self.links.len();
+        if n == 0 {
+            return Err(invalid("it has no links".into()));
+        }
+        for (i, l) in self.links.iter().enumerate() {
+            if self.links[..i].iter().any(|o| o.name == l.name) {
+                return Err(invalid(format!("two links are named `{}`", l.name)));
+            }
+        }
+        for (i, j) in self.joints.iter().enumerate() {
+            if self.joints[..i].iter().any(|o| o.name == j.name) {
+                return Err(invalid(format!("two joints are named `{}`", j.name)));
+            }
+        }
+        let mut parent_of: Vec<Option<usize>> = vec![None; n];
+        for (ji, j) in self.joints.iter().enumerate() {
+            if j.parent_link >= n || j.child_link >= n {
+                return Err(invalid(format!("joint `{}` refers to a missing link", j.name)));
+            }
+            if parent_of[j.child_link].is_some() {
+                return Err(invalid(format!("link `{}` is the child of two joints", self.links[j.child_link].name)));
+            }
+            parent_of[j.child_link] = Some(ji);
+        }
+        let roots: Vec<usize> = (0..n).filter(|&l| parent_of[l].is_none()).collect();
+        if roots.len() != 1 {
+            let names: Vec<&str> = roots.iter().map(|&l| self.links[l].name.as_str()).collect();
+            return Err(invalid(format!("it must have exactly one root link, found {}: {:?}", roots.len(), names)));
+        }
+        // Depth-first preorder from the root, children in declaration order: parents come
+        // before children and each branch stays contiguous.
+        let mut order = Vec::with_capacity(n);
+        let mut stack = vec![roots[0]];
+        while let Some(l) = stack.pop() {
+            if order.len() > n {
+                break;
+            }
+            order.push(l);
+            let children: Vec<usize> =
+                self.joints.iter().filter(|j| j.parent_link == l).map(|j| j.child_link).collect();
+            stack.extend(children.into_iter().rev());
+        }
+        if order.len() != n {
+            return Err(invalid("its joints form a cycle or leave links unconnected".into()));
+        }
+        let mut new_index = vec![0usize; n];
+        for (new, &old) in order.iter().enumerate() {
+            new_index[old] = new;
+        }
+        let mut links: Vec<Link> = order.iter().map(|&old| self.links[old].clone()).collect();
+        // Joints in the order of their child links, so joint k moves link k+1.
+        let mut joints: Vec<Joint> = order[1..]
+            .iter()
+            .map(|&child| {
+                let Some(ji) = parent_of[child] else { unreachable!("non-root link has a parent") };
+                let mut j = self.joints[ji].clone();
+                j.parent_link = new_index[j.parent_link];
+                j.child_link = new_index[j.child_link];
+                j
+            })
+            .collect();
+        for (ji, j) in joints.iter().enumerate() {
+            links[j.child_link].parent_joint = Some(ji);
+        }
+        // Degrees of freedom: every moving joint that does not mimic another.
+        let mimics: Vec<(String, String, f64, f64)> = self
+            .pending_mimic
+            .iter()
+            .map(|(j, other, m, o)| (self.joints[*j].name.clone(), other.clone(), *m, *o))
+            .collect();
+        // Degrees of freedom: every moving joint that does not mimic another, numbered in the
+        // order the joints were declared (URDF file order; on-track arm first in two-irp6).
+        let mut declared: Vec<usize> = (0..joints.len()).collect();
+        declared.sort_by_key(|&ji| self.joints.iter().position(|o| o.name == joints[ji].name));
+        let mut dof_joints = Vec::new();
+        for ji in declared {
+            let j = &mut joints[ji];
+            let is_mimic = mimics.iter().any(|(name, ..)| *name == j.name);
+            if j.kind != JointKind::Fixed && !is_mimic {
+                j.dof_index = Some(dof_joints.len());
+                dof_joints.push(ji);
+            }
+        }
+        for (name, other, mult, off) in &mimics {
+            let Some(dof) = joints.iter().find(|j| &j.name == other).and_then(|j| j.dof_index) else {
+                return Err(invalid(format!("joint `{name}` mimics `{other}`, which is not a degree of freedom")));
+            };
+            if let Some(j) = joints.iter_mut().find(|j| &j.name == name) {
+                j.mimic = Some((dof, *mult, *off));
+            }
+        }
+        let find_link = |name: &str| -> Result<usize, ModelError> {
+            links.iter().position(|l| l.name == name).ok_or_else(|| ModelError::NoSuchName {
+                robot: self.name.clone(),
+                what: "link",
+                name: name.to_string(),
+            })
+        };
+        let mut end_effectors = Vec::new();
+        for (name, link, tool) in &self.end_effectors {
+            end_effectors.push(EndEffector { name: name.clone(), link: find_link(link)?, tool: *tool });
+        }
+        let mut disabled_pairs = HashSet::new();
+        for (a, b) in &self.disabled {
+            // Unknown names in an SRDF are common (other groups' links); skip them silently.
+            if let (Ok(a), Ok(b)) = (find_link(a), find_link(b)) {
+                disabled_pairs.insert((a.min(b), a.max(b)));
+            }
+        }
+        let dof = dof_joints.len();
+        let home = match self.home {
+            Some(h) if h.len() == dof => h,
+            Some(h) => {
+                return Err(invalid(format!("home configuration has {} values for {dof} joints", h.len())));
+            }
+            None => dof_joints.iter().map(|&ji| joints[ji].limits.clamp(0.0)).collect(),
+        };
+        Ok(Robot {
+            name: self.name,
+            provenance: self.provenance,
+            links,
+            joints,
+            dof_joints,
+            end_effectors,
+            home,
+            disabled_pairs,
+            base: self.base,
+        })
+    }
+}
+
+impl Robot {
+    pub fn name(&self) -> &str {
+        &self.name
+    }
+    /// Where the robot's numbers come from, and what is assumed.
+    pub fn provenance(&self) -> &str {
+        &self.provenance
+    }
+    /// Number of degrees of freedom (length of `q`).
+    pub fn dof(&self) -> usize {
+        self.dof_joints.len()
+    }
+    pub fn links(&self) -> &[Link] {
+        &self.links
+    }
+    pub fn joints(&self) -> &[Joint] {
+        &self.joints
+    }
+    /// Joint indices of the degrees of freedom, in `q` order.
+    pub fn dof_joints(&self) -> &[usize] {
+        &self.dof_joints
+    }
+    /// The joint of degree of freedom `i`.
+    pub fn dof_joint(&self, i: usize) -> &Joint {
+        &self.joints[self.dof_joints[i]]
+    }
+    /// Names of the degrees of freedom, in `q` order.
+    pub fn joint_names(&self) -> Vec<String> {
+        self.dof_joints.iter().map(|&j| self.joints[j].name.clone()).collect()
+    }
+    /// Limits of the degrees of freedom, in `q` order.
+    pub fn limits(&self) -> Vec<JointLimits> {
+        self.dof_joints.iter().map(|&j| self.joints[j].limits).collect()
+    }
+    /// Whether degree of freedom `i` is an unlimited angle (wraps).
+    pub fn is_continuous(&self, i: usize) -> bool {
+        self.joints[self.dof_joints[i]].kind == JointKind::Continuous
+    }
+    pub fn end_effectors(&self) -> &[EndEffector] {
+        &self.end_effectors
+    }
+    pub fn home(&self) -> &[f64] {
+        &self.home
+    }
+    /// Placement of the root link in the world.
+    pub fn base(&self) -> &Isometry3<f64> {
+        &self.base
+    }
+    /// Move the whole robot (placement of its root in the world).
+    pub fn set_base(&mut self, base: Isometry3<f64>) {
+        self.base = base;
+    }
+    pub fn link_index(&self, name: &str) -> Option<usize> {
+        self.links.iter().position(|l| l.name == name)
+    }
+    pub fn joint_index(&self, name: &str) -> Option<usize> {
+        self.joints.iter().position(|j| j.name == name)
+    }
+    /// Self-collision pairs disabled by the model or its SRDF (indices ordered low, high).
+    pub fn disabled_pairs(&self) -> &HashSet<(usize, usize)> {
+        &self.disabled_pairs
+    }
+    /// Disable self-collision checks between two links (by index).
+    pub fn disable_pair(&mut self, a: usize, b: usize) {
+        self.disabled_pairs.insert((a.min(b), a.max(b)));
+    }
+
+    /// Check a configuration's length, finiteness and position limits.
+    pub fn check_configuration(&self, q: &[f64]) -> Result<(), ModelError> {
+        if q.len() != self.dof() {
+            return Err(ModelError::WrongDof { robot: self.name.clone(), expected: self.dof(), got: q.len() });
+        }
+        for (i, &v) in q.iter().enumerate() {
+            let j = self.dof_joint(i);
+            if !v.is_finite() {
+                return Err(ModelError::NotFinite { joint: j.name.clone(), value: v });
+            }
+            let l = j.limits;
+            if v < l.lower - 1e-9 || v > l.upper + 1e-9 {
+                return Err(ModelError::OutOfLimits {
+                    joint: j.name.clone(),
+                    value: v,
+                    lower: l.lower,
+                    upper: l.upper,
+                });
+            }
+        }
+        Ok(())
+    }
+
+    /// Whether `q` is within every position limit (no allocation; for hot paths).
+    pub fn within_limits(&self, q: &[f64]) -> bool {
+        q.len() == self.dof()
+            && q.iter().zip(&self.dof_joints).all(|(&v, &j)| {
+                let l = &self.joints[j].limits;
+                v.is_finite() && v >= l.lower - 1e-9 && v <= l.upper + 1e-9
+            })
+    }
+
+    /// The value of joint `ji` for configuration `q` (fixed: 0; mimic: follows its leader).
+    #[inline]
+    pub fn joint_value(&self, ji: usize, q: &[f64]) -> f64 {
+        let j = &self.joints[ji];
+        match (j.dof_index, j.mimic) {
+            (Some(i), _) => q[i],
+            (None, Some((d, m, o))) => q[d] * m + o,
+            _ => 0.0,
+        }
+    }
+
+    /// World poses of every link frame at `q` (index = link index).
+    ///
+    /// `q` must have [`Robot::dof`] values; use [`Robot::check_configuration`] on user input.
+    pub fn forward_kinematics(&self, q: &[f64]) -> Vec<Isometry3<f64>> {
+        let mut out = vec![Isometry3::identity(); self.links.len()];
+        self.forward_kinematics_into(q, &mut out);
+        out
+    }
+
+    /// [`Robot::forward_kinematics`] into a caller-owned buffer (no allocation).
+    #[inline]
+    pub fn forward_kinematics_into(&self, q: &[f64], out: &mut [Isometry3<f64>]) {
+        debug_assert_eq!(q.len(), self.dof());
+        out[0] = self.base;
+        for (ji, j) in self.joints.iter().enumerate() {
+            out[j.child_link] = out[j.parent_link] * j.local_transform(self.joint_value(ji, q));
+        }
+    }
+
+    /// World pose of one link frame at `q`.
+    pub fn link_pose(&self, q: &[f64], link: usize) -> Isometry3<f64> {
+        let mut pose = Isometry3::identity();
+        let mut l = link;
+        while let Some(ji) = self.links[l].parent_joint {
+            let j = &self.joints[ji];
+            pose = j.local_transform(self.joint_value(ji, q)) * pose;
+            l = j.parent_link;
+        }
+        self.base * pose
+    }
+
+    /// Flange and tool poses of end effector `ee` at `q`.
+    pub fn end_effector_poses(&self, q: &[f64], ee: usize) -> (Isometry3<f64>, Isometry3<f64>) {
+        let e = &self.end_effectors[ee];
+        let flange = self.link_pose(q, e.link);
+        (flange, flange * e.tool)
+    }
+
+    /// The joints on the path from the root to `link`, root first.
+    pub fn chain_to(&self, link: usize) -> Vec<usize> {
+        let mut chain = Vec::new();
+        let mut l = link;
+        while let Some(ji) = self.links[l].parent_joint {
+            chain.push(ji);
+            l = self.joints[ji].parent_link;
+        }
+        chain.reverse();
+        chain
+    }
+
+    /// Geometric Jacobian (rows: linear velocity xyz, then angular velocity xyz, world frame) of
+    /// the point `frame_in_link` attached to `link`, one column per degree of freedom.
+    pub fn jacobian(&self, q: &[f64], link: usize, frame_in_link: &Isometry3<f64>) -> Matrix6xX<f64> {
+        let poses = self.forward_kinematics(q);
+        self.jacobian_with_poses(&poses, link, frame_in_link)
+    }
+
+    /// [`Robot::jacobian`] reusing link poses already computed for `q`.
+    pub fn jacobian_with_poses(
+        &self,
+        poses: &[Isometry3<f64>],
+        link: usize,
+        frame_in_link: &Isometry3<f64>,
+    ) -> Matrix6xX<f64> {
+        let mut jac = Matrix6xX::zeros(self.dof());
+        let p: Point3<f64> = (poses[link] * frame_in_link).translation.vector.into();
+        let mut l = link;
+        while let Some(ji) = self.links[l].parent_joint {
+            let j = &self.joints[ji];
+            let (dof, scale) = match (j.dof_index, j.mimic) {
+                (Some(i), _) => (Some(i), 1.0),
+                (None, Some((d, m, _))) => (Some(d), m),
+                _ => (None, 0.0),
+            };
+            if let Some(dof) = dof {
+                let frame = poses[j.parent_link] * j.origin;
+                let axis = frame.rotation * j.axis.into_inner();
+                let col: [f64; 6] = match j.kind {
+                    JointKind::Revolute | JointKind::Continuous => {
+                        let lin = axis.cross(&(p - Point3::from(frame.translation.vector)));
+                        [lin.x, lin.y, lin.z, axis.x, axis.y, axis.z]
+                    }
+                    JointKind::Prismatic => [axis.x, axis.y, axis.z, 0.0, 0.0, 0.0],
+                    JointKind::Fixed => [0.0; 6],
+                };
+                for (r, v) in col.iter().enumerate() {
+                    jac[(r, dof)] += scale * v;
+                }
+            }
+            l = j.parent_link;
+        }
+        jac
+    }
+
+    /// A copy of `home` as a vector.
+    pub fn home_vector(&self) -> DVector<f64> {
+        DVector::from_column_slice(&self.home)
+    }
+}
