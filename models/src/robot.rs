@@ -486,3 +486,78 @@ impl Robot {
         DVector::from_column_slice(&self.home)
     }
 }
+
+impl Robot {
+    /// A copy of this robot in which the named degrees of freedom are fixed at the given values
+    /// (e.g. a gripper held at its start state while the arm is planned). Mimic joints that
+    /// follow a frozen joint are frozen with it.
+    pub fn freeze_joints(&self, frozen: &[(&str, f64)]) -> Result<Robot, ModelError> {
+        let mut robot = self.clone();
+        let mut q_full = self.home.clone();
+        for (name, value) in frozen {
+            let Some(ji) = self.joint_index(name) else {
+                return Err(ModelError::NoSuchName { robot: self.name.clone(), what: "joint", name: name.to_string() });
+            };
+            let Some(dof) = self.joints[ji].dof_index else {
+                return Err(ModelError::Invalid {
+                    robot: self.name.clone(),
+                    message: format!("joint `{name}` is not a degree of freedom and cannot be frozen"),
+                });
+            };
+            q_full[dof] = *value;
+        }
+        let frozen_dofs: Vec<usize> =
+            frozen.iter().filter_map(|(n, _)| self.joint_index(n).and_then(|j| self.joints[j].dof_index)).collect();
+        for (ji, j) in robot.joints.iter_mut().enumerate() {
+            let leader = match (j.dof_index, j.mimic) {
+                (Some(d), _) => Some(d),
+                (None, Some((d, _, _))) => Some(d),
+                _ => None,
+            };
+            if let Some(d) = leader
+                && frozen_dofs.contains(&d)
+            {
+                let value = self.joint_value(ji, &q_full);
+                let moved = j.local_transform(value);
+                j.origin = moved * j.post.inverse();
+                j.kind = JointKind::Fixed;
+                j.offset = 0.0;
+                j.mimic = None;
+                j.dof_index = None;
+            }
+        }
+        // Renumber the remaining degrees of freedom (and the leaders of remaining mimics).
+        let old_to_new: Vec<Option<usize>> = {
+            let mut next = 0;
+            self.dof_joints
+                .iter()
+                .map(|&ji| {
+                    if robot.joints[ji].kind == JointKind::Fixed {
+                        None
+                    } else {
+                        next += 1;
+                        Some(next - 1)
+                    }
+                })
+                .collect()
+        };
+        robot.dof_joints =
+            self.dof_joints.iter().copied().filter(|&ji| robot.joints[ji].kind != JointKind::Fixed).collect();
+        for j in robot.joints.iter_mut() {
+            if let Some(d) = j.dof_index {
+                j.dof_index = old_to_new[d];
+            }
+            if let Some((d, m, o)) = j.mimic {
+                j.mimic = old_to_new[d].map(|nd| (nd, m, o));
+            }
+        }
+        robot.home = self
+            .dof_joints
+            .iter()
+            .zip(&q_full)
+            .filter(|(ji, _)| robot.joints[**ji].kind != JointKind::Fixed)
+            .map(|(_, v)| *v)
+            .collect();
+        Ok(robot)
+    }
+}

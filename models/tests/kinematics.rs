@@ -90,3 +90,17 @@ fn wrap_around_metric_on_polycrank() {
     let d2 = irp.distance(&[-3.1, 0.0, 0.0, 0.0, 0.0, 0.0], &[3.1, 0.0, 0.0, 0.0, 0.0, 0.0]);
     assert!((d2 - 6.2).abs() < 1e-12);
 }
+
+#[test]
+fn freezing_joints_keeps_the_kinematics() {
+    let ot = builtin("irp6-on-track").unwrap();
+    let q = [0.7, 0.3, -1.2, 0.1, 0.4, 2.0, -1.0];
+    let frozen = ot.freeze_joints(&[("track", 0.7), ("wrist_n", -1.0)]).unwrap();
+    assert_eq!(frozen.dof(), 5);
+    assert_eq!(frozen.joint_names(), vec!["column", "lower_arm", "upper_arm", "wrist_t", "wrist_v"]);
+    let (a, _) = ot.end_effector_poses(&q, 0);
+    let (b, _) = frozen.end_effector_poses(&[0.3, -1.2, 0.1, 0.4, 2.0], 0);
+    assert!((a.translation.vector - b.translation.vector).norm() < 1e-12);
+    assert!(a.rotation.angle_to(&b.rotation) < 1e-12);
+    assert!(ot.freeze_joints(&[("nope", 0.0)]).is_err());
+}
