@@ -1,0 +1,132 @@
+//! When deliberation must stop.
+//!
+//! The paper (end of section 4): if planning takes so long that the plan is not in
+//! `c_c^{i+1}` when the control step needs it, the agent must compute `c^{i+1}` without the
+//! plan and halt the effector. A [`Deadline`] is how the caller tells the search when "late"
+//! begins: a wall-clock instant, an expansion budget (reproducible on any machine), a
+//! cancellation flag raised by another thread, any combination of these, or none.
+
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+/// Why a search stopped before it could decide.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
+pub enum Interrupt {
+    /// The wall-clock deadline passed.
+    WallClock,
+    /// The expansion budget was used up.
+    ExpansionBudget,
+    /// Another thread raised the cancellation flag.
+    Cancelled,
+}
+
+/// A limit on deliberation: wall clock, expansion budget, cancellation flag, or none of them.
+///
+/// Build with [`Deadline::none`], [`Deadline::after`], [`Deadline::at`] or
+/// [`Deadline::expansions`], then combine with the `and_*`/`with_*` methods: the search stops at
+/// whichever limit comes first.
+#[derive(Debug, Clone, Default)]
+pub struct Deadline {
+    at: Option<Instant>,
+    max_expansions: Option<u64>,
+    cancel: Option<Arc<AtomicBool>>,
+}
+
+impl Deadline {
+    /// No limit: the search runs until it is solved or proven infeasible.
+    pub fn none() -> Self {
+        Self::default()
+    }
+
+    /// A wall-clock deadline `budget` from now. A budget too large to represent means no wall clock.
+    pub fn after(budget: Duration) -> Self {
+        Self { at: Instant::now().checked_add(budget), ..Self::default() }
+    }
+
+    /// A wall-clock deadline at `instant`.
+    pub fn at(instant: Instant) -> Self {
+        Self { at: Some(instant), ..Self::default() }
+    }
+
+    /// An expansion budget: at most `n` states are expanded. Reproducible on any machine.
+    pub fn expansions(n: u64) -> Self {
+        Self { max_expansions: Some(n), ..Self::default() }
+    }
+
+    /// Adds (or tightens to) an expansion budget of `n`.
+    #[must_use]
+    pub fn and_expansions(mut self, n: u64) -> Self {
+        self.max_expansions = Some(self.max_expansions.map_or(n, |m| m.min(n)));
+        self
+    }
+
+    /// Adds (or tightens to) a wall-clock deadline `budget` from now.
+    #[must_use]
+    pub fn and_after(self, budget: Duration) -> Self {
+        match Instant::now().checked_add(budget) {
+            Some(instant) => self.and_at(instant),
+            None => self,
+        }
+    }
+
+    /// Adds (or tightens to) a wall-clock deadline at `instant`.
+    #[must_use]
+    pub fn and_at(mut self, instant: Instant) -> Self {
+        self.at = Some(self.at.map_or(instant, |a| a.min(instant)));
+        self
+    }
+
+    /// Adds a cancellation flag: when another thread stores `true`, the search stops at its
+    /// next deadline check (the executor's control thread uses this to abort a stale request).
+    #[must_use]
+    pub fn with_cancel_flag(mut self, flag: Arc<AtomicBool>) -> Self {
+        self.cancel = Some(flag);
+        self
+    }
+
+    /// The wall-clock instant, if any.
+    pub fn instant(&self) -> Option<Instant> {
+        self.at
+    }
+
+    /// The expansion budget, if any.
+    pub fn expansion_budget(&self) -> Option<u64> {
+        self.max_expansions
+    }
+
+    /// True when the search, having expanded `expansions` states, must stop now.
+    pub fn is_past(&self, expansions: u64) -> bool {
+        self.check(expansions, true).is_some()
+    }
+
+    /// Time left before the wall-clock deadline (`None` without one, zero once past).
+    pub fn remaining(&self) -> Option<Duration> {
+        self.at.map(|at| at.saturating_duration_since(Instant::now()))
+    }
+
+    /// The reason to stop, if any. The expansion budget is an integer compare and is always
+    /// checked; the cancellation flag and the clock are checked only when `read_clock` is set,
+    /// so that a hot loop can read `Instant::now()` every few expansions.
+    #[inline]
+    pub(crate) fn check(&self, expansions: u64, read_clock: bool) -> Option<Interrupt> {
+        if self.max_expansions.is_some_and(|max| expansions >= max) {
+            return Some(Interrupt::ExpansionBudget);
+        }
+        if read_clock {
+            if self.cancel.as_ref().is_some_and(|flag| flag.load(Ordering::Relaxed)) {
+                return Some(Interrupt::Cancelled);
+            }
+            if self.at.is_some_and(|at| Instant::now() >= at) {
+                return Some(Interrupt::WallClock);
+            }
+        }
+        None
+    }
+
+    /// True when the deadline needs a clock read or a flag load at all.
+    #[inline]
+    pub(crate) fn has_clock(&self) -> bool {
+        self.at.is_some() || self.cancel.is_some()
+    }
+}
