@@ -12,3 +12,4 @@ pub mod search;
 pub mod task;
 
 pub use error::PlanError;
+pub mod moveit;
