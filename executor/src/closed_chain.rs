@@ -1,0 +1,1 @@
+//! Two-arm closed-chain coordination (placeholder).

@@ -1,0 +1,263 @@
+//! Effectors `e_j`: what executes `c^{i+1}_e`.
+//!
+//! * [`Effector`]: one small trait per capability (openrr's arci style).
+//! * [`ServoModel`]: a simulated joint servo, tracking position or velocity targets within the
+//!   robot's limits.
+//! * [`SafetyLimiter`]: a decorator implementing the same trait that makes every command respect
+//!   position, velocity and acceleration limits before the wrapped effector sees it. It enforces
+//!   limits by wrapping, from the measured state, not by remembering earlier commands.
+//! * [`SafeHalt`]: the controlled stop (stop category 2) used when a specification error or a
+//!   late plan leaves nothing sensible to command.
+
+use embodied_models::JointLimits;
+
+use crate::error::ExecutorError;
+use crate::image::{CommandMode, InputImages, JointCommand, OutputImages};
+use crate::transition::TransitionFunction;
+
+/// An effector: it executes joint commands and reports its state (the source of `c^i_e`).
+pub trait Effector: Send {
+    fn limits(&self) -> &[JointLimits];
+    /// Measured joint positions.
+    fn q(&self) -> &[f64];
+    /// Measured joint velocities.
+    fn qd(&self) -> &[f64];
+    /// Execute `command` for one control period `dt`.
+    fn execute(&mut self, command: &JointCommand, dt: f64);
+}
+
+impl Effector for Box<dyn Effector> {
+    fn limits(&self) -> &[JointLimits] {
+        (**self).limits()
+    }
+    fn q(&self) -> &[f64] {
+        (**self).q()
+    }
+    fn qd(&self) -> &[f64] {
+        (**self).qd()
+    }
+    fn execute(&mut self, command: &JointCommand, dt: f64) {
+        (**self).execute(command, dt)
+    }
+}
+
+/// Check that limits can be enforced: positive finite velocity and acceleration bounds,
+/// `lower <= upper`.
+pub fn validate_limits(limits: &[JointLimits]) -> Result<(), ExecutorError> {
+    for (joint, l) in limits.iter().enumerate() {
+        let reason = if !(l.max_velocity > 0.0 && l.max_velocity.is_finite()) {
+            "max_velocity must be positive and finite"
+        } else if !(l.max_acceleration > 0.0 && l.max_acceleration.is_finite()) {
+            "max_acceleration must be positive and finite"
+        } else if l.lower.is_nan() || l.upper.is_nan() || l.lower > l.upper {
+            "lower must not exceed upper"
+        } else {
+            continue;
+        };
+        return Err(ExecutorError::InvalidLimits { joint, reason: reason.to_string() });
+    }
+    Ok(())
+}
+
+/// The velocities `[lo, hi]` a joint at position `q` moving at `v` may take in the next step:
+/// within `±max_velocity`, within `±max_acceleration * dt` of `v`, and slow enough to stop
+/// before a position bound decelerating at `max_acceleration` (so that bounds are never
+/// crossed). From a state that already violates the last condition the window is the hardest
+/// allowed braking.
+pub fn velocity_window(q: f64, v: f64, lim: &JointLimits, dt: f64) -> (f64, f64) {
+    let a = lim.max_acceleration;
+    let mut lo = (-lim.max_velocity).max(v - a * dt);
+    let mut hi = lim.max_velocity.min(v + a * dt);
+    // Stopping distance after one step at v' with semi-implicit integration is at most
+    // v' dt + v'^2 / (2a); keep it within the remaining room d.
+    let bound = |d: f64| -a * dt + (a * a * dt * dt + 2.0 * a * d.max(0.0)).sqrt();
+    if lim.upper.is_finite() {
+        hi = hi.min(bound(lim.upper - q));
+    }
+    if lim.lower.is_finite() {
+        lo = lo.max(-bound(q - lim.lower));
+    }
+    if lo > hi {
+        let brake = 0.0_f64.clamp(v - a * dt, v + a * dt);
+        return (brake, brake);
+    }
+    (lo, hi)
+}
+
+fn finite_or(x: f64, fallback: f64) -> f64 {
+    if x.is_finite() { x } else { fallback }
+}
+
+/// A simulated servo: per joint, a velocity-level tracking law integrated at `dt`, saturated
+/// by [`velocity_window`] so that the simulated joints never exceed their limits.
+///
+/// Position mode: `v = qd_ff + k (q_target - (q + qd_ff dt))` (the error is taken w.r.t. where
+/// the feed-forward velocity alone would lead, so a consistent trajectory is tracked exactly),
+/// with the correction capped at `sqrt(2 a |e|)` so the servo brakes into the target.
+/// Velocity mode: `v = qd`. Non-finite targets are ignored (the joint brakes to rest).
+#[derive(Debug, Clone)]
+pub struct ServoModel {
+    limits: Vec<JointLimits>,
+    q: Vec<f64>,
+    qd: Vec<f64>,
+    gain: f64,
+}
+
+impl ServoModel {
+    /// A servo at rest at `q0`, positions clamped into the limits.
+    pub fn new(limits: Vec<JointLimits>, q0: &[f64]) -> Result<Self, ExecutorError> {
+        validate_limits(&limits)?;
+        if q0.len() != limits.len() {
+            return Err(ExecutorError::DimensionMismatch {
+                what: "initial configuration".into(),
+                expected: limits.len(),
+                got: q0.len(),
+            });
+        }
+        let q = q0.iter().zip(&limits).map(|(q, l)| l.clamp(finite_or(*q, 0.0))).collect();
+        let qd = vec![0.0; limits.len()];
+        Ok(Self { limits, q, qd, gain: 50.0 })
+    }
+    /// Position-loop gain in 1/s (default 50); capped at `1/dt` when used.
+    pub fn with_gain(mut self, gain: f64) -> Self {
+        self.gain = finite_or(gain, 50.0).max(0.0);
+        self
+    }
+}
+
+impl Effector for ServoModel {
+    fn limits(&self) -> &[JointLimits] {
+        &self.limits
+    }
+    fn q(&self) -> &[f64] {
+        &self.q
+    }
+    fn qd(&self) -> &[f64] {
+        &self.qd
+    }
+    fn execute(&mut self, command: &JointCommand, dt: f64) {
+        for i in 0..self.limits.len() {
+            let lim = &self.limits[i];
+            let (q, v) = (self.q[i], self.qd[i]);
+            let desired = tracking_velocity(command, i, q, lim, self.gain, dt);
+            let (lo, hi) = velocity_window(q, v, lim, dt);
+            let v_next = desired.clamp(lo, hi);
+            self.qd[i] = v_next;
+            self.q[i] = lim.clamp(q + v_next * dt);
+        }
+    }
+}
+
+/// The velocity joint `i` at `q` should take to follow `command` (see [`ServoModel`]); zero for
+/// non-finite targets.
+pub fn tracking_velocity(command: &JointCommand, i: usize, q: f64, lim: &JointLimits, gain: f64, dt: f64) -> f64 {
+    let ff = finite_or(command.qd.get(i).copied().unwrap_or(0.0), 0.0);
+    match command.mode {
+        CommandMode::Velocity => ff,
+        CommandMode::Position => match command.q.get(i).copied().filter(|t| t.is_finite()) {
+            Some(target) => {
+                let e = lim.clamp(target) - (q + ff * dt);
+                let correction = (gain.min(1.0 / dt) * e.abs()).min((2.0 * lim.max_acceleration * e.abs()).sqrt());
+                ff + correction.copysign(e)
+            }
+            None => 0.0,
+        },
+    }
+}
+
+/// Safety decorator: turns every command into one the joints can follow within their limits
+/// before the wrapped effector sees it. For each joint it takes the velocity the command asks
+/// for ([`tracking_velocity`]; non-finite values mean "stop"), clamps it into the
+/// [`velocity_window`] of the measured state (velocity, acceleration and position bounds), and
+/// passes on the consistent one-step command `q + v dt` with feed-forward `v`.
+#[derive(Debug, Clone)]
+pub struct SafetyLimiter<E> {
+    inner: E,
+    limited: JointCommand,
+    gain: f64,
+}
+
+impl<E: Effector> SafetyLimiter<E> {
+    pub fn new(inner: E) -> Self {
+        let n = inner.limits().len();
+        Self {
+            inner,
+            limited: JointCommand { mode: CommandMode::Position, q: vec![0.0; n], qd: vec![0.0; n] },
+            gain: 50.0,
+        }
+    }
+    /// Position-loop gain in 1/s used to turn position targets into velocities (default 50).
+    pub fn with_gain(mut self, gain: f64) -> Self {
+        self.gain = finite_or(gain, 50.0).max(0.0);
+        self
+    }
+    /// The command that last reached the wrapped effector.
+    pub fn last_limited(&self) -> &JointCommand {
+        &self.limited
+    }
+    pub fn inner(&self) -> &E {
+        &self.inner
+    }
+    /// Limit `command` for the current state into `out` (as long as the joints).
+    pub fn limit_into(&self, command: &JointCommand, dt: f64, out: &mut JointCommand) {
+        let (q, v, limits) = (self.inner.q(), self.inner.qd(), self.inner.limits());
+        out.mode = CommandMode::Position;
+        for i in 0..limits.len().min(out.q.len()) {
+            let (lo, hi) = velocity_window(q[i], v[i], &limits[i], dt);
+            let v_next = tracking_velocity(command, i, q[i], &limits[i], self.gain, dt).clamp(lo, hi);
+            out.qd[i] = v_next;
+            out.q[i] = limits[i].clamp(q[i] + v_next * dt);
+        }
+    }
+}
+
+impl<E: Effector> Effector for SafetyLimiter<E> {
+    fn limits(&self) -> &[JointLimits] {
+        self.inner.limits()
+    }
+    fn q(&self) -> &[f64] {
+        self.inner.q()
+    }
+    fn qd(&self) -> &[f64] {
+        self.inner.qd()
+    }
+    fn execute(&mut self, command: &JointCommand, dt: f64) {
+        let mut limited = std::mem::replace(
+            &mut self.limited,
+            JointCommand { mode: CommandMode::Position, q: Vec::new(), qd: Vec::new() },
+        );
+        self.limit_into(command, dt, &mut limited);
+        self.inner.execute(&limited, dt);
+        self.limited = limited;
+    }
+}
+
+/// The controlled stop (stop category 2): every joint decelerates to rest and holds, all joints
+/// scaled by one factor so the arm stays on its current path, none decelerating faster than its
+/// acceleration limit. Stateless: each step recomputes the stop from the measured state.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct SafeHalt;
+
+impl SafeHalt {
+    /// The halting command for the state `(q, qd)` into `out`.
+    pub fn command_into(q: &[f64], qd: &[f64], limits: &[JointLimits], dt: f64, out: &mut JointCommand) {
+        // Time to stop of the slowest-stopping joint; all joints share it (path preserved).
+        let t_stop = qd.iter().zip(limits).map(|(v, l)| v.abs() / l.max_acceleration).fold(0.0_f64, f64::max);
+        let scale = if t_stop <= dt || !t_stop.is_finite() { 0.0 } else { 1.0 - dt / t_stop };
+        out.mode = CommandMode::Position;
+        for i in 0..q.len().min(out.q.len()) {
+            let v = qd[i] * scale;
+            out.qd[i] = v;
+            out.q[i] = q[i] + v * dt;
+        }
+    }
+}
+
+impl<C> TransitionFunction<C> for SafeHalt {
+    fn compute(&mut self, _cc: &mut C, inputs: &InputImages, outputs: &mut OutputImages) {
+        if outputs.command.q.len() == inputs.q.len() {
+            SafeHalt::command_into(&inputs.q, &inputs.qd, &inputs.limits, inputs.dt, &mut outputs.command);
+            outputs.has_command = true;
+        }
+    }
+}

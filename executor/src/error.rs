@@ -1,0 +1,58 @@
+//! The crate's one error type.
+
+use thiserror::Error;
+
+/// Everything that can stop a run or reject a specification.
+///
+/// A run that fails with one of these has already begun a [`crate::SafeHalt`]: the runtime never
+/// panics on a faulty agent specification.
+#[derive(Debug, Clone, PartialEq, Error)]
+#[non_exhaustive]
+pub enum ExecutorError {
+    /// The agent's predicates did not select exactly one reaction: either none held and there is
+    /// no main reaction (`held` is empty), or the agent declared that exactly one holds and
+    /// several did (`held` names them).
+    #[error(
+        "agent specification error in agent '{agent}' at step {step}, behaviour '{behaviour}': {}",
+        describe_held(held)
+    )]
+    SpecificationError { agent: String, step: u64, behaviour: String, held: Vec<String> },
+    /// A transition function sent a message to an agent with no channel from the sender.
+    #[error("agent '{agent}' at step {step} sent a message to agent #{to}, but no channel connects them")]
+    NoChannel { agent: String, step: u64, to: usize },
+    /// A vector's length does not match the number of joints.
+    #[error("{what}: expected {expected} values, got {got}")]
+    DimensionMismatch { what: String, expected: usize, got: usize },
+    /// A limit is not a valid number (negative, NaN, lower > upper).
+    #[error("invalid limits for joint {joint}: {reason}")]
+    InvalidLimits { joint: usize, reason: String },
+    /// A name or index that refers to nothing.
+    #[error("unknown {what} '{name}'")]
+    Unknown { what: &'static str, name: String },
+    /// The closed-chain QP could not be solved.
+    #[error("closed-chain QP failed: {0}")]
+    Qp(String),
+}
+
+fn describe_held(held: &[String]) -> String {
+    if held.is_empty() {
+        "no predicate holds and there is no main (default) reaction".to_string()
+    } else {
+        format!("exactly one predicate must hold, but {} held: {}", held.len(), held.join(", "))
+    }
+}
+
+/// A violation found inside a behaviour; the runtime adds the agent and step.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Violation {
+    /// The behaviour whose predicates failed.
+    pub behaviour: String,
+    /// The predicates that held (empty: none held and there was no main reaction).
+    pub held: Vec<String>,
+}
+
+impl Violation {
+    pub(crate) fn into_error(self, agent: &str, step: u64) -> ExecutorError {
+        ExecutorError::SpecificationError { agent: agent.to_string(), step, behaviour: self.behaviour, held: self.held }
+    }
+}

@@ -1,0 +1,286 @@
+//! The multi-agent runtime: steps every agent through eq. (10)/(14) in lock step, routes the
+//! transmissions, advances the simulated world and produces one log record per step.
+//!
+//! A step of the runtime, for step index `i`:
+//! 1. deliver the messages due at `i` into the receivers' `c^i_T`;
+//! 2. every agent reads its images, chooses and computes `c^{i+1}`, and transmits `c^{i+1}_e` to
+//!    its effector and `c^{i+1}_V` to its virtual sensors (agents are independent here, so this
+//!    phase may run on several threads);
+//! 3. `c^{i+1}_T` of every agent enters the transmitter, in agent order;
+//! 4. the world advances by `dt`.
+//!
+//! Everything is deterministic for a given seed whatever the thread count: each agent and each
+//! channel draws from its own random stream, and cross-agent work happens in agent order.
+
+use rayon::prelude::*;
+
+use crate::agent::{Agent, Steppable};
+use crate::error::ExecutorError;
+use crate::image::AgentId;
+use crate::transmitter::{ChannelStats, Link, Transmitter};
+use crate::world::World;
+
+/// Whether to step agents on several threads.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub enum Parallelism {
+    Sequential,
+    /// Use rayon when there are at least `min_agents` agents (a fork-join costs tens of
+    /// microseconds, so small systems are faster on one thread).
+    Rayon {
+        min_agents: usize,
+    },
+}
+
+/// Runtime settings.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct RuntimeConfig {
+    /// Control period, seconds.
+    pub dt: f64,
+    /// Seed of all noise and losses.
+    pub seed: u64,
+    pub parallelism: Parallelism,
+    /// Fill the per-step [`StepRecord`] (off saves a little time in benchmarks).
+    pub record: bool,
+}
+
+impl Default for RuntimeConfig {
+    fn default() -> Self {
+        Self { dt: 0.001, seed: 0, parallelism: Parallelism::Rayon { min_agents: 256 }, record: true }
+    }
+}
+
+/// One agent's line in the per-step log.
+#[derive(Debug, Clone, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct AgentRecord {
+    pub agent: String,
+    /// Joint positions after the step (empty for a coordinator).
+    pub q: Vec<f64>,
+    pub qd: Vec<f64>,
+    /// Path of the active behaviour, e.g. `main/avoid`.
+    pub behaviour: String,
+    pub events: Vec<String>,
+}
+
+/// The log record of one step (one line of JSON Lines).
+#[derive(Debug, Clone, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct StepRecord {
+    pub step: u64,
+    /// Time at the end of the step, seconds.
+    pub time: f64,
+    pub agents: Vec<AgentRecord>,
+}
+
+/// Bound on halting steps after a failure in [`Runtime::run`].
+pub const MAX_HALT_STEPS: u64 = 100_000;
+
+/// A system of agents in a simulated world.
+pub struct Runtime {
+    config: RuntimeConfig,
+    agents: Vec<Box<dyn Steppable>>,
+    world: World,
+    transmitter: Transmitter,
+    step: u64,
+    record: StepRecord,
+    failure: Option<ExecutorError>,
+}
+
+impl Runtime {
+    pub fn new(config: RuntimeConfig) -> Self {
+        let dt = if config.dt.is_finite() && config.dt > 0.0 { config.dt } else { 0.001 };
+        Self {
+            config: RuntimeConfig { dt, ..config },
+            agents: Vec::new(),
+            world: World::new(),
+            transmitter: Transmitter::new(),
+            step: 0,
+            record: StepRecord::default(),
+            failure: None,
+        }
+    }
+
+    /// Add an agent; ids are given in order of addition, starting at 0.
+    pub fn add_agent<C: Send + 'static>(&mut self, mut agent: Agent<C>) -> AgentId {
+        let id = AgentId(self.agents.len());
+        let seed = self.stream_seed(1, id.0 as u64);
+        agent.prepare(id, self.config.dt, seed);
+        self.agents.push(Box::new(agent));
+        self.record.agents.push(AgentRecord::default());
+        id
+    }
+
+    fn stream_seed(&self, kind: u64, index: u64) -> u64 {
+        let mut rng = embodied_models::Rng::new(self.config.seed ^ kind.wrapping_mul(0x9E37_79B9_7F4A_7C15));
+        rng.fork(index).next_u64()
+    }
+
+    /// The id of the agent called `name`.
+    pub fn agent_id(&self, name: &str) -> Option<AgentId> {
+        self.agents.iter().position(|a| a.name() == name).map(AgentId)
+    }
+
+    pub fn agent_count(&self) -> usize {
+        self.agents.len()
+    }
+
+    /// Open the channel `from -> to`.
+    pub fn connect(&mut self, from: AgentId, to: AgentId, link: Link) -> Result<(), ExecutorError> {
+        for id in [from, to] {
+            if id.0 >= self.agents.len() {
+                return Err(ExecutorError::Unknown { what: "agent", name: format!("#{}", id.0) });
+            }
+        }
+        let k = self.transmitter.links().count() as u64;
+        let seed = self.stream_seed(2, k);
+        self.transmitter.connect(from, to, link, seed);
+        Ok(())
+    }
+
+    /// Open channels both ways.
+    pub fn connect_both(&mut self, a: AgentId, b: AgentId, link: Link) -> Result<(), ExecutorError> {
+        self.connect(a, b, link)?;
+        self.connect(b, a, link)
+    }
+
+    pub fn channel_stats(&self, from: AgentId, to: AgentId) -> Option<ChannelStats> {
+        self.transmitter.stats(from, to)
+    }
+
+    pub fn world(&self) -> &World {
+        &self.world
+    }
+    pub fn world_mut(&mut self) -> &mut World {
+        &mut self.world
+    }
+    pub fn config(&self) -> &RuntimeConfig {
+        &self.config
+    }
+    /// Index of the next step to run.
+    pub fn current_step(&self) -> u64 {
+        self.step
+    }
+    /// The error that stopped the run, if any.
+    pub fn failure(&self) -> Option<&ExecutorError> {
+        self.failure.as_ref()
+    }
+    /// The record of the last step run (also after a failing step).
+    pub fn last_record(&self) -> &StepRecord {
+        &self.record
+    }
+    /// Whether every effector is at rest.
+    pub fn is_at_rest(&self) -> bool {
+        self.agents.iter().all(|a| a.is_at_rest())
+    }
+
+    fn parallel(&self) -> bool {
+        match self.config.parallelism {
+            Parallelism::Sequential => false,
+            Parallelism::Rayon { min_agents } => {
+                self.agents.len() >= min_agents.max(2) && rayon::current_num_threads() > 1
+            }
+        }
+    }
+
+    fn deliver(&mut self) {
+        for a in &mut self.agents {
+            a.inbox().clear();
+        }
+        let agents = &mut self.agents;
+        self.transmitter.deliver(self.step, |to, env| {
+            if let Some(a) = agents.get_mut(to.0) {
+                a.inbox().push(env);
+            }
+        });
+    }
+
+    /// Run one control step. On a specification error the failing agent has already begun a
+    /// safe halt, the record of this step is in [`Runtime::last_record`], and the error is
+    /// returned; afterwards `step` refuses to run (call [`Runtime::halt_step`]).
+    pub fn step(&mut self) -> Result<&StepRecord, ExecutorError> {
+        if let Some(f) = &self.failure {
+            return Err(f.clone());
+        }
+        self.deliver();
+        let (world, step, dt) = (&self.world, self.step, self.config.dt);
+        if self.parallel() {
+            let chunk = self.agents.len().div_ceil(rayon::current_num_threads());
+            self.agents.par_iter_mut().with_min_len(chunk.max(1)).for_each(|a| a.step(world, step, dt));
+        } else {
+            for a in &mut self.agents {
+                a.step(world, step, dt);
+            }
+        }
+        let mut failure = None;
+        for a in &mut self.agents {
+            if let Some(e) = a.take_error() {
+                failure.get_or_insert(e);
+            }
+        }
+        for agent in &mut self.agents {
+            let mut unconnected = None;
+            for env in agent.outbox().iter() {
+                if !self.transmitter.send(*env, step) {
+                    unconnected.get_or_insert(env.to.0);
+                }
+            }
+            if let Some(to) = unconnected
+                && failure.is_none()
+            {
+                failure = Some(ExecutorError::NoChannel { agent: agent.name().to_string(), step, to });
+            }
+        }
+        self.finish_step();
+        match failure {
+            Some(e) => {
+                self.failure = Some(e.clone());
+                Err(e)
+            }
+            None => Ok(&self.record),
+        }
+    }
+
+    fn finish_step(&mut self) {
+        self.world.advance(self.config.dt);
+        if self.config.record {
+            self.record.step = self.step;
+            self.record.time = (self.step + 1) as f64 * self.config.dt;
+            for (a, rec) in self.agents.iter().zip(&mut self.record.agents) {
+                a.record(rec);
+            }
+        }
+        self.step += 1;
+    }
+
+    /// One step in which every agent makes a controlled stop (the behaviours are not consulted).
+    pub fn halt_step(&mut self) -> &StepRecord {
+        self.deliver();
+        let (world, step, dt) = (&self.world, self.step, self.config.dt);
+        for a in &mut self.agents {
+            a.halt_step(world, step, dt);
+        }
+        self.finish_step();
+        &self.record
+    }
+
+    /// Run `steps` steps, handing each record to `on_record`. On failure, keep stepping with a
+    /// safe halt until every effector is at rest (handing those records on too), then return the
+    /// error.
+    pub fn run(&mut self, steps: u64, mut on_record: impl FnMut(&StepRecord)) -> Result<(), ExecutorError> {
+        for _ in 0..steps {
+            match self.step() {
+                Ok(rec) => on_record(rec),
+                Err(e) => {
+                    if self.current_step() > 0 && self.record.step + 1 == self.current_step() {
+                        on_record(&self.record);
+                    }
+                    let mut n = 0;
+                    while !self.is_at_rest() && n < MAX_HALT_STEPS {
+                        on_record(self.halt_step());
+                        n += 1;
+                    }
+                    return Err(e);
+                }
+            }
+        }
+        Ok(())
+    }
+}

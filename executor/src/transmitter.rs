@@ -1,0 +1,112 @@
+//! The inter-agent transmission `T` (`c^{i+1}_T ≻ c^i_T` of eq. 10): one-way channels with a
+//! latency in steps and a seeded loss probability.
+
+use std::collections::{HashMap, VecDeque};
+
+use embodied_models::Rng;
+
+use crate::image::{AgentId, Envelope};
+
+/// Properties of one channel.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Link {
+    /// Extra steps in transit: a message sent in step `i` is in the receiver's input image at
+    /// step `i + 1 + latency`.
+    pub latency: u32,
+    /// Probability in [0, 1] that a message is lost.
+    pub loss: f64,
+}
+
+impl Link {
+    /// Delivered in the next step, never lost.
+    pub const IDEAL: Link = Link { latency: 0, loss: 0.0 };
+}
+
+/// Counters of one channel.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize)]
+pub struct ChannelStats {
+    pub sent: u64,
+    pub lost: u64,
+    pub delivered: u64,
+}
+
+struct Channel {
+    from: AgentId,
+    to: AgentId,
+    link: Link,
+    rng: Rng,
+    in_flight: VecDeque<(u64, Envelope)>,
+    stats: ChannelStats,
+}
+
+/// All channels of a system. Delivery order is deterministic: channels in order of creation,
+/// messages in order of sending.
+#[derive(Default)]
+pub struct Transmitter {
+    channels: Vec<Channel>,
+    by_ends: HashMap<(AgentId, AgentId), usize>,
+}
+
+impl Transmitter {
+    pub fn new() -> Self {
+        Self::default()
+    }
+    /// Open (or reconfigure) the channel `from -> to`; `seed` drives its losses.
+    pub fn connect(&mut self, from: AgentId, to: AgentId, link: Link, seed: u64) {
+        let link =
+            Link { latency: link.latency, loss: if link.loss.is_finite() { link.loss.clamp(0.0, 1.0) } else { 1.0 } };
+        match self.by_ends.get(&(from, to)) {
+            Some(&k) => self.channels[k].link = link,
+            None => {
+                self.by_ends.insert((from, to), self.channels.len());
+                self.channels.push(Channel {
+                    from,
+                    to,
+                    link,
+                    rng: Rng::new(seed),
+                    in_flight: VecDeque::with_capacity(16),
+                    stats: ChannelStats::default(),
+                });
+            }
+        }
+    }
+    /// Whether `from -> to` exists.
+    pub fn connected(&self, from: AgentId, to: AgentId) -> bool {
+        self.by_ends.contains_key(&(from, to))
+    }
+    /// Put `envelope`, sent in step `step`, in transit. Returns `false` when there is no channel.
+    pub fn send(&mut self, envelope: Envelope, step: u64) -> bool {
+        let Some(&k) = self.by_ends.get(&(envelope.from, envelope.to)) else {
+            return false;
+        };
+        let ch = &mut self.channels[k];
+        ch.stats.sent += 1;
+        if ch.link.loss > 0.0 && ch.rng.uniform() < ch.link.loss {
+            ch.stats.lost += 1;
+        } else {
+            ch.in_flight.push_back((step + 1 + u64::from(ch.link.latency), envelope));
+        }
+        true
+    }
+    /// Hand every message due by `step` to `deliver(receiver, envelope)`.
+    pub fn deliver(&mut self, step: u64, mut deliver: impl FnMut(AgentId, Envelope)) {
+        for ch in &mut self.channels {
+            while let Some(&(due, env)) = ch.in_flight.front() {
+                if due > step {
+                    break;
+                }
+                ch.in_flight.pop_front();
+                ch.stats.delivered += 1;
+                deliver(ch.to, env);
+            }
+        }
+    }
+    /// Counters of `from -> to`.
+    pub fn stats(&self, from: AgentId, to: AgentId) -> Option<ChannelStats> {
+        self.by_ends.get(&(from, to)).map(|&k| self.channels[k].stats)
+    }
+    /// All channels as `(from, to, link)`.
+    pub fn links(&self) -> impl Iterator<Item = (AgentId, AgentId, Link)> + '_ {
+        self.channels.iter().map(|c| (c.from, c.to, c.link))
+    }
+}

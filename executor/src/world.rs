@@ -1,0 +1,188 @@
+//! The simulated world: obstacles that move, appear and vanish, and the receptors `R` of each
+//! agent (joint encoders, a wrist force sensor, an obstacle detector) with seeded noise, so that
+//! runs need no hardware and replay bit for bit.
+
+use std::sync::Arc;
+
+use embodied_models::{Rng, Robot};
+
+/// A spherical obstacle.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Obstacle {
+    pub name: String,
+    /// Centre at step 0 (or at `appears_at`), metres.
+    pub position: [f64; 3],
+    /// Constant velocity, m/s.
+    pub velocity: [f64; 3],
+    pub radius: f64,
+    /// First step at which the obstacle exists.
+    pub appears_at: u64,
+    /// First step at which it no longer exists.
+    pub vanishes_at: Option<u64>,
+}
+
+impl Obstacle {
+    /// A static obstacle present from step 0.
+    pub fn fixed(name: impl Into<String>, position: [f64; 3], radius: f64) -> Self {
+        Self { name: name.into(), position, velocity: [0.0; 3], radius, appears_at: 0, vanishes_at: None }
+    }
+    /// Whether it exists at `step`.
+    pub fn present_at(&self, step: u64) -> bool {
+        step >= self.appears_at && self.vanishes_at.is_none_or(|v| step < v)
+    }
+}
+
+/// Everything outside the agents.
+#[derive(Debug, Clone, Default)]
+pub struct World {
+    obstacles: Vec<Obstacle>,
+    step: u64,
+}
+
+impl World {
+    pub fn new() -> Self {
+        Self::default()
+    }
+    pub fn add_obstacle(&mut self, obstacle: Obstacle) -> usize {
+        self.obstacles.push(obstacle);
+        self.obstacles.len() - 1
+    }
+    /// All obstacles, present or not, at their current positions.
+    pub fn obstacles(&self) -> &[Obstacle] {
+        &self.obstacles
+    }
+    /// The current step.
+    pub fn step(&self) -> u64 {
+        self.step
+    }
+    pub(crate) fn advance(&mut self, dt: f64) {
+        for o in &mut self.obstacles {
+            if o.present_at(self.step) {
+                for k in 0..3 {
+                    o.position[k] += o.velocity[k] * dt;
+                }
+            }
+        }
+        self.step += 1;
+    }
+}
+
+/// One obstacle as the detector saw it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ObstacleEcho {
+    /// Index in [`World::obstacles`].
+    pub id: usize,
+    /// Measured centre (with noise).
+    pub position: [f64; 3],
+    /// Distance from the sensing point to the obstacle surface (negative = penetration).
+    pub distance: f64,
+}
+
+/// The receptor readings `R` of one agent in one step.
+#[derive(Debug, Clone, Default)]
+pub struct ReceptorReadings {
+    pub step: u64,
+    /// Joint encoders: positions and velocities with noise.
+    pub joint_positions: Vec<f64>,
+    pub joint_velocities: Vec<f64>,
+    /// The sensing point (tool centre of the agent's end effector; the origin for an agent
+    /// without a robot model).
+    pub sensing_point: [f64; 3],
+    /// Wrist force sensor, N (contact with obstacles modelled as springs), with noise.
+    pub force: [f64; 3],
+    /// Obstacles within the detector's range, in world order.
+    pub obstacles: Vec<ObstacleEcho>,
+}
+
+/// Which receptors an agent has and how noisy they are.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct ReceptorSpec {
+    /// Standard deviation of encoder noise (rad or m).
+    pub encoder_noise: f64,
+    /// Force sensor contact stiffness (N/m); `None` = no force sensor.
+    pub force_stiffness: Option<f64>,
+    /// Standard deviation of force noise (N).
+    pub force_noise: f64,
+    /// Obstacle detector range from the sensing point (m); `None` = no detector,
+    /// infinity = a global camera (e.g. a coordinator's).
+    pub detector_range: Option<f64>,
+    /// Standard deviation of detected positions (m).
+    pub detector_noise: f64,
+}
+
+impl Default for ReceptorSpec {
+    /// Encoders only, without noise.
+    fn default() -> Self {
+        Self { encoder_noise: 0.0, force_stiffness: None, force_noise: 0.0, detector_range: None, detector_noise: 0.0 }
+    }
+}
+
+/// The receptors of one agent: a spec, an optional robot model to place the sensing point and
+/// the agent's own noise stream.
+pub(crate) struct Receptors {
+    pub(crate) spec: ReceptorSpec,
+    pub(crate) robot: Option<(Arc<Robot>, usize)>,
+    pub(crate) rng: Rng,
+}
+
+impl Receptors {
+    /// Sample all receptors at the true joint state `(q, qd)` into `out`.
+    pub(crate) fn sample(&mut self, world: &World, q: &[f64], qd: &[f64], out: &mut ReceptorReadings) {
+        let spec = &self.spec;
+        out.step = world.step;
+        out.joint_positions.clear();
+        out.joint_velocities.clear();
+        out.joint_positions.extend_from_slice(q);
+        out.joint_velocities.extend_from_slice(qd);
+        if spec.encoder_noise > 0.0 {
+            for v in out.joint_positions.iter_mut() {
+                *v += spec.encoder_noise * self.rng.normal();
+            }
+        }
+        out.obstacles.clear();
+        out.force = [0.0; 3];
+        if spec.force_stiffness.is_none() && spec.detector_range.is_none() {
+            return;
+        }
+        out.sensing_point = match &self.robot {
+            Some((robot, ee)) if q.len() == robot.dof() && *ee < robot.end_effectors().len() => {
+                let t = robot.end_effector_poses(q, *ee).1.translation.vector;
+                [t.x, t.y, t.z]
+            }
+            _ => [0.0; 3],
+        };
+        let p = out.sensing_point;
+        for (id, o) in world.obstacles().iter().enumerate() {
+            if !o.present_at(world.step) {
+                continue;
+            }
+            let d = [p[0] - o.position[0], p[1] - o.position[1], p[2] - o.position[2]];
+            let centre_dist = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+            let distance = centre_dist - o.radius;
+            if let Some(k) = spec.force_stiffness
+                && distance < 0.0
+                && centre_dist > 0.0
+            {
+                for a in 0..3 {
+                    out.force[a] += k * (-distance) * d[a] / centre_dist;
+                }
+            }
+            if let Some(range) = spec.detector_range
+                && distance <= range
+            {
+                let mut position = o.position;
+                if spec.detector_noise > 0.0 {
+                    for c in position.iter_mut() {
+                        *c += spec.detector_noise * self.rng.normal();
+                    }
+                }
+                out.obstacles.push(ObstacleEcho { id, position, distance });
+            }
+        }
+        if spec.force_stiffness.is_some() && spec.force_noise > 0.0 {
+            for f in out.force.iter_mut() {
+                *f += spec.force_noise * self.rng.normal();
+            }
+        }
+    }
+}
