@@ -21,6 +21,8 @@ pub mod ik;
 pub mod joint;
 pub mod rng;
 pub mod robot;
+pub mod srdf;
+pub mod urdf;
 
 pub use builtin::{BUILTIN_NAMES, builtin, builtin_summaries};
 pub use cspace::{ConfigSpace, wrap_angle};
