@@ -1,0 +1,193 @@
+//! `embodied model`: a robot's joints, link poses, end effectors and collision state at q.
+
+use std::path::Path;
+
+use embodied_models::collision::{CollisionModel, Environment};
+use embodied_models::nalgebra::Isometry3;
+use embodied_models::{Robot, builtin};
+use serde::Serialize;
+
+use crate::AppError;
+
+/// Load a robot: a built-in name, or a path to a URDF (with an optional SRDF).
+pub fn load_robot(spec: &str, srdf: Option<&Path>) -> Result<Robot, AppError> {
+    let looks_like_file = spec.ends_with(".urdf") || spec.ends_with(".xml") || spec.contains('/');
+    if looks_like_file {
+        Ok(embodied_models::urdf::load_urdf(Path::new(spec), srdf)?)
+    } else {
+        if srdf.is_some() {
+            return Err(AppError::Usage(format!("--srdf applies to URDF files, not to the built-in model `{spec}`")));
+        }
+        Ok(builtin(spec)?)
+    }
+}
+
+/// Parse `--q v1,v2,...` and check it against the robot (count, finiteness, limits).
+pub fn parse_q(robot: &Robot, text: &str) -> Result<Vec<f64>, AppError> {
+    let mut q = Vec::new();
+    for (i, part) in text.split(',').enumerate() {
+        let part = part.trim();
+        let v: f64 = part.parse().map_err(|_| {
+            AppError::Usage(format!("--q: value {} (`{part}`) is not a number; expected {} comma-separated numbers", i + 1, robot.dof()))
+        })?;
+        q.push(v);
+    }
+    robot.check_configuration(&q)?;
+    Ok(q)
+}
+
+#[derive(Debug, Serialize)]
+pub struct PoseJson {
+    pub translation: [f64; 3],
+    pub quaternion_xyzw: [f64; 4],
+}
+
+impl From<&Isometry3<f64>> for PoseJson {
+    fn from(p: &Isometry3<f64>) -> Self {
+        let t = p.translation.vector;
+        let r = p.rotation;
+        Self { translation: [t.x, t.y, t.z], quaternion_xyzw: [r.i, r.j, r.k, r.w] }
+    }
+}
+
+#[derive(Debug, Serialize)]
+pub struct JointJson {
+    pub name: String,
+    pub kind: &'static str,
+    pub lower: Option<f64>,
+    pub upper: Option<f64>,
+    pub max_velocity: f64,
+    pub max_acceleration: f64,
+}
+
+#[derive(Debug, Serialize)]
+pub struct LinkJson {
+    pub name: String,
+    pub translation: [f64; 3],
+    pub quaternion_xyzw: [f64; 4],
+}
+
+#[derive(Debug, Serialize)]
+pub struct EndEffectorJson {
+    pub name: String,
+    pub flange: PoseJson,
+    pub tool: PoseJson,
+}
+
+#[derive(Debug, Serialize)]
+pub struct CollisionPairJson {
+    pub a: String,
+    pub b: String,
+}
+
+/// The `embodied model --json` object.
+#[derive(Debug, Serialize)]
+pub struct ModelReport {
+    pub robot: String,
+    pub dof: usize,
+    pub q: Vec<f64>,
+    pub joints: Vec<JointJson>,
+    pub links: Vec<LinkJson>,
+    pub end_effectors: Vec<EndEffectorJson>,
+    pub self_collision: bool,
+    pub colliding_pair: Option<CollisionPairJson>,
+    pub min_distance: f64,
+    pub closest_pair: CollisionPairJson,
+    pub provenance: String,
+}
+
+/// Build the report of `robot` at `q` (already checked).
+pub fn model_report(robot: &Robot, q: &[f64]) -> ModelReport {
+    let joints = (0..robot.dof())
+        .map(|i| {
+            let j = robot.dof_joint(i);
+            let l = j.limits;
+            JointJson {
+                name: j.name.clone(),
+                kind: j.kind.as_str(),
+                lower: l.lower.is_finite().then_some(l.lower),
+                upper: l.upper.is_finite().then_some(l.upper),
+                max_velocity: l.max_velocity,
+                max_acceleration: l.max_acceleration,
+            }
+        })
+        .collect();
+    let poses = robot.forward_kinematics(q);
+    let links = robot
+        .links()
+        .iter()
+        .zip(&poses)
+        .map(|(l, p)| {
+            let pj = PoseJson::from(p);
+            LinkJson { name: l.name.clone(), translation: pj.translation, quaternion_xyzw: pj.quaternion_xyzw }
+        })
+        .collect();
+    let end_effectors = robot
+        .end_effectors()
+        .iter()
+        .map(|e| {
+            let flange = poses[e.link];
+            EndEffectorJson { name: e.name.clone(), flange: (&flange).into(), tool: (&(flange * e.tool)).into() }
+        })
+        .collect();
+    let collision = CollisionModel::new(robot, Environment::new());
+    let contact = collision.first_collision(q);
+    let dist = collision.distance(q);
+    ModelReport {
+        robot: robot.name().to_string(),
+        dof: robot.dof(),
+        q: q.to_vec(),
+        joints,
+        links,
+        end_effectors,
+        self_collision: contact.is_some(),
+        colliding_pair: contact.map(|c| CollisionPairJson { a: c.a.to_string(), b: c.b.to_string() }),
+        min_distance: dist.distance,
+        closest_pair: CollisionPairJson { a: dist.a.to_string(), b: dist.b.to_string() },
+        provenance: robot.provenance().to_string(),
+    }
+}
+
+/// Human-readable rendering of a [`ModelReport`].
+pub fn render_text(r: &ModelReport) -> String {
+    use std::fmt::Write;
+    let mut s = String::new();
+    let _ = writeln!(s, "robot {} ({} DOF)", r.robot, r.dof);
+    let _ = writeln!(s, "  source: {}", r.provenance);
+    let _ = writeln!(s, "joints:");
+    for (j, q) in r.joints.iter().zip(&r.q) {
+        let lim = match (j.lower, j.upper) {
+            (Some(l), Some(u)) => format!("[{l:+.4}, {u:+.4}]"),
+            _ => "unlimited".to_string(),
+        };
+        let _ = writeln!(
+            s,
+            "  {:<22} {:<10} q={:+.4}  limits {:<20} vmax {:.3}  amax {:.3}",
+            j.name, j.kind, q, lim, j.max_velocity, j.max_acceleration
+        );
+    }
+    let _ = writeln!(s, "links (world frame):");
+    for l in &r.links {
+        let t = l.translation;
+        let _ = writeln!(s, "  {:<28} xyz ({:+.4}, {:+.4}, {:+.4})", l.name, t[0], t[1], t[2]);
+    }
+    for e in &r.end_effectors {
+        let f = e.flange.translation;
+        let t = e.tool.translation;
+        let _ = writeln!(
+            s,
+            "end effector {}: flange ({:+.4}, {:+.4}, {:+.4})  tool ({:+.4}, {:+.4}, {:+.4})",
+            e.name, f[0], f[1], f[2], t[0], t[1], t[2]
+        );
+    }
+    match &r.colliding_pair {
+        Some(p) => {
+            let _ = writeln!(s, "self-collision: YES ({} and {})", p.a, p.b);
+        }
+        None => {
+            let _ = writeln!(s, "self-collision: no");
+        }
+    }
+    let _ = writeln!(s, "minimum distance: {:.4} m ({} and {})", r.min_distance, r.closest_pair.a, r.closest_pair.b);
+    s
+}

@@ -1,0 +1,398 @@
+//! Scenario files (TOML): robots as agents, their placement, obstacles, start, goals, planner
+//! and run settings. Built-in scenarios live in `scenarios/` and are embedded in the binary.
+//!
+//! Every error names the file, the line and column, and what was expected.
+
+use std::ops::Range;
+use std::path::{Path, PathBuf};
+
+use embodied_models::collision::{Environment, Obstacle};
+use embodied_models::nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
+use embodied_models::{ConvexHull, Robot, Shape};
+use serde::Deserialize;
+use toml::Spanned;
+
+use crate::AppError;
+
+/// The scenarios embedded in the binary: (name, TOML text).
+pub const BUILTIN_SCENARIOS: &[(&str, &str)] = &[
+    ("polycrank-transfer", include_str!("../scenarios/polycrank-transfer.toml")),
+    ("irp6-pick", include_str!("../scenarios/irp6-pick.toml")),
+    ("two-irp6-cell", include_str!("../scenarios/two-irp6-cell.toml")),
+    ("rnt-polish", include_str!("../scenarios/rnt-polish.toml")),
+];
+
+/// The scenario `embodied run` uses when given none.
+pub const DEFAULT_SCENARIO: &str = "two-irp6-cell";
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawScenario {
+    name: String,
+    description: String,
+    #[serde(default)]
+    seed: Option<u64>,
+    #[serde(default)]
+    agents: Vec<Spanned<RawAgent>>,
+    #[serde(default)]
+    obstacles: Vec<Spanned<RawObstacle>>,
+    #[serde(default)]
+    planner: RawPlanner,
+    #[serde(default)]
+    run: Option<toml::Table>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawAgent {
+    name: String,
+    #[serde(default)]
+    robot: Option<Spanned<String>>,
+    #[serde(default)]
+    urdf: Option<Spanned<String>>,
+    #[serde(default)]
+    srdf: Option<String>,
+    #[serde(default)]
+    xyz: Option<[f64; 3]>,
+    #[serde(default)]
+    rpy: Option<[f64; 3]>,
+    #[serde(default)]
+    start: Option<Spanned<Vec<f64>>>,
+    #[serde(default)]
+    goal: Option<Spanned<Vec<f64>>>,
+    #[serde(default)]
+    goals: Option<Spanned<Vec<Vec<f64>>>>,
+    #[serde(default)]
+    goal_pose: Option<Spanned<RawPose>>,
+    #[serde(default)]
+    behaviour: Option<toml::Table>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawPose {
+    #[serde(default)]
+    end_effector: Option<String>,
+    xyz: [f64; 3],
+    #[serde(default)]
+    rpy: Option<[f64; 3]>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawObstacle {
+    name: String,
+    #[serde(rename = "box", default)]
+    cuboid: Option<[f64; 3]>,
+    #[serde(default)]
+    sphere: Option<f64>,
+    #[serde(default)]
+    cylinder: Option<RawRadiusLength>,
+    #[serde(default)]
+    capsule: Option<RawRadiusLength>,
+    #[serde(default)]
+    mesh: Option<String>,
+    #[serde(default)]
+    scale: Option<f64>,
+    xyz: [f64; 3],
+    #[serde(default)]
+    rpy: Option<[f64; 3]>,
+    /// Time (s) at which the obstacle appears in a run (absent: present from the start).
+    #[serde(default)]
+    appear_at: Option<f64>,
+    /// Velocity (m/s) with which the obstacle moves in a run.
+    #[serde(default)]
+    velocity: Option<[f64; 3]>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawRadiusLength {
+    radius: f64,
+    length: f64,
+}
+
+#[derive(Debug, Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+struct RawPlanner {
+    #[serde(default)]
+    deadline_ms: Option<f64>,
+    #[serde(default)]
+    seed: Option<u64>,
+    #[serde(default)]
+    resolution: Option<f64>,
+    #[serde(default)]
+    expansions: Option<usize>,
+}
+
+/// What an agent should reach.
+#[derive(Debug, Clone)]
+pub enum GoalSpec {
+    Configuration(Vec<f64>),
+    AnyOf(Vec<Vec<f64>>),
+    ToolPose { end_effector: usize, pose: Isometry3<f64> },
+}
+
+/// One robot of the scenario, as an agent.
+#[derive(Debug, Clone)]
+pub struct AgentSpec {
+    pub name: String,
+    pub robot: Robot,
+    pub start: Vec<f64>,
+    pub goal: Option<GoalSpec>,
+    /// The agent's behaviour settings for `embodied run` (free-form table, read by the runner).
+    pub behaviour: Option<toml::Table>,
+}
+
+/// An obstacle with its run-time script.
+#[derive(Debug, Clone)]
+pub struct ObstacleSpec {
+    pub obstacle: Obstacle,
+    pub appear_at: Option<f64>,
+    pub velocity: Option<Vector3<f64>>,
+}
+
+/// Planner settings of a scenario.
+#[derive(Debug, Clone)]
+pub struct PlannerSpec {
+    pub deadline_ms: f64,
+    pub seed: u64,
+    pub resolution: f64,
+    pub expansions: Option<usize>,
+}
+
+/// A loaded, checked scenario.
+#[derive(Debug, Clone)]
+pub struct Scenario {
+    pub name: String,
+    pub description: String,
+    pub source: String,
+    /// Hex SHA-256 of the scenario text.
+    pub hash: String,
+    pub seed: u64,
+    pub agents: Vec<AgentSpec>,
+    pub obstacles: Vec<ObstacleSpec>,
+    pub planner: PlannerSpec,
+    pub run: Option<toml::Table>,
+}
+
+impl Scenario {
+    /// The obstacles present at time zero.
+    pub fn initial_environment(&self) -> Environment {
+        let mut env = Environment::new();
+        for o in self.obstacles.iter().filter(|o| o.appear_at.is_none_or(|t| t <= 0.0)) {
+            env.add(o.obstacle.clone());
+        }
+        env
+    }
+}
+
+/// 1-based line and column of a byte offset.
+pub fn line_col(text: &str, offset: usize) -> (usize, usize) {
+    let offset = offset.min(text.len());
+    let before = &text[..offset];
+    let line = before.matches('\n').count() + 1;
+    let col = before.rfind('\n').map_or(offset, |nl| offset - nl - 1) + 1;
+    (line, col)
+}
+
+struct Ctx<'a> {
+    file: &'a Path,
+    text: &'a str,
+}
+
+impl Ctx<'_> {
+    fn err(&self, span: Range<usize>, message: impl Into<String>) -> AppError {
+        let (line, column) = line_col(self.text, span.start);
+        AppError::Parse { file: self.file.to_path_buf(), line, column, message: message.into() }
+    }
+}
+
+fn pose(xyz: [f64; 3], rpy: Option<[f64; 3]>) -> Isometry3<f64> {
+    let [r, p, y] = rpy.unwrap_or([0.0; 3]);
+    Isometry3::from_parts(Translation3::new(xyz[0], xyz[1], xyz[2]), UnitQuaternion::from_euler_angles(r, p, y))
+}
+
+/// Resolve a scenario argument: a built-in name or a file path.
+pub fn load_scenario(arg: &str) -> Result<Scenario, AppError> {
+    if let Some((_, text)) = BUILTIN_SCENARIOS.iter().find(|(n, _)| *n == arg) {
+        return parse_scenario(text, Path::new(&format!("<built-in>/{arg}.toml")), Path::new("."));
+    }
+    let path = PathBuf::from(arg);
+    if !path.exists() {
+        let names: Vec<&str> = BUILTIN_SCENARIOS.iter().map(|(n, _)| *n).collect();
+        return Err(AppError::Usage(format!(
+            "`{arg}` is neither a scenario file nor a built-in scenario; built-in scenarios are: {}",
+            names.join(", ")
+        )));
+    }
+    let text = std::fs::read_to_string(&path).map_err(|e| AppError::io(&path, e))?;
+    let dir = path.parent().map(Path::to_path_buf).unwrap_or_else(|| PathBuf::from("."));
+    parse_scenario(&text, &path, &dir)
+}
+
+fn sha256_hex(text: &str) -> String {
+    use sha2::Digest;
+    let digest = sha2::Sha256::digest(text.as_bytes());
+    digest.iter().map(|b| format!("{b:02x}")).collect()
+}
+
+/// Parse a scenario from TOML text; `file` names it in errors, `dir` anchors relative paths.
+pub fn parse_scenario(text: &str, file: &Path, dir: &Path) -> Result<Scenario, AppError> {
+    let ctx = Ctx { file, text };
+    let raw: RawScenario = toml::from_str(text).map_err(|e| {
+        let span = e.span().unwrap_or(0..0);
+        ctx.err(span, e.message().trim().to_string())
+    })?;
+    if raw.agents.is_empty() {
+        return Err(ctx.err(0..0, "a scenario needs at least one [[agents]] table"));
+    }
+    let mut agents = Vec::new();
+    for spanned in &raw.agents {
+        let span = spanned.span();
+        let a = spanned.get_ref();
+        if agents.iter().any(|x: &AgentSpec| x.name == a.name) {
+            return Err(ctx.err(span, format!("two agents are named `{}`", a.name)));
+        }
+        let mut robot = match (&a.robot, &a.urdf) {
+            (Some(name), None) => embodied_models::builtin(name.get_ref())
+                .map_err(|e| ctx.err(name.span(), format!("robot: {e}")))?,
+            (None, Some(urdf)) => {
+                let path = dir.join(urdf.get_ref());
+                let srdf = a.srdf.as_ref().map(|s| dir.join(s));
+                embodied_models::urdf::load_urdf(&path, srdf.as_deref())
+                    .map_err(|e| ctx.err(urdf.span(), format!("urdf: {e}")))?
+            }
+            _ => {
+                return Err(ctx.err(
+                    span,
+                    format!("agent `{}`: expected exactly one of `robot = \"<built-in>\"` or `urdf = \"<file>\"`", a.name),
+                ));
+            }
+        };
+        if a.xyz.is_some() || a.rpy.is_some() {
+            robot.set_base(pose(a.xyz.unwrap_or([0.0; 3]), a.rpy) * robot.base());
+        }
+        let check = |q: &Spanned<Vec<f64>>, what: &str| -> Result<Vec<f64>, AppError> {
+            robot.check_configuration(q.get_ref()).map_err(|e| ctx.err(q.span(), format!("{what}: {e}")))?;
+            Ok(q.get_ref().clone())
+        };
+        let start = match &a.start {
+            Some(q) => check(q, "start")?,
+            None => robot.home().to_vec(),
+        };
+        let goal = match (&a.goal, &a.goals, &a.goal_pose) {
+            (None, None, None) => None,
+            (Some(q), None, None) => Some(GoalSpec::Configuration(check(q, "goal")?)),
+            (None, Some(qs), None) => {
+                let mut list = Vec::new();
+                for q in qs.get_ref() {
+                    robot
+                        .check_configuration(q)
+                        .map_err(|e| ctx.err(qs.span(), format!("goals[{}]: {e}", list.len())))?;
+                    list.push(q.clone());
+                }
+                if list.is_empty() {
+                    return Err(ctx.err(qs.span(), "goals: expected at least one configuration"));
+                }
+                Some(GoalSpec::AnyOf(list))
+            }
+            (None, None, Some(p)) => {
+                let raw_pose = p.get_ref();
+                let ee = match &raw_pose.end_effector {
+                    None => 0,
+                    Some(name) => robot.end_effectors().iter().position(|e| &e.name == name).ok_or_else(|| {
+                        let names: Vec<&str> = robot.end_effectors().iter().map(|e| e.name.as_str()).collect();
+                        ctx.err(p.span(), format!("goal_pose: no end effector `{name}`; expected one of {names:?}"))
+                    })?,
+                };
+                if robot.end_effectors().is_empty() {
+                    return Err(ctx.err(p.span(), "goal_pose: this robot has no end effector"));
+                }
+                Some(GoalSpec::ToolPose { end_effector: ee, pose: pose(raw_pose.xyz, raw_pose.rpy) })
+            }
+            _ => {
+                return Err(ctx.err(span, format!("agent `{}`: give at most one of goal, goals, goal_pose", a.name)));
+            }
+        };
+        agents.push(AgentSpec { name: a.name.clone(), robot, start, goal, behaviour: a.behaviour.clone() });
+    }
+    let mut obstacles = Vec::new();
+    for spanned in &raw.obstacles {
+        let span = spanned.span();
+        let o = spanned.get_ref();
+        let positive = |v: f64, what: &str| -> Result<f64, AppError> {
+            if v.is_finite() && v > 0.0 {
+                Ok(v)
+            } else {
+                Err(ctx.err(span.clone(), format!("obstacle `{}`: {what} must be a positive number, got {v}", o.name)))
+            }
+        };
+        let mut shapes = Vec::new();
+        if let Some([x, y, z]) = o.cuboid {
+            shapes.push(Shape::cuboid(positive(x, "box x")? / 2.0, positive(y, "box y")? / 2.0, positive(z, "box z")? / 2.0));
+        }
+        if let Some(r) = o.sphere {
+            shapes.push(Shape::sphere(positive(r, "sphere radius")?));
+        }
+        if let Some(c) = &o.cylinder {
+            shapes.push(Shape::cylinder(positive(c.radius, "radius")?, positive(c.length, "length")? / 2.0));
+        }
+        if let Some(c) = &o.capsule {
+            let h = positive(c.length, "length")? / 2.0;
+            shapes.push(Shape::capsule([0.0, 0.0, -h], [0.0, 0.0, h], positive(c.radius, "radius")?));
+        }
+        if let Some(m) = &o.mesh {
+            let path = dir.join(m);
+            let scale = o.scale.unwrap_or(1.0);
+            let mut file =
+                std::fs::File::open(&path).map_err(|e| ctx.err(span.clone(), format!("mesh {}: {e}", path.display())))?;
+            let stl = stl_io::read_stl(&mut file)
+                .map_err(|e| ctx.err(span.clone(), format!("mesh {}: not a readable STL file: {e}", path.display())))?;
+            let points: Vec<Point3<f64>> = stl
+                .vertices
+                .iter()
+                .map(|v| Point3::new(v[0] as f64 * scale, v[1] as f64 * scale, v[2] as f64 * scale))
+                .collect();
+            let hull = ConvexHull::from_points(&points)
+                .ok_or_else(|| ctx.err(span.clone(), format!("mesh {}: degenerate (flat) mesh", path.display())))?;
+            shapes.push(Shape::ConvexMesh(std::sync::Arc::new(hull)));
+        }
+        if shapes.len() != 1 {
+            return Err(ctx.err(
+                span,
+                format!(
+                    "obstacle `{}`: expected exactly one shape key: box = [x, y, z], sphere = r, cylinder = {{ radius, length }}, capsule = {{ radius, length }} or mesh = \"file.stl\"",
+                    o.name
+                ),
+            ));
+        }
+        let Some(shape) = shapes.pop() else { unreachable!("checked above") };
+        obstacles.push(ObstacleSpec {
+            obstacle: Obstacle { name: o.name.clone(), pose: pose(o.xyz, o.rpy), shape },
+            appear_at: o.appear_at,
+            velocity: o.velocity.map(Vector3::from),
+        });
+    }
+    let seed = raw.seed.unwrap_or(1);
+    let planner = PlannerSpec {
+        deadline_ms: raw.planner.deadline_ms.unwrap_or(200.0),
+        seed: raw.planner.seed.unwrap_or(seed),
+        resolution: raw.planner.resolution.unwrap_or(0.02),
+        expansions: raw.planner.expansions,
+    };
+    if !(planner.resolution > 0.0) {
+        return Err(ctx.err(0..0, "[planner] resolution must be positive"));
+    }
+    Ok(Scenario {
+        name: raw.name,
+        description: raw.description,
+        source: file.display().to_string(),
+        hash: sha256_hex(text),
+        seed,
+        agents,
+        obstacles,
+        planner,
+        run: raw.run,
+    })
+}
