@@ -220,6 +220,19 @@ impl InputImages {
 
 /// The output images `c^{i+1} = <c^{i+1}_e, c^{i+1}_V, c^{i+1}_T>`: write-only for transition
 /// functions (setters only), read by the runtime when it transmits them.
+///
+/// A transition function cannot read back what it wrote:
+/// ```compile_fail
+/// fn peek(o: &embodied_executor::OutputImages) -> f64 {
+///     o.command.q[0]
+/// }
+/// ```
+/// and cannot write an input image:
+/// ```compile_fail
+/// fn poke(i: &mut embodied_executor::InputImages) {
+///     i.q()[0] = 1.0;
+/// }
+/// ```
 #[derive(Debug, Clone)]
 pub struct OutputImages {
     pub(crate) has_command: bool,
