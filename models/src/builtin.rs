@@ -285,7 +285,10 @@ pub fn polycrank() -> Result<Robot, ModelError> {
     let shapes = vec![
         vec![aabb_mm([-172.0, 469.0], [-172.0, 172.0], [-224.0, -1.0])],
         vec![aabb_mm([-353.0, 121.0], [-171.0, 175.0], [-154.0, 0.0])],
-        vec![aabb_mm([-118.0, 118.0], [-345.0, 108.0], [-165.0, 121.0])],
+        // z trimmed from 121 to 89 mm: the full box reaches into link 5's layer along the parallel
+        // axes 4-6 (z 90..235 mm in frame 3), which the real arm passes over; untrimmed, link 3 and
+        // link 5 overlapped at home and in ~90% of configurations.
+        vec![aabb_mm([-118.0, 118.0], [-345.0, 108.0], [-165.0, 89.0])],
         vec![aabb_mm([-243.0, 92.0], [-91.0, 91.0], [-146.0, -1.0])],
         vec![aabb_mm([-243.0, 92.0], [-91.0, 91.0], [-146.0, -1.0])],
         vec![PlacedShape::new(Isometry3::identity(), Shape::cuboid(0.055, 0.0515, 0.0575))],
@@ -313,7 +316,9 @@ pub fn polycrank() -> Result<Robot, ModelError> {
 /// RNT-like serial-parallel milling robot: ASSUMPTION MODEL (README 3).
 pub fn rnt() -> Result<Robot, ModelError> {
     let mut b = RobotBuilder::new("rnt").provenance(RNT_SOURCE);
-    let base = b.link("base", vec![PlacedShape::new(tz(0.45), Shape::cylinder(0.35, 0.45))]);
+    // Column up to 0.8 m (0.2 m below the shoulder at d1 = 1.0), so that the link-2 capsule
+    // (r 0.15) clears it at every q1; a column up to 0.9 m touched it in every configuration.
+    let base = b.link("base", vec![PlacedShape::new(tz(0.4), Shape::cylinder(0.35, 0.4))]);
     let dh = [
         Dh::new(0.0, 1.00, 0.35, -FRAC_PI_2),
         Dh::new(0.0, 0.0, 1.20, 0.0),
@@ -335,7 +340,9 @@ pub fn rnt() -> Result<Robot, ModelError> {
         vec![PlacedShape::new(id, Shape::capsule([-0.35, 0.0, 0.0], [0.0, 0.0, 0.0], 0.15))],
         vec![PlacedShape::new(id, Shape::capsule([-1.2, 0.0, 0.0], [0.0, 0.0, 0.0], 0.15))],
         vec![PlacedShape::new(id, Shape::capsule([-0.2, 0.0, 0.0], [0.0, 0.0, 0.0], 0.15))],
-        vec![PlacedShape::new(id, Shape::capsule([0.0, -1.1, 0.0], [0.0, -0.15, 0.0], 0.12))],
+        // starts 0.2 m along the forearm (was 0): link 3 covers the elbow, and from 0 the capsule
+        // overlapped link 2's at the elbow in every configuration
+        vec![PlacedShape::new(id, Shape::capsule([0.0, -0.9, 0.0], [0.0, -0.15, 0.0], 0.12))],
         vec![PlacedShape::new(id, Shape::capsule([0.0, 0.0, 0.0], [0.0, 0.0, 0.0], 0.1))],
         vec![
             PlacedShape::new(tz(-0.12), Shape::cylinder(0.08, 0.12)),
@@ -346,6 +353,9 @@ pub fn rnt() -> Result<Robot, ModelError> {
     dh_chain(&mut b, base, Isometry3::identity(), "", &names, &dh, &[JointKind::Revolute; 6], &limits, shapes);
     // ASSUMPTION: a 0.10 m milling/polishing spindle along the flange z.
     b.end_effector("rnt", "link6", tz(0.10));
-    b.home(vec![0.0, -FRAC_PI_2 * 0.5, 0.0, 0.0, 0.5, 0.0]);
+    // With README 3's theta3 offset (+pi/2) the forearm folds back along the upper arm at q3 = 0
+    // (the old home put the wrist against the column); q3 = -1.2 opens the elbow as far as the
+    // limits allow, reaching forward at shoulder height.
+    b.home(vec![0.0, -1.2, -1.2, 0.0, 0.5, 0.0]);
     b.build()
 }

@@ -14,6 +14,7 @@
 #![forbid(unsafe_code)]
 
 pub mod builtin;
+pub mod collision;
 pub mod cspace;
 pub mod error;
 pub mod geometry;
@@ -25,6 +26,7 @@ pub mod srdf;
 pub mod urdf;
 
 pub use builtin::{BUILTIN_NAMES, builtin, builtin_summaries};
+pub use collision::{Body, CollisionModel, CollisionScratch, Contact, DistanceReport, Environment, Obstacle};
 pub use cspace::{ConfigSpace, wrap_angle};
 pub use error::ModelError;
 pub use geometry::{ConvexHull, PlacedShape, Shape};

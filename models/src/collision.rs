@@ -1,0 +1,891 @@
+//! # Collision checking: is a configuration free, and how far from contact is it?
+//!
+//! A [`CollisionModel`] owns a robot and an [`Environment`] of posed obstacles and answers, for a
+//! configuration `q`, whether any link touches an obstacle or another link ([`CollisionModel::collides`]),
+//! which pair does ([`CollisionModel::first_collision`]), the signed distance to the nearest contact
+//! ([`CollisionModel::distance`]) and whether a straight joint-space motion stays free
+//! ([`CollisionModel::motion_is_free`]).
+//!
+//! ```
+//! use embodied_models::collision::{CollisionModel, Environment, Obstacle};
+//! use embodied_models::{Shape, builtin, nalgebra::Isometry3};
+//!
+//! let robot = builtin("irp6-postument").unwrap();
+//! let mut env = Environment::new();
+//! env.add(Obstacle::new("table", Isometry3::translation(0.8, 0.0, 0.4), Shape::cuboid(0.3, 0.5, 0.4)));
+//! let model = CollisionModel::new(&robot, env);
+//! assert!(!model.collides(robot.home()));
+//! ```
+//!
+//! ## How a query runs
+//!
+//! 1. **Kinematics of what carries shapes only.** Links joined by fixed joints are merged into one
+//!    rigid *body* at construction (their shapes re-expressed in the body frame), and bodies that
+//!    carry no shape and lead to none are dropped, so forward kinematics costs one transform per
+//!    moving joint that matters.
+//! 2. **Broad phase.** Every link has a bounding sphere of its shapes. Obstacles are first culled
+//!    against the bounding box of all link spheres, then each (link, obstacle) pair by sphere
+//!    against the obstacle's box, then each (shape, obstacle) pair the same way. Self-collision
+//!    pairs are culled sphere against sphere. World poses of a link's shapes are computed only
+//!    when a pair involving the link survives the cull.
+//! 3. **Narrow phase** ([`narrow`]): closed forms for sphere/capsule against
+//!    sphere/capsule/box/cylinder, parry3d for everything else.
+//!
+//! `collides` stops at the first contact and does not allocate: it uses a thread-local
+//! [`CollisionScratch`] (or pass your own to [`CollisionModel::collides_with`]).
+//!
+//! ## Self-collision pairs
+//!
+//! A pair of links is checked unless it is disabled by the robot (SRDF `disable_collisions`,
+//! [`Robot::disable_pair`]), or the two links are *adjacent*: joined by a joint, or joined
+//! through links that carry no shapes (a shapeless link's parent and children are adjacent to
+//! each other). [`disable_always_colliding`] adds pairs that touch in every sampled configuration,
+//! like MoveIt's setup assistant.
+//!
+//! ## Wrong input
+//!
+//! Query methods do not validate `q` beyond its length (call [`Robot::check_configuration`] on
+//! user input first, to get a message naming the offending joint). A `q` of the wrong length
+//! never panics: `collides` answers `true` (in collision, the safe side), `motion_is_free`
+//! answers `false`, `first_collision` answers `None`, `distance` reports `-inf`, and
+//! `link_shapes_world` returns no shapes.
+
+mod environment;
+pub mod narrow;
+
+use std::cell::RefCell;
+use std::fmt;
+use std::sync::Arc;
+
+use nalgebra::{Isometry3, Matrix3, Point3, Translation3, Unit, UnitQuaternion, Vector3};
+
+use crate::cspace::ConfigSpace;
+use crate::geometry::{ConvexHull, Shape};
+use crate::joint::JointKind;
+use crate::rng::Rng;
+use crate::robot::Robot;
+pub use environment::{Environment, Obstacle};
+use narrow::View;
+pub use narrow::{Separation, parry_shape_separation, parry_shapes_intersect, shape_separation, shapes_intersect};
+
+/// One side of a contact or distance: a robot link or an obstacle.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Body {
+    /// A link of the robot (`link` indexes [`Robot::links`]).
+    Link { link: usize, name: String },
+    /// An obstacle of the environment (`index` indexes [`Environment::obstacles`]).
+    Obstacle { index: usize, name: String },
+}
+
+impl Body {
+    pub fn name(&self) -> &str {
+        match self {
+            Body::Link { name, .. } | Body::Obstacle { name, .. } => name,
+        }
+    }
+    pub fn is_link(&self) -> bool {
+        matches!(self, Body::Link { .. })
+    }
+}
+
+impl fmt::Display for Body {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Body::Link { name, .. } => write!(f, "link `{name}`"),
+            Body::Obstacle { name, .. } => write!(f, "obstacle `{name}`"),
+        }
+    }
+}
+
+/// A pair in contact: "link `ot_link3` and obstacle `table`". `a` is always a link.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Contact {
+    pub a: Body,
+    pub b: Body,
+}
+
+impl fmt::Display for Contact {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{} and {}", self.a, self.b)
+    }
+}
+
+/// The nearest pair over every checked pair (links against obstacles and non-filtered link pairs).
+///
+/// `distance` is signed: the gap when free, minus the penetration depth when two shapes overlap.
+/// `+inf` when nothing is checked (no obstacles, no self-collision pairs); `-inf` for a `q` of
+/// the wrong length. Witness points are in the world frame.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DistanceReport {
+    pub distance: f64,
+    pub a: Body,
+    pub b: Body,
+    pub point_a: Point3<f64>,
+    pub point_b: Point3<f64>,
+}
+
+// ---------------------------------------------------------------------------------------------
+// Geometry prepared once per robot / environment.
+
+/// A shape in its body's frame.
+#[derive(Debug, Clone)]
+enum Local {
+    Sphere { c: Point3<f64>, r: f64 },
+    Capsule { a: Point3<f64>, b: Point3<f64>, r: f64 },
+    Cuboid { iso: Isometry3<f64>, half: Vector3<f64> },
+    Cylinder { iso: Isometry3<f64>, r: f64, hh: f64 },
+    Mesh { iso: Isometry3<f64>, hull: Arc<ConvexHull> },
+}
+
+/// A shape in the world frame.
+#[derive(Debug, Clone)]
+enum World {
+    Sphere { c: Point3<f64>, r: f64 },
+    Capsule { a: Point3<f64>, b: Point3<f64>, r: f64 },
+    Cuboid { iso: Isometry3<f64>, half: Vector3<f64> },
+    Cylinder { iso: Isometry3<f64>, r: f64, hh: f64 },
+    Mesh { iso: Isometry3<f64>, hull: Arc<ConvexHull> },
+}
+
+impl World {
+    const EMPTY: World = World::Sphere { c: Point3::new(0.0, 0.0, 0.0), r: 0.0 };
+
+    #[inline]
+    fn view(&self) -> View<'_> {
+        match self {
+            World::Sphere { c, r } => View::Sphere { c: *c, r: *r },
+            World::Capsule { a, b, r } => View::Capsule { a: *a, b: *b, r: *r },
+            World::Cuboid { iso, half } => View::Cuboid { iso, half: *half },
+            World::Cylinder { iso, r, hh } => View::Cylinder { iso, r: *r, hh: *hh },
+            World::Mesh { iso, hull } => View::Mesh { iso, poly: &hull.polyhedron },
+        }
+    }
+
+    fn from_shape(shape: &Shape, pose: &Isometry3<f64>) -> World {
+        match shape {
+            Shape::Sphere { radius } => World::Sphere { c: Point3::from(pose.translation.vector), r: *radius },
+            Shape::Capsule { a, b, radius } => World::Capsule { a: pose * a, b: pose * b, r: *radius },
+            Shape::Cuboid { half_extents } => World::Cuboid { iso: *pose, half: *half_extents },
+            Shape::Cylinder { radius, half_height } => World::Cylinder { iso: *pose, r: *radius, hh: *half_height },
+            Shape::ConvexMesh(hull) => World::Mesh { iso: *pose, hull: hull.clone() },
+        }
+    }
+}
+
+/// How a moving joint gets its value from `q`.
+#[derive(Debug, Clone, Copy)]
+enum Value {
+    Dof(usize),
+    Mimic(usize, f64, f64),
+    Zero,
+}
+
+/// A rigid body of the collision model: the links fixed to one moving joint's child.
+/// Pose = pose(parent) * pre * motion(value + offset) * post.
+#[derive(Debug, Clone)]
+struct FkBody {
+    parent: usize,
+    pre: Isometry3<f64>,
+    prismatic: bool,
+    axis: Unit<Vector3<f64>>,
+    offset: f64,
+    post: Option<Isometry3<f64>>,
+    value: Value,
+}
+
+/// A link that carries shapes (a "slot"), with its bounding sphere in its body's frame.
+#[derive(Debug, Clone)]
+struct LinkGeom {
+    link: usize,
+    body: usize,
+    shapes: std::ops::Range<usize>,
+    c: Point3<f64>,
+    r: f64,
+}
+
+#[derive(Debug, Clone)]
+struct ShapeGeom {
+    local: Local,
+    /// Bounding sphere in the body frame.
+    c: Point3<f64>,
+    r: f64,
+}
+
+#[derive(Debug)]
+struct RobotGeom {
+    dof: usize,
+    base: Isometry3<f64>,
+    bodies: Vec<FkBody>,
+    links: Vec<LinkGeom>,
+    shapes: Vec<ShapeGeom>,
+    self_pairs: Vec<(u32, u32)>,
+    cspace: ConfigSpace,
+}
+
+#[derive(Debug, Clone)]
+struct ObstacleGeom {
+    world: World,
+    lo: Point3<f64>,
+    hi: Point3<f64>,
+}
+
+impl ObstacleGeom {
+    fn new(o: &Obstacle) -> Self {
+        let world = World::from_shape(&o.shape, &o.pose);
+        let (lo, hi) = narrow::aabb(&world.view());
+        ObstacleGeom { world, lo, hi }
+    }
+}
+
+/// Squared distance from a point to an axis-aligned box.
+#[inline]
+fn dist2_point_aabb(p: &Point3<f64>, lo: &Point3<f64>, hi: &Point3<f64>) -> f64 {
+    let dx = (lo.x - p.x).max(0.0).max(p.x - hi.x);
+    let dy = (lo.y - p.y).max(0.0).max(p.y - hi.y);
+    let dz = (lo.z - p.z).max(0.0).max(p.z - hi.z);
+    dx * dx + dy * dy + dz * dz
+}
+
+#[inline]
+fn sphere_hits_aabb(c: &Point3<f64>, r: f64, o: &ObstacleGeom) -> bool {
+    dist2_point_aabb(c, &o.lo, &o.hi) <= r * r
+}
+
+/// Centre and radius of a sphere enclosing a set of spheres (centroid-based, not minimal).
+fn enclosing_sphere(spheres: &[(Point3<f64>, f64)]) -> (Point3<f64>, f64) {
+    if spheres.is_empty() {
+        return (Point3::origin(), 0.0);
+    }
+    let n = spheres.len() as f64;
+    let c = Point3::from(spheres.iter().fold(Vector3::zeros(), |s, (p, _)| s + p.coords) / n);
+    let r = spheres.iter().map(|(p, r)| (p - c).norm() + r).fold(0.0, f64::max);
+    (c, r)
+}
+
+impl RobotGeom {
+    fn new(robot: &Robot) -> Self {
+        let links = robot.links();
+        let joints = robot.joints();
+        let n = links.len();
+        // Merge fixed-jointed links into bodies: body_of[link], and the link frame in the body frame.
+        let mut body_of = vec![0usize; n];
+        let mut in_body = vec![Isometry3::identity(); n];
+        let mut bodies = vec![FkBody {
+            parent: usize::MAX,
+            pre: Isometry3::identity(),
+            prismatic: false,
+            axis: Vector3::z_axis(),
+            offset: 0.0,
+            post: None,
+            value: Value::Zero,
+        }];
+        for j in joints {
+            let (p, c) = (j.parent_link, j.child_link);
+            if j.kind == JointKind::Fixed {
+                body_of[c] = body_of[p];
+                in_body[c] = in_body[p] * j.local_transform(0.0);
+            } else {
+                let value = match (j.dof_index, j.mimic) {
+                    (Some(i), _) => Value::Dof(i),
+                    (None, Some((d, m, o))) => Value::Mimic(d, m, o),
+                    _ => Value::Zero,
+                };
+                let is_identity = |t: &Isometry3<f64>| t.translation.vector.norm() == 0.0 && t.rotation.angle() == 0.0;
+                bodies.push(FkBody {
+                    parent: body_of[p],
+                    pre: in_body[p] * j.origin,
+                    prismatic: j.kind == JointKind::Prismatic,
+                    axis: j.axis,
+                    offset: j.offset,
+                    post: if is_identity(&j.post) { None } else { Some(j.post) },
+                    value,
+                });
+                body_of[c] = bodies.len() - 1;
+                in_body[c] = Isometry3::identity();
+            }
+        }
+        // Keep only bodies that carry shapes or lead to some.
+        let mut needed = vec![false; bodies.len()];
+        needed[0] = true;
+        for (l, link) in links.iter().enumerate() {
+            if !link.shapes.is_empty() {
+                needed[body_of[l]] = true;
+            }
+        }
+        for b in (1..bodies.len()).rev() {
+            if needed[b] {
+                needed[bodies[b].parent] = true;
+            }
+        }
+        let mut remap = vec![usize::MAX; bodies.len()];
+        let mut kept = Vec::new();
+        for (b, body) in bodies.into_iter().enumerate() {
+            if needed[b] {
+                remap[b] = kept.len();
+                let mut body = body;
+                if b != 0 {
+                    body.parent = remap[body.parent];
+                }
+                kept.push(body);
+            }
+        }
+        // Shapes in body frames, grouped by link.
+        let mut slots = Vec::new();
+        let mut shapes = Vec::new();
+        for (l, link) in links.iter().enumerate() {
+            if link.shapes.is_empty() {
+                continue;
+            }
+            let first = shapes.len();
+            let mut spheres = Vec::new();
+            for ps in &link.shapes {
+                let pose = in_body[l] * ps.pose;
+                let local = match &ps.shape {
+                    Shape::Sphere { radius } => Local::Sphere { c: Point3::from(pose.translation.vector), r: *radius },
+                    Shape::Capsule { a, b, radius } => Local::Capsule { a: pose * a, b: pose * b, r: *radius },
+                    Shape::Cuboid { half_extents } => Local::Cuboid { iso: pose, half: *half_extents },
+                    Shape::Cylinder { radius, half_height } => {
+                        Local::Cylinder { iso: pose, r: *radius, hh: *half_height }
+                    }
+                    Shape::ConvexMesh(hull) => Local::Mesh { iso: pose, hull: hull.clone() },
+                };
+                let (c, r) = ps.shape.bounding_sphere();
+                let c = pose * c;
+                spheres.push((c, r));
+                shapes.push(ShapeGeom { local, c, r });
+            }
+            let (c, r) = enclosing_sphere(&spheres);
+            slots.push(LinkGeom { link: l, body: remap[body_of[l]], shapes: first..shapes.len(), c, r });
+        }
+        let self_pairs = self_collision_pairs(robot, &slots);
+        RobotGeom {
+            dof: robot.dof(),
+            base: *robot.base(),
+            bodies: kept,
+            links: slots,
+            shapes,
+            self_pairs,
+            cspace: ConfigSpace::new(robot),
+        }
+    }
+}
+
+/// The link pairs to check for self-collision (as slot indices): not on the same link, not
+/// disabled, not adjacent (directly, or through links without shapes).
+fn self_collision_pairs(robot: &Robot, slots: &[LinkGeom]) -> Vec<(u32, u32)> {
+    let links = robot.links();
+    let parent = |l: usize| links[l].parent_joint.map(|j| robot.joints()[j].parent_link);
+    let ancestors = |mut l: usize| {
+        let mut v = vec![l];
+        while let Some(p) = parent(l) {
+            v.push(p);
+            l = p;
+        }
+        v
+    };
+    let adjacent = |a: usize, b: usize| {
+        let pa = ancestors(a);
+        let pb = ancestors(b);
+        let Some(lca) = pa.iter().copied().find(|x| pb.contains(x)) else { return false };
+        // The links strictly between a and b on the tree path must all be shapeless.
+        let between_a = pa.iter().take_while(|&&x| x != lca).skip(1);
+        let between_b = pb.iter().take_while(|&&x| x != lca).skip(1);
+        let lca_between = lca != a && lca != b;
+        between_a.chain(between_b).all(|&x| links[x].shapes.is_empty())
+            && (!lca_between || links[lca].shapes.is_empty())
+    };
+    let disabled = robot.disabled_pairs();
+    let mut pairs = Vec::new();
+    for i in 0..slots.len() {
+        for j in i + 1..slots.len() {
+            let (a, b) = (slots[i].link, slots[j].link);
+            if a == b || disabled.contains(&(a.min(b), a.max(b))) || adjacent(a, b) {
+                continue;
+            }
+            pairs.push((i as u32, j as u32));
+        }
+    }
+    pairs
+}
+
+// ---------------------------------------------------------------------------------------------
+// Scratch.
+
+/// Per-thread working memory of a query (link poses, world shapes, candidate lists). Reuse one
+/// per thread to keep queries allocation-free; it adapts itself to whichever model uses it.
+#[derive(Debug, Clone)]
+pub struct CollisionScratch {
+    body_iso: Vec<Isometry3<f64>>,
+    body_rot: Vec<Matrix3<f64>>,
+    link_c: Vec<Point3<f64>>,
+    link_stamp: Vec<u32>,
+    stamp: u32,
+    world: Vec<World>,
+    world_c: Vec<Point3<f64>>,
+    candidates: Vec<u32>,
+    q: Vec<f64>,
+    intervals: Vec<(u32, u32)>,
+}
+
+impl Default for CollisionScratch {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl CollisionScratch {
+    pub const fn new() -> Self {
+        Self {
+            body_iso: Vec::new(),
+            body_rot: Vec::new(),
+            link_c: Vec::new(),
+            link_stamp: Vec::new(),
+            stamp: 0,
+            world: Vec::new(),
+            world_c: Vec::new(),
+            candidates: Vec::new(),
+            q: Vec::new(),
+            intervals: Vec::new(),
+        }
+    }
+
+    /// Size the buffers for a model (no allocation once they are big enough) and start a query.
+    fn begin(&mut self, g: &RobotGeom) {
+        if self.body_iso.len() != g.bodies.len() {
+            self.body_iso.resize(g.bodies.len(), Isometry3::identity());
+            self.body_rot.resize(g.bodies.len(), Matrix3::identity());
+        }
+        if self.link_c.len() != g.links.len() {
+            self.link_c.resize(g.links.len(), Point3::origin());
+            self.link_stamp.resize(g.links.len(), 0);
+        }
+        if self.world.len() != g.shapes.len() {
+            self.world.resize(g.shapes.len(), World::EMPTY);
+            self.world_c.resize(g.shapes.len(), Point3::origin());
+        }
+        self.stamp = self.stamp.wrapping_add(1);
+        if self.stamp == 0 {
+            self.link_stamp.iter_mut().for_each(|s| *s = 0);
+            self.stamp = 1;
+        }
+    }
+}
+
+thread_local! {
+    static SCRATCH: RefCell<CollisionScratch> = const { RefCell::new(CollisionScratch::new()) };
+}
+
+// ---------------------------------------------------------------------------------------------
+// The model.
+
+/// Which pair collided, by slot/obstacle index (no allocation on the hot path).
+#[derive(Debug, Clone, Copy)]
+enum Hit {
+    Env { slot: usize, obstacle: usize },
+    Pair { a: usize, b: usize },
+}
+
+/// A robot and its environment, prepared for fast collision queries. Cheap to clone (the robot
+/// geometry is shared); `Send + Sync`.
+#[derive(Debug, Clone)]
+pub struct CollisionModel {
+    robot: Arc<Robot>,
+    geom: Arc<RobotGeom>,
+    env: Environment,
+    obstacles: Vec<ObstacleGeom>,
+}
+
+impl CollisionModel {
+    pub fn new(robot: &Robot, env: Environment) -> Self {
+        let geom = Arc::new(RobotGeom::new(robot));
+        let obstacles = env.obstacles().iter().map(ObstacleGeom::new).collect();
+        Self { robot: Arc::new(robot.clone()), geom, env, obstacles }
+    }
+    pub fn robot(&self) -> &Robot {
+        &self.robot
+    }
+    pub fn environment(&self) -> &Environment {
+        &self.env
+    }
+    /// Replace the environment (rebuilds the obstacle broad phase).
+    pub fn set_environment(&mut self, env: Environment) {
+        self.obstacles = env.obstacles().iter().map(ObstacleGeom::new).collect();
+        self.env = env;
+    }
+    /// Move the obstacle(s) of this name, updating the broad phase; `false` if there is none.
+    pub fn set_obstacle_pose(&mut self, name: &str, pose: Isometry3<f64>) -> bool {
+        if !self.env.set_pose(name, pose) {
+            return false;
+        }
+        for (o, g) in self.env.obstacles().iter().zip(self.obstacles.iter_mut()) {
+            if o.name == name {
+                *g = ObstacleGeom::new(o);
+            }
+        }
+        true
+    }
+    /// A fresh scratch for [`CollisionModel::collides_with`] (one per thread).
+    pub fn scratch(&self) -> CollisionScratch {
+        let mut s = CollisionScratch::new();
+        s.begin(&self.geom);
+        s
+    }
+    /// The self-collision pairs that are checked, as link indices (low, high).
+    pub fn self_collision_pairs(&self) -> Vec<(usize, usize)> {
+        let l = &self.geom.links;
+        self.geom.self_pairs.iter().map(|&(a, b)| (l[a as usize].link, l[b as usize].link)).collect()
+    }
+
+    fn with_scratch<R>(&self, f: impl FnOnce(&mut CollisionScratch) -> R) -> R {
+        SCRATCH.with(|cell| match cell.try_borrow_mut() {
+            Ok(mut s) => f(&mut s),
+            Err(_) => f(&mut self.scratch()),
+        })
+    }
+
+    /// Whether `q` puts any link into an obstacle or into another (checked) link.
+    /// A `q` of the wrong length counts as colliding.
+    pub fn collides(&self, q: &[f64]) -> bool {
+        self.with_scratch(|s| self.collides_with(q, s))
+    }
+
+    /// [`CollisionModel::collides`] with caller-owned working memory.
+    pub fn collides_with(&self, q: &[f64], scratch: &mut CollisionScratch) -> bool {
+        if q.len() != self.geom.dof {
+            return true;
+        }
+        self.find_hit(q, scratch).is_some()
+    }
+
+    /// The first colliding pair found at `q` (for messages), `None` if `q` is free.
+    pub fn first_collision(&self, q: &[f64]) -> Option<Contact> {
+        if q.len() != self.geom.dof {
+            return None;
+        }
+        let hit = self.with_scratch(|s| self.find_hit(q, s))?;
+        Some(match hit {
+            Hit::Env { slot, obstacle } => Contact { a: self.link_body(slot), b: self.obstacle_body(obstacle) },
+            Hit::Pair { a, b } => Contact { a: self.link_body(a), b: self.link_body(b) },
+        })
+    }
+
+    fn link_body(&self, slot: usize) -> Body {
+        let link = self.geom.links[slot].link;
+        Body::Link { link, name: self.robot.links()[link].name.clone() }
+    }
+    fn obstacle_body(&self, index: usize) -> Body {
+        Body::Obstacle { index, name: self.env.obstacles()[index].name.clone() }
+    }
+
+    /// Forward kinematics of the bodies that carry shapes, and the links' world bounding spheres.
+    #[inline]
+    fn pose_bodies(&self, q: &[f64], s: &mut CollisionScratch) {
+        let g = &*self.geom;
+        s.begin(g);
+        s.body_iso[0] = g.base;
+        for (b, body) in g.bodies.iter().enumerate().skip(1) {
+            let v = match body.value {
+                Value::Dof(i) => q[i],
+                Value::Mimic(d, m, o) => q[d] * m + o,
+                Value::Zero => 0.0,
+            } + body.offset;
+            let local = if body.prismatic {
+                Isometry3::from_parts(
+                    Translation3::from(body.pre.translation.vector + body.pre.rotation * (body.axis.into_inner() * v)),
+                    body.pre.rotation,
+                )
+            } else {
+                Isometry3::from_parts(
+                    body.pre.translation,
+                    body.pre.rotation * UnitQuaternion::from_axis_angle(&body.axis, v),
+                )
+            };
+            let local = match &body.post {
+                Some(post) => local * post,
+                None => local,
+            };
+            s.body_iso[b] = s.body_iso[body.parent] * local;
+        }
+        for b in 0..g.bodies.len() {
+            s.body_rot[b] = *s.body_iso[b].rotation.to_rotation_matrix().matrix();
+        }
+        for (slot, l) in g.links.iter().enumerate() {
+            s.link_c[slot] = s.body_rot[l.body] * l.c + s.body_iso[l.body].translation.vector;
+        }
+    }
+
+    /// World poses of a link's shapes, computed once per query.
+    #[inline]
+    fn pose_link(&self, slot: usize, s: &mut CollisionScratch) {
+        if s.link_stamp[slot] == s.stamp {
+            return;
+        }
+        s.link_stamp[slot] = s.stamp;
+        let g = &*self.geom;
+        let l = &g.links[slot];
+        let rot = s.body_rot[l.body];
+        let iso = s.body_iso[l.body];
+        let t = iso.translation.vector;
+        for k in l.shapes.clone() {
+            let sh = &g.shapes[k];
+            s.world_c[k] = rot * sh.c + t;
+            s.world[k] = match &sh.local {
+                Local::Sphere { c, r } => World::Sphere { c: rot * c + t, r: *r },
+                Local::Capsule { a, b, r } => World::Capsule { a: rot * a + t, b: rot * b + t, r: *r },
+                Local::Cuboid { iso: li, half } => World::Cuboid { iso: iso * li, half: *half },
+                Local::Cylinder { iso: li, r, hh } => World::Cylinder { iso: iso * li, r: *r, hh: *hh },
+                Local::Mesh { iso: li, hull } => World::Mesh { iso: iso * li, hull: hull.clone() },
+            };
+        }
+    }
+
+    fn link_hits_obstacle(&self, slot: usize, o: &ObstacleGeom, s: &mut CollisionScratch) -> bool {
+        let l = &self.geom.links[slot];
+        if !sphere_hits_aabb(&s.link_c[slot], l.r, o) {
+            return false;
+        }
+        self.pose_link(slot, s);
+        let ov = o.world.view();
+        l.shapes.clone().any(|k| {
+            sphere_hits_aabb(&s.world_c[k], self.geom.shapes[k].r, o) && narrow::intersects(&s.world[k].view(), &ov)
+        })
+    }
+
+    fn pair_hits(&self, a: usize, b: usize, s: &mut CollisionScratch) -> bool {
+        let g = &*self.geom;
+        let (la, lb) = (&g.links[a], &g.links[b]);
+        let rr = la.r + lb.r;
+        if (s.link_c[a] - s.link_c[b]).norm_squared() > rr * rr {
+            return false;
+        }
+        self.pose_link(a, s);
+        self.pose_link(b, s);
+        for i in la.shapes.clone() {
+            for j in lb.shapes.clone() {
+                let rr = g.shapes[i].r + g.shapes[j].r;
+                if (s.world_c[i] - s.world_c[j]).norm_squared() <= rr * rr
+                    && narrow::intersects(&s.world[i].view(), &s.world[j].view())
+                {
+                    return true;
+                }
+            }
+        }
+        false
+    }
+
+    /// The first colliding pair; `q` has the right length.
+    fn find_hit(&self, q: &[f64], s: &mut CollisionScratch) -> Option<Hit> {
+        self.pose_bodies(q, s);
+        let g = &*self.geom;
+        if !self.obstacles.is_empty() && !g.links.is_empty() {
+            // Obstacles near the robot at all: against the box around every link sphere.
+            let mut lo = Point3::from(Vector3::repeat(f64::INFINITY));
+            let mut hi = Point3::from(Vector3::repeat(f64::NEG_INFINITY));
+            for (slot, l) in g.links.iter().enumerate() {
+                let c = s.link_c[slot];
+                lo = lo.inf(&(c - Vector3::repeat(l.r)));
+                hi = hi.sup(&(c + Vector3::repeat(l.r)));
+            }
+            s.candidates.clear();
+            for (i, o) in self.obstacles.iter().enumerate() {
+                if o.lo.x <= hi.x
+                    && o.hi.x >= lo.x
+                    && o.lo.y <= hi.y
+                    && o.hi.y >= lo.y
+                    && o.lo.z <= hi.z
+                    && o.hi.z >= lo.z
+                {
+                    s.candidates.push(i as u32);
+                }
+            }
+            for ci in 0..s.candidates.len() {
+                let oi = s.candidates[ci] as usize;
+                let o = &self.obstacles[oi];
+                for slot in 0..g.links.len() {
+                    if self.link_hits_obstacle(slot, o, s) {
+                        return Some(Hit::Env { slot, obstacle: oi });
+                    }
+                }
+            }
+        }
+        for &(a, b) in &g.self_pairs {
+            if self.pair_hits(a as usize, b as usize, s) {
+                return Some(Hit::Pair { a: a as usize, b: b as usize });
+            }
+        }
+        None
+    }
+
+    /// Signed distance to the nearest contact over all checked pairs (see [`DistanceReport`]).
+    pub fn distance(&self, q: &[f64]) -> DistanceReport {
+        self.with_scratch(|s| self.distance_with(q, s))
+    }
+
+    /// [`CollisionModel::distance`] with caller-owned working memory.
+    pub fn distance_with(&self, q: &[f64], s: &mut CollisionScratch) -> DistanceReport {
+        let g = &*self.geom;
+        let nobody = || Body::Link { link: 0, name: self.robot.links()[0].name.clone() };
+        if q.len() != g.dof {
+            let o = Point3::origin();
+            return DistanceReport { distance: f64::NEG_INFINITY, a: nobody(), b: nobody(), point_a: o, point_b: o };
+        }
+        self.pose_bodies(q, s);
+        let mut best = f64::INFINITY;
+        let mut best_sep: Option<(Separation, Hit)> = None;
+        for (oi, o) in self.obstacles.iter().enumerate() {
+            let ov = o.world.view();
+            for (slot, l) in g.links.iter().enumerate() {
+                if dist2_point_aabb(&s.link_c[slot], &o.lo, &o.hi).sqrt() - l.r >= best {
+                    continue;
+                }
+                self.pose_link(slot, s);
+                for k in l.shapes.clone() {
+                    if dist2_point_aabb(&s.world_c[k], &o.lo, &o.hi).sqrt() - g.shapes[k].r >= best {
+                        continue;
+                    }
+                    let sep = narrow::separation(&s.world[k].view(), &ov);
+                    if sep.distance < best {
+                        best = sep.distance;
+                        best_sep = Some((sep, Hit::Env { slot, obstacle: oi }));
+                    }
+                }
+            }
+        }
+        for &(a, b) in &g.self_pairs {
+            let (a, b) = (a as usize, b as usize);
+            let (la, lb) = (&g.links[a], &g.links[b]);
+            if (s.link_c[a] - s.link_c[b]).norm() - la.r - lb.r >= best {
+                continue;
+            }
+            self.pose_link(a, s);
+            self.pose_link(b, s);
+            for i in la.shapes.clone() {
+                for j in lb.shapes.clone() {
+                    if (s.world_c[i] - s.world_c[j]).norm() - g.shapes[i].r - g.shapes[j].r >= best {
+                        continue;
+                    }
+                    let sep = narrow::separation(&s.world[i].view(), &s.world[j].view());
+                    if sep.distance < best {
+                        best = sep.distance;
+                        best_sep = Some((sep, Hit::Pair { a, b }));
+                    }
+                }
+            }
+        }
+        match best_sep {
+            Some((sep, hit)) => {
+                let (a, b) = match hit {
+                    Hit::Env { slot, obstacle } => (self.link_body(slot), self.obstacle_body(obstacle)),
+                    Hit::Pair { a, b } => (self.link_body(a), self.link_body(b)),
+                };
+                DistanceReport { distance: sep.distance, a, b, point_a: sep.point_a, point_b: sep.point_b }
+            }
+            None => {
+                let o = Point3::origin();
+                DistanceReport { distance: f64::INFINITY, a: nobody(), b: nobody(), point_a: o, point_b: o }
+            }
+        }
+    }
+
+    /// Whether the straight joint-space motion from `qa` to `qb` (the short way round on
+    /// continuous joints) is free: configurations no more than `resolution` apart in every joint
+    /// (rad or m) are checked, endpoints first, then midpoints in bisection order so that a
+    /// collision is usually found after few checks. A non-positive or non-finite `resolution`,
+    /// or configurations of the wrong length, give `false`.
+    pub fn motion_is_free(&self, qa: &[f64], qb: &[f64], resolution: f64) -> bool {
+        self.with_scratch(|s| self.motion_is_free_with(qa, qb, resolution, s))
+    }
+
+    /// [`CollisionModel::motion_is_free`] with caller-owned working memory.
+    pub fn motion_is_free_with(&self, qa: &[f64], qb: &[f64], resolution: f64, s: &mut CollisionScratch) -> bool {
+        let g = &*self.geom;
+        if qa.len() != g.dof || qb.len() != g.dof || resolution.is_nan() || resolution <= 0.0 || resolution.is_infinite() {
+            return false;
+        }
+        let steps = (g.cspace.max_joint_step(qa, qb) / resolution).ceil().max(1.0);
+        if !steps.is_finite() || steps > u32::MAX as f64 / 2.0 {
+            return false;
+        }
+        let n = steps as u32;
+        if self.find_hit(qa, s).is_some() || self.find_hit(qb, s).is_some() {
+            return false;
+        }
+        let mut q = std::mem::take(&mut s.q);
+        let mut queue = std::mem::take(&mut s.intervals);
+        q.clear();
+        q.resize(g.dof, 0.0);
+        queue.clear();
+        queue.push((0, n));
+        let mut head = 0;
+        let mut free = true;
+        while head < queue.len() {
+            let (lo, hi) = queue[head];
+            head += 1;
+            if hi - lo < 2 {
+                continue;
+            }
+            let mid = lo + (hi - lo) / 2;
+            g.cspace.interpolate_into(qa, qb, mid as f64 / n as f64, &mut q);
+            if self.find_hit(&q, s).is_some() {
+                free = false;
+                break;
+            }
+            queue.push((lo, mid));
+            queue.push((mid, hi));
+        }
+        s.q = q;
+        s.intervals = queue;
+        free
+    }
+
+    /// The robot's shapes posed in the world at `q`, as obstacles for another agent's model.
+    /// Names are the link names (`link#k` for the k-th shape of a link with several).
+    pub fn link_shapes_world(&self, q: &[f64]) -> Vec<Obstacle> {
+        if q.len() != self.geom.dof {
+            return Vec::new();
+        }
+        let poses = self.robot.forward_kinematics(q);
+        let mut out = Vec::new();
+        for (l, link) in self.robot.links().iter().enumerate() {
+            for (k, ps) in link.shapes.iter().enumerate() {
+                let name = if link.shapes.len() == 1 { link.name.clone() } else { format!("{}#{k}", link.name) };
+                out.push(Obstacle { name, pose: poses[l] * ps.pose, shape: ps.shape.clone() });
+            }
+        }
+        out
+    }
+}
+
+/// Disable every self-collision pair that is in contact in all of `samples` random
+/// configurations (within limits), as MoveIt's setup assistant does for "always in collision"
+/// pairs: such pairs are modelling artefacts (overlapping shapes of neighbouring links), and
+/// checking them would make every configuration invalid. Returns the pairs disabled (link indices).
+pub fn disable_always_colliding(robot: &mut Robot, samples: usize, seed: u64) -> Vec<(usize, usize)> {
+    if samples == 0 {
+        return Vec::new();
+    }
+    let model = CollisionModel::new(robot, Environment::new());
+    let g = &*model.geom;
+    let mut counts = vec![0usize; g.self_pairs.len()];
+    let mut rng = Rng::new(seed);
+    let mut s = model.scratch();
+    let mut q = vec![0.0; robot.dof()];
+    for _ in 0..samples {
+        robot.random_configuration_into(&mut rng, &mut q);
+        model.pose_bodies(&q, &mut s);
+        for (p, &(a, b)) in g.self_pairs.iter().enumerate() {
+            if model.pair_hits(a as usize, b as usize, &mut s) {
+                counts[p] += 1;
+            }
+        }
+    }
+    let mut disabled = Vec::new();
+    for (p, &(a, b)) in g.self_pairs.iter().enumerate() {
+        if counts[p] == samples {
+            let (la, lb) = (g.links[a as usize].link, g.links[b as usize].link);
+            robot.disable_pair(la, lb);
+            disabled.push((la.min(lb), la.max(lb)));
+        }
+    }
+    disabled
+}

@@ -1,0 +1,353 @@
+//! Narrow phase: does one pair of posed shapes overlap, and how far apart are they?
+//!
+//! The robot hot path is spheres and capsules against spheres, boxes, capsules and cylinders, so
+//! those pairs are answered in closed form here (a handful of flops, no branches into GJK). Every
+//! other pair (box-box, cylinder-cylinder, capsule-box, meshes...) goes to parry's dispatcher.
+//!
+//! Distances are *signed*: positive is the gap between the shapes, negative is the penetration
+//! depth (the smallest translation that separates them), for the analytic paths and for parry's
+//! fallback (`query::contact` when `query::closest_points` says they intersect) alike.
+
+use nalgebra::{Isometry3, Point3, UnitQuaternion, Vector3};
+use parry3d_f64::query::{self, ClosestPoints};
+use parry3d_f64::shape::{Ball, Capsule, ConvexPolyhedron, Cuboid, Cylinder, Shape as ParryShape};
+
+use crate::geometry::Shape;
+
+/// The result of a distance query between two shapes, A and B.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Separation {
+    /// Gap between the shapes (> 0), or minus the penetration depth (< 0) when they overlap.
+    pub distance: f64,
+    /// The point of A nearest to B (when overlapping: A's deepest point into B), world frame.
+    pub point_a: Point3<f64>,
+    /// The point of B nearest to A (when overlapping: B's deepest point into A), world frame.
+    pub point_b: Point3<f64>,
+}
+
+impl Separation {
+    fn flipped(self) -> Self {
+        Separation { distance: self.distance, point_a: self.point_b, point_b: self.point_a }
+    }
+}
+
+/// A shape posed in the world, borrowed for one query. Spheres and capsules are stored by their
+/// world-frame centre/segment, so the hot path never builds an isometry for them.
+#[derive(Debug, Clone, Copy)]
+pub(crate) enum View<'a> {
+    Sphere { c: Point3<f64>, r: f64 },
+    Capsule { a: Point3<f64>, b: Point3<f64>, r: f64 },
+    Cuboid { iso: &'a Isometry3<f64>, half: Vector3<f64> },
+    Cylinder { iso: &'a Isometry3<f64>, r: f64, hh: f64 },
+    Mesh { iso: &'a Isometry3<f64>, poly: &'a ConvexPolyhedron },
+}
+
+// ---------------------------------------------------------------------------------------------
+// Closed-form pieces.
+
+/// Closest points between segments `p1-q1` and `p2-q2`: returns the parameters `(s, t)` in
+/// [0, 1] of the closest points `p1 + s (q1 - p1)` and `p2 + t (q2 - p2)`.
+///
+/// Minimises |(p1 + s d1) - (p2 + t d2)|^2 over the unit square: the unconstrained optimum
+/// clamped to [0, 1] for `s`, then `t` recomputed for that `s` and clamped, then `s` recomputed
+/// when `t` was clamped (the minimum of a convex quadratic over a box lies on this path).
+pub fn segment_segment_params(p1: &Point3<f64>, q1: &Point3<f64>, p2: &Point3<f64>, q2: &Point3<f64>) -> (f64, f64) {
+    const EPS: f64 = 1e-18;
+    let d1 = q1 - p1;
+    let d2 = q2 - p2;
+    let w = p1 - p2;
+    let a = d1.dot(&d1);
+    let e = d2.dot(&d2);
+    let f = d2.dot(&w);
+    if a <= EPS && e <= EPS {
+        return (0.0, 0.0);
+    }
+    if a <= EPS {
+        return (0.0, (f / e).clamp(0.0, 1.0));
+    }
+    let c = d1.dot(&w);
+    if e <= EPS {
+        return ((-c / a).clamp(0.0, 1.0), 0.0);
+    }
+    let b = d1.dot(&d2);
+    let denom = a * e - b * b;
+    // Parallel segments (denom ~ 0): any s works; start from s = 0 and let the clamps fix t.
+    let mut s = if denom > 1e-14 * a * e { ((b * f - c * e) / denom).clamp(0.0, 1.0) } else { 0.0 };
+    let mut t = (b * s + f) / e;
+    if t < 0.0 {
+        t = 0.0;
+        s = (-c / a).clamp(0.0, 1.0);
+    } else if t > 1.0 {
+        t = 1.0;
+        s = ((b - c) / a).clamp(0.0, 1.0);
+    }
+    (s, t)
+}
+
+/// Nearest point of segment `a-b` to `p`.
+#[inline]
+pub fn closest_on_segment(p: &Point3<f64>, a: &Point3<f64>, b: &Point3<f64>) -> Point3<f64> {
+    let ab = b - a;
+    let len2 = ab.norm_squared();
+    if len2 <= 1e-18 {
+        return *a;
+    }
+    let t = ((p - a).dot(&ab) / len2).clamp(0.0, 1.0);
+    a + ab * t
+}
+
+/// Two balls (centre, radius): the sphere-sphere, sphere-capsule and capsule-capsule answers
+/// all reduce to this once the nearest core points are known.
+fn balls(c1: &Point3<f64>, r1: f64, c2: &Point3<f64>, r2: f64) -> Separation {
+    let d = c2 - c1;
+    let len = d.norm();
+    let n = if len > 1e-12 { d / len } else { Vector3::x() };
+    Separation { distance: len - r1 - r2, point_a: c1 + n * r1, point_b: c2 - n * r2 }
+}
+
+/// Signed distance between two spheres.
+pub fn sphere_sphere(c1: &Point3<f64>, r1: f64, c2: &Point3<f64>, r2: f64) -> Separation {
+    balls(c1, r1, c2, r2)
+}
+
+/// Signed distance between a sphere and a capsule (segment `a-b`, radius `rc`).
+pub fn sphere_capsule(c: &Point3<f64>, r: f64, a: &Point3<f64>, b: &Point3<f64>, rc: f64) -> Separation {
+    balls(c, r, &closest_on_segment(c, a, b), rc)
+}
+
+/// Signed distance between two capsules (segments `a1-b1`, `a2-b2`).
+pub fn capsule_capsule(
+    a1: &Point3<f64>,
+    b1: &Point3<f64>,
+    r1: f64,
+    a2: &Point3<f64>,
+    b2: &Point3<f64>,
+    r2: f64,
+) -> Separation {
+    let (s, t) = segment_segment_params(a1, b1, a2, b2);
+    balls(&(a1 + (b1 - a1) * s), r1, &(a2 + (b2 - a2) * t), r2)
+}
+
+/// Signed distance between a sphere and a box (`half` extents, posed by `iso`): the centre is
+/// clamped into the box in the box frame; inside, the nearest face gives the depth.
+pub fn sphere_box(c: &Point3<f64>, r: f64, iso: &Isometry3<f64>, half: &Vector3<f64>) -> Separation {
+    let p = iso.inverse_transform_point(c);
+    let q = Point3::new(p.x.clamp(-half.x, half.x), p.y.clamp(-half.y, half.y), p.z.clamp(-half.z, half.z));
+    let d = q - p;
+    let len = d.norm();
+    if len > 1e-12 {
+        let n = iso.rotation * (d / len);
+        return Separation { distance: len - r, point_a: c + n * r, point_b: iso * q };
+    }
+    // Centre inside: leave through the face with the least depth.
+    let gaps = [p.x.abs() - half.x, p.y.abs() - half.y, p.z.abs() - half.z];
+    let mut axis = 0;
+    for i in 1..3 {
+        if gaps[i] > gaps[axis] {
+            axis = i;
+        }
+    }
+    let sign = if p[axis] >= 0.0 { 1.0 } else { -1.0 };
+    let mut face = p;
+    face[axis] = sign * half[axis];
+    let mut out = Vector3::zeros();
+    out[axis] = sign;
+    let n = iso.rotation * out;
+    Separation { distance: gaps[axis] - r, point_a: c - n * r, point_b: iso * face }
+}
+
+/// Signed distance between a sphere and a cylinder along its local z (radius `rc`, half height
+/// `hh`, posed by `iso`).
+pub fn sphere_cylinder(c: &Point3<f64>, r: f64, iso: &Isometry3<f64>, rc: f64, hh: f64) -> Separation {
+    let p = iso.inverse_transform_point(c);
+    let rho = (p.x * p.x + p.y * p.y).sqrt();
+    let (ux, uy) = if rho > 1e-12 { (p.x / rho, p.y / rho) } else { (1.0, 0.0) };
+    let dr = rho - rc;
+    let dz = p.z.abs() - hh;
+    let sz = if p.z >= 0.0 { 1.0 } else { -1.0 };
+    if dr <= 0.0 && dz <= 0.0 {
+        // Inside: leave through the mantle or the nearer cap, whichever is closer.
+        let (face, out) = if dr > dz {
+            (Point3::new(ux * rc, uy * rc, p.z), Vector3::new(ux, uy, 0.0))
+        } else {
+            (Point3::new(p.x, p.y, sz * hh), Vector3::new(0.0, 0.0, sz))
+        };
+        let n = iso.rotation * out;
+        return Separation { distance: dr.max(dz) - r, point_a: c - n * r, point_b: iso * face };
+    }
+    let k = rho.min(rc);
+    let q = Point3::new(ux * k, uy * k, p.z.clamp(-hh, hh));
+    let d = q - p;
+    let len = d.norm();
+    let n = if len > 1e-12 { iso.rotation * (d / len) } else { iso.rotation * Vector3::new(ux, uy, 0.0) };
+    Separation { distance: len - r, point_a: c + n * r, point_b: iso * q }
+}
+
+#[inline]
+fn sphere_box_hit(c: &Point3<f64>, r: f64, iso: &Isometry3<f64>, half: &Vector3<f64>) -> bool {
+    let p = iso.inverse_transform_point(c);
+    let dx = (p.x.abs() - half.x).max(0.0);
+    let dy = (p.y.abs() - half.y).max(0.0);
+    let dz = (p.z.abs() - half.z).max(0.0);
+    dx * dx + dy * dy + dz * dz <= r * r
+}
+
+#[inline]
+fn sphere_cylinder_hit(c: &Point3<f64>, r: f64, iso: &Isometry3<f64>, rc: f64, hh: f64) -> bool {
+    let p = iso.inverse_transform_point(c);
+    let rho = (p.x * p.x + p.y * p.y).sqrt();
+    let dr = (rho - rc).max(0.0);
+    let dz = (p.z.abs() - hh).max(0.0);
+    dr * dr + dz * dz <= r * r
+}
+
+// ---------------------------------------------------------------------------------------------
+// Dispatch.
+
+/// Whether two posed shapes overlap (touching counts).
+#[inline]
+pub(crate) fn intersects(a: &View, b: &View) -> bool {
+    use View::*;
+    match (a, b) {
+        (Sphere { c: c1, r: r1 }, Sphere { c: c2, r: r2 }) => {
+            let s = r1 + r2;
+            (c2 - c1).norm_squared() <= s * s
+        }
+        (Sphere { c, r }, Capsule { a, b, r: rc }) | (Capsule { a, b, r: rc }, Sphere { c, r }) => {
+            let s = r + rc;
+            (closest_on_segment(c, a, b) - c).norm_squared() <= s * s
+        }
+        (Capsule { a: a1, b: b1, r: r1 }, Capsule { a: a2, b: b2, r: r2 }) => {
+            let (s, t) = segment_segment_params(a1, b1, a2, b2);
+            let d = (a2 + (b2 - a2) * t) - (a1 + (b1 - a1) * s);
+            let rr = r1 + r2;
+            d.norm_squared() <= rr * rr
+        }
+        (Sphere { c, r }, Cuboid { iso, half }) | (Cuboid { iso, half }, Sphere { c, r }) => {
+            sphere_box_hit(c, *r, iso, half)
+        }
+        (Sphere { c, r }, Cylinder { iso, r: rc, hh }) | (Cylinder { iso, r: rc, hh }, Sphere { c, r }) => {
+            sphere_cylinder_hit(c, *r, iso, *rc, *hh)
+        }
+        _ => parry_intersects(a, b),
+    }
+}
+
+/// Signed distance and witness points between two posed shapes.
+pub(crate) fn separation(a: &View, b: &View) -> Separation {
+    use View::*;
+    match (a, b) {
+        (Sphere { c: c1, r: r1 }, Sphere { c: c2, r: r2 }) => sphere_sphere(c1, *r1, c2, *r2),
+        (Sphere { c, r }, Capsule { a, b, r: rc }) => sphere_capsule(c, *r, a, b, *rc),
+        (Capsule { a, b, r: rc }, Sphere { c, r }) => sphere_capsule(c, *r, a, b, *rc).flipped(),
+        (Capsule { a: a1, b: b1, r: r1 }, Capsule { a: a2, b: b2, r: r2 }) => capsule_capsule(a1, b1, *r1, a2, b2, *r2),
+        (Sphere { c, r }, Cuboid { iso, half }) => sphere_box(c, *r, iso, half),
+        (Cuboid { iso, half }, Sphere { c, r }) => sphere_box(c, *r, iso, half).flipped(),
+        (Sphere { c, r }, Cylinder { iso, r: rc, hh }) => sphere_cylinder(c, *r, iso, *rc, *hh),
+        (Cylinder { iso, r: rc, hh }, Sphere { c, r }) => sphere_cylinder(c, *r, iso, *rc, *hh).flipped(),
+        _ => parry_separation(a, b),
+    }
+}
+
+/// A parry shape built on the stack from a view (no allocation; meshes are borrowed).
+enum Held<'a> {
+    Ball(Ball),
+    Capsule(Capsule),
+    Cuboid(Cuboid),
+    Cylinder(Cylinder),
+    Poly(&'a ConvexPolyhedron),
+}
+
+impl Held<'_> {
+    fn shape(&self) -> &dyn ParryShape {
+        match self {
+            Held::Ball(s) => s,
+            Held::Capsule(s) => s,
+            Held::Cuboid(s) => s,
+            Held::Cylinder(s) => s,
+            Held::Poly(s) => *s,
+        }
+    }
+}
+
+/// parry's cylinders run along y; ours (URDF) along z. Rx(+90 deg) takes y to z.
+fn y_to_z() -> UnitQuaternion<f64> {
+    UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::FRAC_PI_2)
+}
+
+fn to_parry<'a>(v: &View<'a>) -> (Isometry3<f64>, Held<'a>) {
+    match *v {
+        View::Sphere { c, r } => (Isometry3::translation(c.x, c.y, c.z), Held::Ball(Ball::new(r))),
+        View::Capsule { a, b, r } => (Isometry3::identity(), Held::Capsule(Capsule::new(a, b, r))),
+        View::Cuboid { iso, half } => (*iso, Held::Cuboid(Cuboid::new(half))),
+        View::Cylinder { iso, r, hh } => {
+            (Isometry3::from_parts(iso.translation, iso.rotation * y_to_z()), Held::Cylinder(Cylinder::new(hh, r)))
+        }
+        View::Mesh { iso, poly } => (*iso, Held::Poly(poly)),
+    }
+}
+
+pub(crate) fn parry_intersects(a: &View, b: &View) -> bool {
+    let (ia, sa) = to_parry(a);
+    let (ib, sb) = to_parry(b);
+    // Unsupported cannot happen for convex shapes; if it ever does, say "colliding" (safe side).
+    query::intersection_test(&ia, sa.shape(), &ib, sb.shape()).unwrap_or(true)
+}
+
+pub(crate) fn parry_separation(a: &View, b: &View) -> Separation {
+    let (ia, sa) = to_parry(a);
+    let (ib, sb) = to_parry(b);
+    let centre_a = Point3::from(ia.translation.vector);
+    let centre_b = Point3::from(ib.translation.vector);
+    let touching = Separation { distance: 0.0, point_a: centre_a, point_b: centre_b };
+    match query::closest_points(&ia, sa.shape(), &ib, sb.shape(), f64::MAX) {
+        Ok(ClosestPoints::WithinMargin(pa, pb)) => Separation { distance: (pb - pa).norm(), point_a: pa, point_b: pb },
+        Ok(ClosestPoints::Intersecting) => match query::contact(&ia, sa.shape(), &ib, sb.shape(), 0.0) {
+            Ok(Some(c)) => Separation { distance: c.dist.min(0.0), point_a: c.point1, point_b: c.point2 },
+            _ => touching,
+        },
+        Ok(ClosestPoints::Disjoint) | Err(_) => touching,
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Public entry points on [`Shape`]s (used by tests, tools and the planner's clearance queries).
+
+/// A shape and its pose, as a query view; the pose is folded into the view for spheres/capsules.
+pub(crate) fn view_of<'a>(shape: &'a Shape, pose: &'a Isometry3<f64>) -> View<'a> {
+    match shape {
+        Shape::Sphere { radius } => View::Sphere { c: Point3::from(pose.translation.vector), r: *radius },
+        Shape::Capsule { a, b, radius } => View::Capsule { a: pose * a, b: pose * b, r: *radius },
+        Shape::Cuboid { half_extents } => View::Cuboid { iso: pose, half: *half_extents },
+        Shape::Cylinder { radius, half_height } => View::Cylinder { iso: pose, r: *radius, hh: *half_height },
+        Shape::ConvexMesh(hull) => View::Mesh { iso: pose, poly: &hull.polyhedron },
+    }
+}
+
+/// Whether two posed shapes overlap (touching counts), with the analytic fast paths.
+pub fn shapes_intersect(a: &Shape, pose_a: &Isometry3<f64>, b: &Shape, pose_b: &Isometry3<f64>) -> bool {
+    intersects(&view_of(a, pose_a), &view_of(b, pose_b))
+}
+
+/// Signed distance between two posed shapes, with the analytic fast paths.
+pub fn shape_separation(a: &Shape, pose_a: &Isometry3<f64>, b: &Shape, pose_b: &Isometry3<f64>) -> Separation {
+    separation(&view_of(a, pose_a), &view_of(b, pose_b))
+}
+
+/// Signed distance between two posed shapes computed by parry only (the reference the analytic
+/// paths are tested against).
+pub fn parry_shape_separation(a: &Shape, pose_a: &Isometry3<f64>, b: &Shape, pose_b: &Isometry3<f64>) -> Separation {
+    parry_separation(&view_of(a, pose_a), &view_of(b, pose_b))
+}
+
+/// Whether two posed shapes overlap, by parry only.
+pub fn parry_shapes_intersect(a: &Shape, pose_a: &Isometry3<f64>, b: &Shape, pose_b: &Isometry3<f64>) -> bool {
+    parry_intersects(&view_of(a, pose_a), &view_of(b, pose_b))
+}
+
+/// World-frame axis-aligned bounding box of a posed shape.
+pub(crate) fn aabb(v: &View) -> (Point3<f64>, Point3<f64>) {
+    let (iso, held) = to_parry(v);
+    let bb = held.shape().compute_aabb(&iso);
+    (bb.mins, bb.maxs)
+}

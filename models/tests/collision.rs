@@ -1,0 +1,404 @@
+//! Collision checking: analytic distances, the analytic fast paths against parry, self-collision
+//! of the built-in robots, and motion checking (thin obstacles, resolution, wrap-around).
+
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
+use embodied_models::collision::{
+    Body, CollisionModel, Environment, Obstacle, disable_always_colliding, parry_shape_separation,
+    parry_shapes_intersect, shape_separation, shapes_intersect,
+};
+use embodied_models::nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
+use embodied_models::{BUILTIN_NAMES, Rng, Shape, builtin};
+use proptest::prelude::*;
+
+fn at(x: f64, y: f64, z: f64) -> Isometry3<f64> {
+    Isometry3::translation(x, y, z)
+}
+
+fn dist(a: &Shape, pa: Isometry3<f64>, b: &Shape, pb: Isometry3<f64>) -> f64 {
+    shape_separation(a, &pa, b, &pb).distance
+}
+
+// ---------------------------------------------------------------------------------------------
+// Distances with known answers.
+
+#[test]
+fn sphere_sphere_distance_is_centre_gap_minus_radii() {
+    let (a, b) = (Shape::sphere(0.5), Shape::sphere(0.3));
+    assert!((dist(&a, at(0.0, 0.0, 0.0), &b, at(2.0, 0.0, 0.0)) - 1.2).abs() < 1e-12);
+    // overlapping by 0.3: the signed distance is minus the depth
+    assert!((dist(&a, at(0.0, 0.0, 0.0), &b, at(0.0, 0.5, 0.0)) + 0.3).abs() < 1e-12);
+    let s = shape_separation(&a, &at(0.0, 0.0, 0.0), &b, &at(2.0, 0.0, 0.0));
+    assert!((s.point_a - Point3::new(0.5, 0.0, 0.0)).norm() < 1e-12);
+    assert!((s.point_b - Point3::new(1.7, 0.0, 0.0)).norm() < 1e-12);
+}
+
+#[test]
+fn sphere_box_distance_to_face_edge_corner_and_inside() {
+    let b = Shape::cuboid(1.0, 0.5, 0.25);
+    let s = Shape::sphere(0.1);
+    let id = Isometry3::identity();
+    assert!((dist(&s, at(2.0, 0.0, 0.0), &b, id) - 0.9).abs() < 1e-12); // face
+    assert!((dist(&s, at(2.0, 1.5, 0.0), &b, id) - (2f64.sqrt() - 0.1)).abs() < 1e-12); // edge
+    assert!((dist(&s, at(2.0, 1.5, 1.25), &b, id) - (3f64.sqrt() - 0.1)).abs() < 1e-12); // corner
+    // centre inside, 0.05 below the +z face: depth 0.05 + 0.1
+    assert!((dist(&s, at(0.3, 0.0, 0.2), &b, id) + 0.15).abs() < 1e-12);
+    // a rotated box: 90 degrees about z swaps the x and y extents
+    let rot = Isometry3::from_parts(
+        Translation3::identity(),
+        UnitQuaternion::from_euler_angles(0.0, 0.0, 1.0e-0 * std::f64::consts::FRAC_PI_2),
+    );
+    assert!((dist(&s, at(2.0, 0.0, 0.0), &b, rot) - 1.4).abs() < 1e-12);
+}
+
+#[test]
+fn capsule_capsule_distance_crossing_parallel_and_end_to_end() {
+    let along_x = Shape::capsule([-1.0, 0.0, 0.0], [1.0, 0.0, 0.0], 0.1);
+    let along_y = Shape::capsule([0.0, -1.0, 0.0], [0.0, 1.0, 0.0], 0.2);
+    // crossing at right angles, 1 m apart in z
+    assert!((dist(&along_x, at(0.0, 0.0, 0.0), &along_y, at(0.0, 0.0, 1.0)) - 0.7).abs() < 1e-12);
+    // parallel, 0.5 apart
+    assert!((dist(&along_x, at(0.0, 0.0, 0.0), &along_x, at(0.3, 0.5, 0.0)) - 0.3).abs() < 1e-12);
+    // collinear, end to end with a 1 m gap between the segment ends
+    assert!((dist(&along_x, at(0.0, 0.0, 0.0), &along_x, at(3.0, 0.0, 0.0)) - 0.8).abs() < 1e-12);
+    // crossing in the same plane: penetration depth = sum of radii
+    assert!((dist(&along_x, at(0.0, 0.0, 0.0), &along_y, at(0.0, 0.0, 0.0)) + 0.3).abs() < 1e-12);
+}
+
+#[test]
+fn sphere_cylinder_distance_to_mantle_cap_and_rim() {
+    let c = Shape::cylinder(1.0, 0.5); // along z
+    let s = Shape::sphere(0.25);
+    let id = Isometry3::identity();
+    assert!((dist(&s, at(3.0, 0.0, 0.0), &c, id) - 1.75).abs() < 1e-12);
+    assert!((dist(&s, at(0.0, 0.2, 2.0), &c, id) - 1.25).abs() < 1e-12);
+    assert!((dist(&s, at(0.0, 4.0, 4.5), &c, id) - (5.0 - 0.25)).abs() < 1e-12);
+    // lying along y after a 90-degree turn about x: the point (0, 0, 3) faces the mantle
+    let lying = Isometry3::rotation(Vector3::x() * std::f64::consts::FRAC_PI_2);
+    assert!((dist(&s, at(0.0, 0.0, 3.0), &c, lying) - 1.75).abs() < 1e-12);
+    assert!((dist(&s, at(0.0, 3.0, 0.0), &c, lying) - 2.25).abs() < 1e-12);
+}
+
+#[test]
+fn box_box_and_cylinder_cylinder_via_parry() {
+    let b = Shape::cuboid(0.5, 0.5, 0.5);
+    assert!((dist(&b, at(0.0, 0.0, 0.0), &b, at(2.0, 0.0, 0.0)) - 1.0).abs() < 1e-9);
+    assert!((dist(&b, at(0.0, 0.0, 0.0), &b, at(2.0, 2.0, 0.0)) - 2f64.sqrt()).abs() < 1e-9);
+    assert!((dist(&b, at(0.0, 0.0, 0.0), &b, at(0.8, 0.0, 0.0)) + 0.2).abs() < 1e-9);
+    let c = Shape::cylinder(0.3, 1.0); // along z in our convention, along y in parry's
+    assert!((dist(&c, at(0.0, 0.0, 0.0), &c, at(0.0, 0.0, 2.5)) - 0.5).abs() < 1e-6);
+    assert!((dist(&c, at(0.0, 0.0, 0.0), &c, at(1.0, 0.0, 0.0)) - 0.4).abs() < 1e-6);
+    let cap = Shape::capsule([0.0, 0.0, -1.0], [0.0, 0.0, 1.0], 0.1);
+    assert!((dist(&cap, at(1.0, 0.0, 0.0), &b, at(0.0, 0.0, 0.0)) - 0.4).abs() < 1e-6);
+}
+
+// ---------------------------------------------------------------------------------------------
+// The analytic paths agree with parry on random poses.
+
+fn pose() -> impl Strategy<Value = Isometry3<f64>> {
+    (prop::array::uniform3(-1.0..1.0f64), prop::array::uniform3(-3.2..3.2f64)).prop_map(|(t, r)| {
+        Isometry3::from_parts(Translation3::new(t[0], t[1], t[2]), UnitQuaternion::from_scaled_axis(Vector3::from(r)))
+    })
+}
+
+fn robot_shape() -> impl Strategy<Value = Shape> {
+    prop_oneof![
+        (0.01..0.6f64).prop_map(Shape::sphere),
+        (prop::array::uniform3(-0.5..0.5f64), prop::array::uniform3(-0.5..0.5f64), 0.01..0.4f64)
+            .prop_map(|(a, b, r)| Shape::capsule(a, b, r)),
+    ]
+}
+
+fn any_shape() -> impl Strategy<Value = Shape> {
+    prop_oneof![
+        robot_shape(),
+        prop::array::uniform3(0.02..0.6f64).prop_map(|h| Shape::cuboid(h[0], h[1], h[2])),
+        (0.02..0.6f64, 0.02..0.6f64).prop_map(|(r, h)| Shape::cylinder(r, h)),
+    ]
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(2000))]
+
+    /// sphere-sphere, sphere-capsule, capsule-capsule, sphere-box, sphere-cylinder (both orders).
+    #[test]
+    fn analytic_paths_match_parry(a in robot_shape(), pa in pose(), b in any_shape(), pb in pose(), flip in any::<bool>()) {
+        let (a, pa, b, pb) = if flip { (b, pb, a, pa) } else { (a, pa, b, pb) };
+        let fast = shape_separation(&a, &pa, &b, &pb);
+        let reference = parry_shape_separation(&a, &pa, &b, &pb);
+        // EPA (parry's penetration depth for capsules and cylinders) is an iterative estimate.
+        // GJK's answer is a true pair of points, so it can only overestimate a gap.
+        let tol = if reference.distance < 0.0 { 1e-4 } else { 1e-5 };
+        if reference.distance > 0.0 {
+            prop_assert!(fast.distance <= reference.distance + 1e-9, "analytic {} > parry {}", fast.distance, reference.distance);
+        }
+        prop_assert!((fast.distance - reference.distance).abs() < tol,
+            "{} vs {}: analytic {} parry {}", a.kind(), b.kind(), fast.distance, reference.distance);
+        if fast.distance > 1e-6 {
+            // witness points: on the right shapes and as far apart as the distance says
+            prop_assert!(((fast.point_b - fast.point_a).norm() - fast.distance).abs() < 1e-9);
+            prop_assert!(shape_separation(&Shape::sphere(1e-9), &Isometry3::translation(fast.point_a.x, fast.point_a.y, fast.point_a.z), &a, &pa).distance.abs() < 1e-5);
+            prop_assert!(shape_separation(&Shape::sphere(1e-9), &Isometry3::translation(fast.point_b.x, fast.point_b.y, fast.point_b.z), &b, &pb).distance.abs() < 1e-5);
+        }
+        if reference.distance.abs() > 1e-6 {
+            prop_assert_eq!(shapes_intersect(&a, &pa, &b, &pb), parry_shapes_intersect(&a, &pa, &b, &pb));
+            prop_assert_eq!(shapes_intersect(&a, &pa, &b, &pb), reference.distance < 0.0);
+        }
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Built-in robots.
+
+#[test]
+fn home_of_every_builtin_is_free_in_an_empty_world() {
+    for name in BUILTIN_NAMES {
+        let r = builtin(name).unwrap();
+        let m = CollisionModel::new(&r, Environment::new());
+        assert!(!m.self_collision_pairs().is_empty(), "{name}: no self-collision pairs are checked");
+        assert_eq!(m.first_collision(r.home()), None, "{name} home");
+        assert!(m.distance(r.home()).distance > 0.0, "{name}");
+    }
+}
+
+#[test]
+fn adjacent_links_and_links_joined_through_shapeless_links_are_not_checked() {
+    let r = builtin("irp6-postument").unwrap();
+    let m = CollisionModel::new(&r, Environment::new());
+    let idx = |n: &str| r.link_index(n).unwrap();
+    let pairs = m.self_collision_pairs();
+    let has = |a: &str, b: &str| pairs.contains(&(idx(a).min(idx(b)), idx(a).max(idx(b))));
+    assert!(!has("link2", "link3")); // joint
+    assert!(!has("base", "link2")); // through the shapeless link1
+    assert!(!has("link4", "link6")); // through the shapeless link5
+    assert!(has("base", "link6"));
+    assert!(has("link2", "link4"));
+    // an SRDF-style disabled pair is skipped
+    let mut r2 = r.clone();
+    r2.disable_pair(idx("base"), idx("link6"));
+    let m2 = CollisionModel::new(&r2, Environment::new());
+    assert_eq!(m2.self_collision_pairs().len(), pairs.len() - 1);
+}
+
+#[test]
+fn irp6_postument_folded_onto_its_column_collides() {
+    let r = builtin("irp6-postument").unwrap();
+    let m = CollisionModel::new(&r, Environment::new());
+    // Lower arm at its forward limit (-50 deg), upper arm at its lowest (+40 deg, pointing down
+    // and back), wrist pitched fully (92 deg): the gripper swings back into the column.
+    let q = [0.0, -0.8727, 0.6981, 1.6057, 0.0, 0.0];
+    r.check_configuration(&q).unwrap();
+    let c = m.first_collision(&q).expect("folded wrist against the column");
+    let names = [c.a.name(), c.b.name()];
+    assert!(names.contains(&"base") && names.contains(&"link6"), "{c}");
+    assert!(m.distance(&q).distance < 0.0);
+    assert!(m.collides(&q));
+}
+
+#[test]
+fn polycrank_folded_down_onto_its_crank_collides() {
+    let r = builtin("polycrank").unwrap();
+    let m = CollisionModel::new(&r, Environment::new());
+    // q4 = -90 deg turns the planar 3R wrist chain (axes 4-6 horizontal) straight down from
+    // z = 1.63 m, which drives links 5-7 into the crank link 2 (top at 1.30 m).
+    let q = [0.0, 0.0, 0.0, -std::f64::consts::FRAC_PI_2, 0.0, 0.0, 0.0];
+    let c = m.first_collision(&q).expect("wrist folded down onto the crank");
+    assert!(c.a.is_link() && c.b.is_link(), "{c}");
+    assert!(m.distance(&q).distance < 0.0);
+}
+
+#[test]
+fn two_irp6_arms_reaching_for_each_other_collide_between_robots() {
+    let r = builtin("two-irp6").unwrap();
+    let m = CollisionModel::new(&r, Environment::new());
+    // Track at its end (columns 0.9 m apart), on-track arm turned to +y, postument arm to -y,
+    // both stretched forward: each reaches ~0.9 m.
+    let front = [-1.57, 0.0, 1.56, 1.57, -1.57];
+    let mut q = vec![1.21, std::f64::consts::FRAC_PI_2];
+    q.extend(front);
+    q.push(-std::f64::consts::FRAC_PI_2);
+    q.extend(front);
+    r.check_configuration(&q).unwrap();
+    let c = m.first_collision(&q).expect("the arms meet");
+    let names = [c.a.name(), c.b.name()];
+    assert!(names.iter().any(|n| n.starts_with("ot_")) && names.iter().any(|n| n.starts_with("p_")), "{c}");
+    assert!(format!("{c}").starts_with("link `"), "{c}");
+    let d = m.distance(&q);
+    assert!(d.distance < 0.0);
+}
+
+#[test]
+fn environment_contact_names_link_and_obstacle() {
+    let r = builtin("irp6-postument").unwrap();
+    let (flange, _) = r.end_effector_poses(r.home(), 0);
+    let p = flange.translation.vector;
+    let env = Environment::new().with(Obstacle::new("table", at(p.x, p.y, p.z), Shape::cuboid(0.05, 0.05, 0.05)));
+    let m = CollisionModel::new(&r, env);
+    let c = m.first_collision(r.home()).expect("the flange is inside the box");
+    assert_eq!(c.b, Body::Obstacle { index: 0, name: "table".into() });
+    assert_eq!(format!("{c}"), format!("link `{}` and obstacle `table`", c.a.name()));
+    // moved away, free; the distance report names the pair and its witness points
+    let mut m = m;
+    assert!(m.set_obstacle_pose("table", at(p.x + 1.0, p.y, p.z)));
+    assert!(!m.collides(r.home()));
+    // far away, the nearest pair is the robot's own (0.025 m at home)
+    let d = m.distance(r.home());
+    assert!(d.a.is_link() && d.b.is_link(), "{d:?}");
+    // a floor 1 cm below the base box is nearer; box-box goes through parry
+    let mut env = m.environment().clone();
+    env.add(Obstacle::new("floor", at(0.0, 0.0, -0.51), Shape::cuboid(2.0, 2.0, 0.5)));
+    m.set_environment(env);
+    let d = m.distance(r.home());
+    assert!((d.distance - 0.01).abs() < 1e-6, "{d:?}");
+    assert!(((d.point_b - d.point_a).norm() - d.distance).abs() < 1e-6);
+    assert_eq!((d.a.name(), d.b.name()), ("base", "floor"));
+}
+
+#[test]
+fn wrong_length_configurations_do_not_panic() {
+    let r = builtin("polycrank").unwrap();
+    let m = CollisionModel::new(&r, Environment::new());
+    assert!(m.collides(&[0.0; 3]));
+    assert!(m.first_collision(&[0.0; 3]).is_none());
+    assert_eq!(m.distance(&[]).distance, f64::NEG_INFINITY);
+    assert!(!m.motion_is_free(&[0.0; 3], r.home(), 0.1));
+    assert!(!m.motion_is_free(r.home(), r.home(), 0.0));
+    assert!(m.link_shapes_world(&[1.0]).is_empty());
+}
+
+#[test]
+fn link_shapes_world_makes_one_robot_an_obstacle_for_another() {
+    let r = builtin("irp6-postument").unwrap();
+    let m = CollisionModel::new(&r, Environment::new());
+    let shapes = m.link_shapes_world(r.home());
+    let total: usize = r.links().iter().map(|l| l.shapes.len()).sum();
+    assert_eq!(shapes.len(), total);
+    // the same robot's home as obstacles for a copy placed at the same spot collides everywhere
+    let other = CollisionModel::new(&r, shapes.into_iter().collect());
+    assert!(other.collides(r.home()));
+}
+
+#[test]
+fn always_colliding_pairs_get_disabled() {
+    use embodied_models::{JointKind, JointLimits, PlacedShape, RobotBuilder};
+    // Three links: the last one's ball (r 0.45) is always 0.5 m from the first one's (r 0.1),
+    // whatever the joints do, so the pair overlaps in every configuration.
+    let ball = |r: f64| vec![PlacedShape::new(Isometry3::identity(), Shape::sphere(r))];
+    let mut b = RobotBuilder::new("stick");
+    let l0 = b.link("l0", ball(0.1));
+    let l1 = b.link("l1", vec![PlacedShape::new(at(0.0, 0.0, 0.25), Shape::sphere(0.05))]);
+    let l2 = b.link("l2", ball(0.45));
+    let lim = JointLimits::new(-3.0, 3.0, 1.0, 1.0);
+    let id = Isometry3::identity();
+    b.joint("j1", JointKind::Revolute, l0, l1, id, Vector3::x(), 0.0, id, lim);
+    b.joint("j2", JointKind::Revolute, l1, l2, at(0.0, 0.0, 0.5), Vector3::x(), 0.0, id, lim);
+    let mut r = b.build().unwrap();
+    assert!(CollisionModel::new(&r, Environment::new()).collides(r.home()));
+    let disabled = disable_always_colliding(&mut r, 100, 7);
+    let (i0, i2) = (r.link_index("l0").unwrap(), r.link_index("l2").unwrap());
+    assert_eq!(disabled, vec![(i0.min(i2), i0.max(i2))]);
+    assert!(!CollisionModel::new(&r, Environment::new()).collides(r.home()));
+    // the stock IRp-6 model has no always-colliding pair
+    let mut irp6 = builtin("irp6-postument").unwrap();
+    assert!(disable_always_colliding(&mut irp6, 200, 7).is_empty());
+}
+
+// ---------------------------------------------------------------------------------------------
+// Motions.
+
+/// IRp-6 sweeping its column joint through +-0.5 rad at home; a 1 cm plate stands where the
+/// flange passes at q1 = 0.
+fn sweep_with_plate() -> (embodied_models::Robot, CollisionModel, Vec<f64>, Vec<f64>) {
+    let r = builtin("irp6-postument").unwrap();
+    let (flange, _) = r.end_effector_poses(r.home(), 0);
+    let p = flange.translation.vector;
+    let plate = Obstacle::new("plate", at(p.x, p.y, p.z), Shape::cuboid(0.1, 0.005, 0.1));
+    let m = CollisionModel::new(&r, Environment::new().with(plate));
+    let mut qa = r.home().to_vec();
+    let mut qb = r.home().to_vec();
+    qa[0] = -0.5;
+    qb[0] = 0.5;
+    (r, m, qa, qb)
+}
+
+#[test]
+fn motion_check_catches_a_thin_obstacle_between_free_endpoints() {
+    let (_, mut m, qa, qb) = sweep_with_plate();
+    assert!(!m.collides(&qa) && !m.collides(&qb));
+    assert!(!m.motion_is_free(&qa, &qb, 0.01));
+    assert!(!m.motion_is_free(&qb, &qa, 0.01));
+    let mut env = m.environment().clone();
+    assert!(env.remove("plate"));
+    m.set_environment(env);
+    assert!(m.motion_is_free(&qa, &qb, 0.01));
+}
+
+#[test]
+fn motion_check_honours_the_resolution() {
+    let (_, m, qa, qb) = sweep_with_plate();
+    // one step of 1 rad: only the (free) endpoints are checked and the plate is missed
+    assert!(m.motion_is_free(&qa, &qb, 1.0));
+    // steps of 0.3 rad: checks at -0.5, -0.25, 0, 0.25, 0.5 (4 steps) hit the plate at 0
+    assert!(!m.motion_is_free(&qa, &qb, 0.3));
+    // a motion that starts on the plate side but whose only checked points miss the plate:
+    // from -0.5 to 0.3 with 0.8 resolution checks just the endpoints
+    let mut qc = qb.clone();
+    qc[0] = 0.3;
+    assert!(m.motion_is_free(&qa, &qc, 0.8));
+    assert!(!m.motion_is_free(&qa, &qc, 0.05));
+}
+
+#[test]
+fn motion_on_a_continuous_joint_goes_the_short_way_round() {
+    let r = builtin("polycrank").unwrap();
+    // A ball where link 6 is at q = 0 (arm pointing +x); the arm passes it only on the long way
+    // from q1 = -3.1 to q1 = 3.1.
+    let p = r.forward_kinematics(r.home())[r.link_index("link6").unwrap()].translation.vector;
+    let m =
+        CollisionModel::new(&r, Environment::new().with(Obstacle::new("post", at(p.x, p.y, p.z), Shape::sphere(0.05))));
+    let mut qa = r.home().to_vec();
+    let mut qb = r.home().to_vec();
+    qa[0] = -3.1;
+    qb[0] = 3.1;
+    assert!(!m.collides(&qa) && !m.collides(&qb));
+    assert!(m.collides(r.home()));
+    assert!(m.motion_is_free(&qa, &qb, 0.01));
+    // the same angles the long way (through 0) are blocked
+    let mut qc = r.home().to_vec();
+    qc[0] = 1.5;
+    let mut qd = r.home().to_vec();
+    qd[0] = -1.5;
+    assert!(!m.motion_is_free(&qd, &qc, 0.01));
+}
+
+#[test]
+fn collides_and_motion_agree_with_a_brute_force_scan() {
+    let r = builtin("two-irp6").unwrap();
+    let env: Environment = (0..20)
+        .map(|i| {
+            let a = i as f64 * 0.7;
+            Obstacle::new(
+                format!("o{i}"),
+                at(1.2 * a.cos(), 1.0 + 1.2 * a.sin(), 0.3 + 0.08 * i as f64),
+                Shape::cuboid(0.1, 0.1, 0.1),
+            )
+        })
+        .collect();
+    let m = CollisionModel::new(&r, env);
+    let cs = r.config_space();
+    let mut rng = Rng::new(11);
+    let mut scratch = m.scratch();
+    for _ in 0..50 {
+        let qa = r.random_configuration(&mut rng);
+        let qb = r.random_configuration(&mut rng);
+        // distance sign and collides agree
+        let d = m.distance(&qa);
+        if d.distance.abs() > 1e-9 {
+            assert_eq!(m.collides_with(&qa, &mut scratch), d.distance < 0.0, "{d:?}");
+        }
+        let res = 0.05;
+        let n = (cs.max_joint_step(&qa, &qb) / res).ceil() as usize;
+        let brute = (0..=n).all(|i| !m.collides(&cs.interpolate(&qa, &qb, i as f64 / n as f64)));
+        assert_eq!(m.motion_is_free(&qa, &qb, res), brute);
+    }
+}
