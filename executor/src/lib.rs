@@ -77,6 +77,7 @@ pub mod agent;
 pub mod behaviour;
 pub mod closed_chain;
 pub mod composer;
+pub mod deliberation;
 pub mod effector;
 pub mod error;
 pub mod image;
@@ -90,6 +91,9 @@ pub mod world;
 pub use agent::{Agent, ControlSubsystem, Coordinator};
 pub use behaviour::{Behaviour, Primitive, Reactive, Selection, Sequence, Status, boxed};
 pub use composer::Composer;
+pub use deliberation::{
+    DeliberationSettings, DeliberativeState, Deliberator, PlanClock, PlanFollower, PlanRequest, deliberative_agent,
+};
 pub use effector::{Effector, SafeHalt, SafetyLimiter, ServoModel, tracking_velocity, velocity_window};
 pub use error::{ExecutorError, Violation};
 pub use image::{

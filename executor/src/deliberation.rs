@@ -1,0 +1,34 @@
+//! Deliberation in the loop (end of section 4 of the paper): "if planning takes long, the plan
+//! may not be ready at step i+1; then the next state must be computed without it and must halt
+//! the effector, to be on the safe side."
+//!
+//! * [`Deliberator`] (in `c_c`): requests run on their own thread under a
+//!   [`embodied_planner::deadline::Deadline`]; [`Deliberator::poll`] never blocks the control
+//!   step in wall-clock mode; planner panics are caught; every plan passes
+//!   [`verify_trajectory`] before it is delivered as ready.
+//! * [`PlanClock`]: wall clock for real runs, or simulated time derived from the planner's
+//!   expansion count, so that logs replay bit for bit.
+//! * [`PlanFollower`]: the behaviour that follows a verified plan and otherwise makes a
+//!   [`crate::SafeHalt`]; stale plans (old world version or old start state) are discarded,
+//!   never followed; a sensed obstacle in the path invalidates the plan and a new one is asked
+//!   for from the halted state.
+//! * [`lattice_plan`]: the built-in deterministic planner (A* on a joint-space lattice).
+//! * [`deliberative_agent`]: a scenario agent with a goal, as a deliberative agent.
+//!
+//! Events written to the step record: `plan_requested`, `plan_ready`, `plan_late`,
+//! `plan_failed`, `plan_rejected`, `planner_panicked`, `plan_discarded_stale`, `plan_lost`,
+//! `plan_abandoned`, `plan_invalidated`, `plan_revalidated`, `plan_suspended`, `world_changed`,
+//! `sensor_fault`, `sensor_recovered`, `safe_halt_started`, `safe_halt_done`, `goal_reached`.
+
+pub mod follower;
+pub mod lattice;
+pub mod trajectory;
+pub mod worker;
+
+pub use follower::{AsDeliberation, DeliberationSettings, DeliberativeState, PlanFollower, deliberative_agent};
+pub use lattice::{LatticeSettings, lattice_plan};
+pub use trajectory::{Trajectory, TrajectoryViolation, time_parameterize, verify_trajectory};
+pub use worker::{
+    Deliberator, MotionPlanner, PlanBudget, PlanClock, PlanDelivery, PlanFailure, PlanOutcome, PlanRequest,
+    PlanVerifier, Planned,
+};

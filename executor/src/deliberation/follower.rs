@@ -1,0 +1,520 @@
+//! The deliberative behaviour: [`PlanFollower`] asks for plans through the [`Deliberator`] in
+//! `c_c` ([`DeliberativeState`]), follows a verified trajectory, and performs a [`SafeHalt`]
+//! whenever no valid plan is available or a fault is detected.
+
+use std::sync::Arc;
+
+use embodied_models::{CollisionModel, Environment, Obstacle, Robot, Shape};
+use nalgebra::Isometry3;
+
+use crate::agent::Agent;
+use crate::behaviour::{Behaviour, Status};
+use crate::effector::SafeHalt;
+use crate::error::{ExecutorError, Violation};
+use crate::image::{InputImages, JointCommand, OutputImages, SensorConfig};
+use crate::sensor::NearestObstacle;
+use crate::world::ReceptorSpec;
+
+use super::lattice::{LatticeSettings, lattice_plan};
+use super::trajectory::Trajectory;
+use super::worker::{
+    Deliberator, MotionPlanner, PlanBudget, PlanClock, PlanDelivery, PlanOutcome, PlanRequest, PlanVerifier,
+};
+
+/// Settings of a deliberative agent.
+#[derive(Clone)]
+pub struct DeliberationSettings {
+    pub clock: PlanClock,
+    pub budget: PlanBudget,
+    /// Settings of the built-in lattice planner (used when `planner` is `None`).
+    pub lattice: LatticeSettings,
+    /// An injected planner instead of the built-in one.
+    pub planner: Option<Arc<dyn MotionPlanner>>,
+    /// Collision-check resolution of the verifier, rad or m.
+    pub verify_resolution: f64,
+    /// Steps to wait after a failed, rejected or panicked plan before asking again.
+    pub retry_after_steps: u64,
+    /// Requests after which the agent gives up and holds (`plan_abandoned`).
+    pub max_attempts: u32,
+    /// Steps after `needed_at` after which an outstanding request counts as lost.
+    pub plan_timeout_steps: u64,
+    /// Obstacle detector range (m); `Some` adds a [`NearestObstacle`] virtual sensor (index 0).
+    pub obstacle_sensing: Option<f64>,
+    /// Steps without a fresh obstacle reading after which the sensor counts as failed.
+    pub sensor_max_age: u64,
+    /// Movement of a sensed obstacle (m) that counts as a change of the world.
+    pub move_tolerance: f64,
+    /// Halt and replan on every change of the world, not only when the plan is hit.
+    pub halt_on_any_change: bool,
+}
+
+impl Default for DeliberationSettings {
+    fn default() -> Self {
+        Self {
+            clock: PlanClock::WallClock,
+            budget: PlanBudget::default(),
+            lattice: LatticeSettings::default(),
+            planner: None,
+            verify_resolution: 0.01,
+            retry_after_steps: 100,
+            max_attempts: 3,
+            plan_timeout_steps: 2000,
+            obstacle_sensing: None,
+            sensor_max_age: 50,
+            move_tolerance: 0.02,
+            halt_on_any_change: false,
+        }
+    }
+}
+
+struct ActivePlan {
+    trajectory: Arc<Trajectory>,
+    id: u64,
+    started_at: u64,
+}
+
+struct Halt {
+    started_at: u64,
+    q0: Vec<f64>,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct SensedObstacle {
+    id: usize,
+    centre: [f64; 3],
+    radius: f64,
+}
+
+/// `c_c` of a deliberative agent: the deliberator, the goal, the world model and the plan.
+pub struct DeliberativeState {
+    pub deliberator: Deliberator,
+    pub goal: Vec<f64>,
+    settings: DeliberationSettings,
+    robot: Arc<Robot>,
+    base_env: Environment,
+    collision: CollisionModel,
+    sensed: Vec<SensedObstacle>,
+    world_version: u64,
+    plan: Option<ActivePlan>,
+    halt: Option<Halt>,
+    fault: Option<String>,
+    attempts: u32,
+    next_request_at: u64,
+    late_reported: bool,
+    goal_reached: bool,
+    abandoned: bool,
+    last_fresh: u64,
+    scratch: JointCommand,
+}
+
+impl DeliberativeState {
+    /// `c_c` for `robot` planning to `goal` in `collision`'s environment.
+    pub fn new(robot: Arc<Robot>, collision: CollisionModel, goal: Vec<f64>, settings: DeliberationSettings) -> Self {
+        let planner: Arc<dyn MotionPlanner> = match &settings.planner {
+            Some(p) => p.clone(),
+            None => {
+                let model = collision.clone();
+                let lattice = settings.lattice;
+                Arc::new(move |r: &PlanRequest, d: &embodied_planner::deadline::Deadline| {
+                    lattice_plan(&model, &lattice, r, d)
+                })
+            }
+        };
+        let verifier = PlanVerifier {
+            limits: robot.limits(),
+            collision: Some(collision.clone()),
+            resolution: settings.verify_resolution,
+        };
+        let dof = robot.dof();
+        Self {
+            deliberator: Deliberator::new(planner, verifier, settings.clock),
+            goal,
+            base_env: collision.environment().clone(),
+            collision,
+            robot,
+            settings,
+            sensed: Vec::new(),
+            world_version: 0,
+            plan: None,
+            halt: None,
+            fault: None,
+            attempts: 0,
+            next_request_at: 0,
+            late_reported: false,
+            goal_reached: false,
+            abandoned: false,
+            last_fresh: 0,
+            scratch: JointCommand::hold(&vec![0.0; dof]),
+        }
+    }
+    /// Version of the agent's world model (increases with every sensed change).
+    pub fn world_version(&self) -> u64 {
+        self.world_version
+    }
+    /// Whether a verified plan is being followed.
+    pub fn is_following(&self) -> bool {
+        self.plan.is_some()
+    }
+    /// Whether the goal has been reached.
+    pub fn goal_reached(&self) -> bool {
+        self.goal_reached
+    }
+
+    fn environment(&self) -> Environment {
+        let mut env = self.base_env.clone();
+        for o in &self.sensed {
+            let [x, y, z] = o.centre;
+            env.add(Obstacle::new(
+                format!("sensed-{}", o.id),
+                Isometry3::translation(x, y, z),
+                Shape::Sphere { radius: o.radius },
+            ));
+        }
+        env
+    }
+}
+
+/// Something a deliberative `c_c` type contains, so that [`PlanFollower`] can run inside a
+/// larger program with its own `c_c`.
+pub trait AsDeliberation {
+    fn deliberation(&mut self) -> &mut DeliberativeState;
+}
+
+impl AsDeliberation for DeliberativeState {
+    fn deliberation(&mut self) -> &mut DeliberativeState {
+        self
+    }
+}
+
+/// The deliberative behaviour (a primitive behaviour whose transition function consults the
+/// plan in `c_c`; it never ends by itself: at the goal it holds).
+pub struct PlanFollower {
+    name: String,
+    phase: &'static str,
+    suspended: bool,
+}
+
+impl PlanFollower {
+    pub fn new(name: impl Into<String>) -> Self {
+        Self { name: name.into(), phase: "waiting", suspended: false }
+    }
+}
+
+fn at_rest(qd: &[f64]) -> bool {
+    qd.iter().all(|v| v.abs() < 1e-9)
+}
+
+impl<C: AsDeliberation + Send> Behaviour<C> for PlanFollower {
+    fn name(&self) -> &str {
+        &self.name
+    }
+
+    fn step(&mut self, cc: &mut C, inputs: &InputImages, outputs: &mut OutputImages) -> Result<Status, Violation> {
+        let s = cc.deliberation();
+        let step = inputs.step();
+        if std::mem::take(&mut self.suspended) && s.plan.take().is_some() {
+            outputs.event("plan_suspended");
+        }
+        sense(s, inputs, outputs);
+        if let Some(d) = s.deliberator.poll(step) {
+            deliver(s, d, inputs, outputs);
+        }
+        // An answer that never comes (e.g. its transmission was lost).
+        if s.deliberator.pending().is_some_and(|_| step > s.next_request_at + s.settings.plan_timeout_steps)
+            && let Some(id) = s.deliberator.pending()
+        {
+            s.deliberator.cancel();
+            outputs.event(format!("plan_lost id={id}"));
+            s.attempts += 1;
+            s.next_request_at = step;
+        }
+        if s.fault.is_some() {
+            s.plan = None;
+            s.deliberator.cancel();
+        }
+        if let Some(plan) = &s.plan {
+            let k = step.saturating_sub(plan.started_at) + 1;
+            let t = k as f64 * inputs.dt();
+            let n = inputs.dof();
+            plan.trajectory.sample(t, &mut s.scratch.q[..n], &mut s.scratch.qd[..n]);
+            outputs.set_position_target(&s.scratch.q, &s.scratch.qd);
+            if t >= plan.trajectory.duration() {
+                if !s.goal_reached {
+                    s.goal_reached = true;
+                    outputs.event(format!("goal_reached id={}", plan.id));
+                }
+                self.phase = "at-goal";
+            } else {
+                self.phase = "following";
+            }
+            return Ok(Status::Running);
+        }
+        // No valid plan: c^{i+1} is computed without it and halts the effector.
+        halt(s, inputs, outputs);
+        self.phase = if s.fault.is_some() {
+            "fault"
+        } else if s.halt.is_some() {
+            "halting"
+        } else {
+            "waiting"
+        };
+        if s.fault.is_none() && !s.goal_reached && !s.abandoned && s.halt.is_none() && at_rest(inputs.qd()) {
+            maybe_request(s, inputs, outputs);
+        }
+        Ok(Status::Running)
+    }
+
+    fn reset(&mut self) {
+        self.suspended = true;
+        self.phase = "suspended";
+    }
+
+    fn describe(&self, out: &mut String) {
+        out.push_str(&self.name);
+        out.push('/');
+        out.push_str(self.phase);
+    }
+}
+
+fn maybe_request(s: &mut DeliberativeState, inputs: &InputImages, outputs: &mut OutputImages) {
+    let step = inputs.step();
+    if let Some(id) = s.deliberator.pending() {
+        if step >= s.next_request_at + s.settings.budget.steps && !s.late_reported {
+            s.late_reported = true;
+            outputs.event(format!("plan_late id={id}"));
+            outputs.event("safe_halt_started reason=plan_late");
+            outputs.event("safe_halt_done distance=0 steps=0");
+        }
+        return;
+    }
+    if step < s.next_request_at {
+        return;
+    }
+    if s.attempts >= s.settings.max_attempts {
+        s.abandoned = true;
+        outputs.event(format!("plan_abandoned after {} attempts", s.attempts));
+        return;
+    }
+    let request = PlanRequest {
+        id: 0,
+        world_version: s.world_version,
+        step,
+        start: inputs.q().to_vec(),
+        goal: s.goal.clone(),
+        dt: inputs.dt(),
+        environment: Some(s.environment()),
+        budget: s.settings.budget,
+    };
+    let id = s.deliberator.request(request);
+    s.next_request_at = step;
+    s.late_reported = false;
+    outputs.event(format!("plan_requested id={id} world={}", s.world_version));
+    if s.settings.budget.steps == 0 {
+        // The plan is needed now and cannot be there: halt (at rest, a hold).
+        s.late_reported = true;
+        outputs.event(format!("plan_late id={id}"));
+        outputs.event("safe_halt_started reason=plan_late");
+        outputs.event("safe_halt_done distance=0 steps=0");
+    }
+}
+
+/// Halt command for this step, with the halt's start and end logged.
+fn halt(s: &mut DeliberativeState, inputs: &InputImages, outputs: &mut OutputImages) {
+    let (q, qd) = (inputs.q(), inputs.qd());
+    if !at_rest(qd) && s.halt.is_none() {
+        s.halt = Some(Halt { started_at: inputs.step(), q0: q.to_vec() });
+        let speed = qd.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
+        outputs.event(format!("safe_halt_started speed={speed:.6}"));
+    }
+    if at_rest(qd)
+        && let Some(h) = s.halt.take()
+    {
+        let distance = q.iter().zip(&h.q0).fold(0.0_f64, |m, (a, b)| m.max((a - b).abs()));
+        let steps = inputs.step() - h.started_at;
+        outputs.event(format!("safe_halt_done distance={distance:.6} steps={steps}"));
+    }
+    SafeHalt::command_into(q, qd, inputs.limits(), inputs.dt(), &mut s.scratch);
+    outputs.set_command(&s.scratch);
+}
+
+fn deliver(s: &mut DeliberativeState, d: PlanDelivery, inputs: &InputImages, outputs: &mut OutputImages) {
+    let step = inputs.step();
+    let when = if step > d.needed_at { "late" } else { "in_time" };
+    let id = d.id;
+    let overshoot = match (s.deliberator.clock(), d.overshoot) {
+        (PlanClock::WallClock, Some(o)) => format!(" overshoot_us={}", o.as_micros()),
+        _ => String::new(),
+    };
+    let retry = |s: &mut DeliberativeState| {
+        s.attempts += 1;
+        s.next_request_at = step + s.settings.retry_after_steps;
+    };
+    match d.outcome {
+        PlanOutcome::Ready(trajectory) => {
+            let stale = if d.world_version != s.world_version {
+                Some(format!("world {} != {}", d.world_version, s.world_version))
+            } else if d.start.len() != inputs.dof()
+                || d.start.iter().zip(inputs.q()).any(|(a, b)| (a - b).abs() > 1e-6)
+                || !at_rest(inputs.qd())
+            {
+                Some("start state moved".to_string())
+            } else if s.fault.is_some() {
+                Some("fault".to_string())
+            } else {
+                None
+            };
+            match stale {
+                Some(why) => {
+                    outputs.event(format!("plan_discarded_stale id={id}: {why}"));
+                    s.next_request_at = step;
+                }
+                None => {
+                    outputs.event(format!(
+                        "plan_ready id={id} world={} {when} expansions={}{overshoot}",
+                        d.world_version, d.expansions
+                    ));
+                    s.attempts = 0;
+                    s.plan = Some(ActivePlan { trajectory, id, started_at: step });
+                }
+            }
+        }
+        PlanOutcome::Rejected(v) => {
+            outputs.event(format!("plan_rejected id={id}: {v}"));
+            retry(s);
+        }
+        PlanOutcome::Failed(f) => {
+            outputs.event(format!("plan_failed id={id} {when}: {f}{overshoot}"));
+            retry(s);
+        }
+        PlanOutcome::Panicked(m) => {
+            outputs.event(format!("planner_panicked id={id}: {m}"));
+            retry(s);
+        }
+    }
+}
+
+/// Read the obstacle sensor: faults (NaN, silence), and changes of the world.
+fn sense(s: &mut DeliberativeState, inputs: &InputImages, outputs: &mut OutputImages) {
+    if s.settings.obstacle_sensing.is_none() {
+        return;
+    }
+    let step = inputs.step();
+    let r = inputs.sensor(0);
+    if !r.fresh {
+        if step.saturating_sub(s.last_fresh) > s.settings.sensor_max_age && s.fault.is_none() {
+            s.fault = Some("sensor silent".into());
+            outputs.event(format!("sensor_fault: no reading for {} steps", step - s.last_fresh));
+        }
+        return;
+    }
+    s.last_fresh = step;
+    if r.as_slice().iter().any(|v| !v.is_finite()) {
+        if s.fault.is_none() {
+            s.fault = Some("sensor NaN".into());
+            outputs.event("sensor_fault: non-finite reading");
+        }
+        return;
+    }
+    if s.fault.take().is_some() {
+        outputs.event("sensor_recovered");
+        s.attempts = 0;
+    }
+    let changed = if r.len < 5 {
+        if s.sensed.is_empty() {
+            false
+        } else {
+            s.sensed.clear();
+            true
+        }
+    } else {
+        let v = r.as_slice();
+        let id = v[4].max(0.0) as usize;
+        let centre = [v[1], v[2], v[3]];
+        let q = inputs.q();
+        let p = if q.len() == s.robot.dof() && !s.robot.end_effectors().is_empty() {
+            s.robot.end_effector_poses(q, 0).1.translation.vector
+        } else {
+            nalgebra::Vector3::zeros()
+        };
+        let centre_dist = ((p.x - centre[0]).powi(2) + (p.y - centre[1]).powi(2) + (p.z - centre[2]).powi(2)).sqrt();
+        let radius = (centre_dist - v[0]).max(0.0);
+        let tol = s.settings.move_tolerance;
+        match s.sensed.iter_mut().find(|o| o.id == id) {
+            Some(o) => {
+                let moved = (0..3).any(|k| (o.centre[k] - centre[k]).abs() > tol) || (o.radius - radius).abs() > tol;
+                if moved {
+                    *o = SensedObstacle { id, centre, radius };
+                }
+                moved
+            }
+            None => {
+                s.sensed.push(SensedObstacle { id, centre, radius });
+                true
+            }
+        }
+    };
+    if !changed {
+        return;
+    }
+    s.world_version += 1;
+    let env = s.environment();
+    s.collision.set_environment(env);
+    outputs.event(format!("world_changed version={}", s.world_version));
+    let Some(plan) = &s.plan else { return };
+    let k = (step.saturating_sub(plan.started_at) as usize).min(plan.trajectory.len().saturating_sub(1));
+    let hit = remaining_collides(&s.collision, &plan.trajectory, k, s.settings.verify_resolution);
+    if hit || s.settings.halt_on_any_change {
+        outputs.event(format!("plan_invalidated id={}{}", plan.id, if hit { ": obstacle in path" } else { "" }));
+        s.plan = None;
+        s.attempts = 0;
+        s.goal_reached = false;
+        s.next_request_at = step;
+    } else {
+        outputs.event(format!("plan_revalidated id={} world={}", plan.id, s.world_version));
+    }
+}
+
+fn remaining_collides(model: &CollisionModel, traj: &Trajectory, from: usize, resolution: f64) -> bool {
+    let mut scratch = model.scratch();
+    let stride = 4.0 * resolution.max(1e-4);
+    let mut knot = from;
+    for k in from + 1..traj.len() {
+        let last = k + 1 == traj.len();
+        let next_far = !last && traj.q[k + 1].iter().zip(&traj.q[knot]).any(|(a, b)| (a - b).abs() > stride);
+        if (last || next_far) && !model.motion_is_free_with(&traj.q[knot], &traj.q[k], resolution, &mut scratch) {
+            return true;
+        }
+        if last || next_far {
+            knot = k;
+        }
+    }
+    from < traj.len() && model.collides_with(&traj.q[from], &mut scratch)
+}
+
+/// A deliberative agent in a few lines: `robot` at `start` planning to `goal` in `collision`'s
+/// environment, its program the [`PlanFollower`]; with `settings.obstacle_sensing` it also gets
+/// an obstacle detector and a [`NearestObstacle`] virtual sensor (index 0).
+pub fn deliberative_agent(
+    name: impl Into<String>,
+    robot: Arc<Robot>,
+    collision: CollisionModel,
+    start: &[f64],
+    goal: Vec<f64>,
+    settings: DeliberationSettings,
+) -> Result<Agent<DeliberativeState>, ExecutorError> {
+    let dof = robot.dof();
+    for (what, v) in [("start configuration", start), ("goal configuration", &goal[..])] {
+        if v.len() != dof {
+            return Err(ExecutorError::DimensionMismatch { what: what.into(), expected: dof, got: v.len() });
+        }
+    }
+    let sensing = settings.obstacle_sensing;
+    let state = DeliberativeState::new(robot.clone(), collision, goal, settings);
+    let mut agent = Agent::embodied(name, robot, Some(start), state, PlanFollower::new("deliberative"))?;
+    if let Some(range) = sensing {
+        agent = agent
+            .with_sensor(NearestObstacle, SensorConfig::default())
+            .with_receptors(ReceptorSpec { detector_range: Some(range), ..ReceptorSpec::default() });
+    }
+    Ok(agent)
+}
