@@ -26,10 +26,13 @@ pub fn idle<C>() -> impl TransitionFunction<C> {
     |_: &mut C, _: &InputImages, _: &mut OutputImages| {}
 }
 
+/// The test inside a [`Predicate`].
+pub type PredicateFn<C> = Box<dyn Fn(&C, &InputImages) -> bool + Send + Sync>;
+
 /// A named predicate `^q p_{c_j}(c^i)`; it may read `c_c` and the input images only.
 pub struct Predicate<C> {
     name: String,
-    test: Box<dyn Fn(&C, &InputImages) -> bool + Send + Sync>,
+    test: PredicateFn<C>,
 }
 
 impl<C> Predicate<C> {

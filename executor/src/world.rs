@@ -163,8 +163,8 @@ impl Receptors {
                 && distance < 0.0
                 && centre_dist > 0.0
             {
-                for a in 0..3 {
-                    out.force[a] += k * (-distance) * d[a] / centre_dist;
+                for (f, da) in out.force.iter_mut().zip(d) {
+                    *f += k * (-distance) * da / centre_dist;
                 }
             }
             if let Some(range) = spec.detector_range

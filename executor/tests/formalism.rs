@@ -121,7 +121,7 @@ fn priority_order_is_subsumption_suppression() {
 fn nested_behaviour_uses_its_local_predicates() {
     let inner = Reactive::priority("inner")
         .rule(
-            Predicate::new("even", |_: &(), i: &InputImages| i.step() % 2 == 0),
+            Predicate::new("even", |_: &(), i: &InputImages| i.step().is_multiple_of(2)),
             Primitive::new("even-step", 1, velocity(0.1)),
         )
         .main_reaction(Primitive::new("odd-step", 1, velocity(-0.1)));
@@ -563,7 +563,7 @@ fn runs_are_deterministic_and_independent_of_threads() {
                         q.resize(i.dof(), 0.0);
                         q[0] += 0.5 * ((i.step() as f64) * 0.003 + k as f64).sin();
                         o.set_position_target(&q, &vec![0.0; i.dof()]);
-                        if i.step() % 50 == 0 {
+                        if i.step().is_multiple_of(50) {
                             o.send(AgentId((k + 1) % 6), Message::new(1, &[i.q()[0]]));
                         }
                     },

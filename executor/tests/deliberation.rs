@@ -1,0 +1,386 @@
+//! Deliberation in the loop: faults end in a safe halt with the log intact, late plans halt
+//! and resume, stale plans are discarded, obstacles trigger replanning, runs replay.
+
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU32, Ordering};
+
+use embodied_executor::deliberation::*;
+use embodied_executor::*;
+use embodied_models::{CollisionModel, Environment, Robot};
+use embodied_planner::deadline::Deadline;
+
+const START: [f64; 6] = [0.0, -0.785, 0.0, 0.0, 0.5, 0.0];
+const GOAL: [f64; 6] = [0.6, -0.5, 0.4, 0.0, 1.2, 0.0];
+
+fn robot() -> Arc<Robot> {
+    Arc::new(embodied_models::builtin("rnt").expect("built-in robot"))
+}
+
+fn simulated() -> DeliberationSettings {
+    DeliberationSettings {
+        clock: PlanClock::Simulated { steps_per_expansion: 0.01, fixed_steps: 5 },
+        budget: PlanBudget { wall: None, steps: 200, expansions: None },
+        retry_after_steps: 50,
+        ..DeliberationSettings::default()
+    }
+}
+
+/// A planner that ignores obstacles: a straight line, time-parameterised within limits.
+fn straight_line(robot: &Robot) -> impl Fn(&PlanRequest, &Deadline) -> Result<Planned, PlanFailure> + use<> {
+    let (limits, names) = (robot.limits(), robot.joint_names());
+    move |r: &PlanRequest, _: &Deadline| {
+        let trajectory = time_parameterize(&[r.start.clone(), r.goal.clone()], &limits, &names, r.dt, 0.9);
+        Ok(Planned { trajectory, expansions: 100 })
+    }
+}
+
+fn run(runtime: &mut Runtime, steps: u64) -> Vec<StepRecord> {
+    let mut records = Vec::new();
+    let result = runtime.run(steps, |r| records.push(r.clone()));
+    assert!(result.is_ok(), "run failed: {result:?}");
+    records
+}
+
+fn events(records: &[StepRecord]) -> Vec<(u64, String)> {
+    records.iter().flat_map(|r| r.agents[0].events.iter().map(move |e| (r.step, e.clone()))).collect()
+}
+
+fn first(records: &[StepRecord], prefix: &str) -> Option<u64> {
+    events(records).into_iter().find(|(_, e)| e.starts_with(prefix)).map(|(s, _)| s)
+}
+
+/// The log is complete, every state within the limits, and the agent ends at rest.
+fn assert_safe(records: &[StepRecord], steps: u64, robot: &Robot) {
+    assert_eq!(records.len() as u64, steps, "one record per step");
+    for (k, r) in records.iter().enumerate() {
+        assert_eq!(r.step, k as u64);
+    }
+    let limits = robot.limits();
+    let dt = 0.001;
+    for w in records.windows(2) {
+        let (a, b) = (&w[0].agents[0], &w[1].agents[0]);
+        for (j, l) in limits.iter().enumerate() {
+            assert!(b.q[j] >= l.lower - 1e-9 && b.q[j] <= l.upper + 1e-9, "position bound, joint {j}");
+            assert!(b.qd[j].abs() <= l.max_velocity + 1e-9, "velocity bound, joint {j}");
+            assert!(
+                (b.qd[j] - a.qd[j]).abs() / dt <= l.max_acceleration * (1.0 + 1e-6) + 1e-6,
+                "acceleration, joint {j}"
+            );
+        }
+    }
+    let last = &records[records.len() - 1].agents[0];
+    assert!(last.qd.iter().all(|v| *v == 0.0), "ends at rest: {:?}", last.qd);
+}
+
+fn env_agent(settings: DeliberationSettings, env: Environment) -> Agent<DeliberativeState> {
+    let robot = robot();
+    let collision = CollisionModel::new(&robot, env);
+    deliberative_agent("arm", robot, collision, &START, GOAL.to_vec(), settings).expect("agent")
+}
+
+fn runtime_with(agent: Agent<DeliberativeState>) -> Runtime {
+    let mut rt = Runtime::new(RuntimeConfig { seed: 3, ..RuntimeConfig::default() });
+    rt.add_agent(agent);
+    rt
+}
+
+#[test]
+fn plans_and_reaches_the_goal() {
+    let mut rt = runtime_with(env_agent(simulated(), Environment::new()));
+    let records = run(&mut rt, 6000);
+    assert!(first(&records, "plan_requested id=1").is_some());
+    assert!(first(&records, "plan_ready id=1 world=0 in_time").is_some(), "{:?}", events(&records));
+    assert!(first(&records, "goal_reached").is_some(), "{:?}", events(&records));
+    let last = &records[records.len() - 1].agents[0];
+    for (q, g) in last.q.iter().zip(GOAL) {
+        assert!((q - g).abs() < 1e-3, "{:?}", last.q);
+    }
+    assert_safe(&records, 6000, &robot());
+}
+
+#[test]
+fn wall_clock_mode_never_blocks_and_reaches_the_goal() {
+    let settings = DeliberationSettings {
+        budget: PlanBudget { wall: Some(std::time::Duration::from_secs(5)), steps: 5000, expansions: None },
+        ..DeliberationSettings::default()
+    };
+    let mut rt = runtime_with(env_agent(settings, Environment::new()));
+    let mut records = Vec::new();
+    // Step until the plan lands (the runtime keeps producing records meanwhile).
+    for _ in 0..200_000 {
+        records.push(rt.step().expect("step").clone());
+        if first(&records, "goal_reached").is_some() {
+            break;
+        }
+    }
+    assert!(first(&records, "plan_ready id=1").is_some(), "{:?}", events(&records));
+    assert!(first(&records, "goal_reached").is_some());
+}
+
+fn midway_fault_agent(sensor: impl VirtualSensor + 'static, config: SensorConfig) -> Agent<DeliberativeState> {
+    let robot = robot();
+    let collision = CollisionModel::new(&robot, Environment::new());
+    let settings = DeliberationSettings { obstacle_sensing: Some(f64::INFINITY), ..simulated() };
+    let state = DeliberativeState::new(robot.clone(), collision, GOAL.to_vec(), settings);
+    Agent::embodied("arm", robot, Some(&START), state, PlanFollower::new("deliberative"))
+        .expect("agent")
+        .with_sensor(sensor, config)
+}
+
+#[test]
+fn nan_sensor_reading_halts_safely() {
+    let calls = AtomicU32::new(0);
+    let sensor = move |_: &SensorConfig, _: &ReceptorReadings| {
+        if calls.fetch_add(1, Ordering::Relaxed) < 600 { Reading::new(&[]) } else { Reading::new(&[f64::NAN; 5]) }
+    };
+    let mut rt = runtime_with(midway_fault_agent(sensor, SensorConfig::default()));
+    let records = run(&mut rt, 3000);
+    let fault = first(&records, "sensor_fault: non-finite").expect("fault event");
+    assert_eq!(fault, 600);
+    assert!(first(&records, "plan_ready").is_some_and(|s| s < fault), "moving when the fault comes");
+    assert!(first(&records, "safe_halt_started").is_some_and(|s| s == fault));
+    assert!(first(&records, "safe_halt_done").is_some_and(|s| s > fault));
+    assert!(first(&records, "goal_reached").is_none());
+    assert_safe(&records, 3000, &robot());
+}
+
+#[test]
+fn silent_sensor_halts_safely() {
+    // Read once at step 0, then not for 100000 steps: the sensor stops delivering.
+    let config = SensorConfig { period: 100_000, ..SensorConfig::default() };
+    let mut rt = runtime_with(midway_fault_agent(NearestObstacle, config));
+    let records = run(&mut rt, 3000);
+    let fault = first(&records, "sensor_fault: no reading").expect("fault event");
+    assert_eq!(fault, 51);
+    assert!(first(&records, "plan_ready").is_none(), "no plan may be followed without the sensor");
+    assert_safe(&records, 3000, &robot());
+}
+
+fn injected(planner: impl MotionPlanner + 'static, env: Environment) -> Agent<DeliberativeState> {
+    let settings = DeliberationSettings { planner: Some(Arc::new(planner)), max_attempts: 2, ..simulated() };
+    env_agent(settings, env)
+}
+
+#[test]
+fn planner_panic_halts_safely() {
+    let planner = |_: &PlanRequest, _: &Deadline| -> Result<Planned, PlanFailure> { panic!("planner bug") };
+    let mut rt = runtime_with(injected(planner, Environment::new()));
+    let records = run(&mut rt, 1000);
+    assert!(first(&records, "planner_panicked id=1: planner bug").is_some(), "{:?}", events(&records));
+    assert!(first(&records, "planner_panicked id=2").is_some(), "retried");
+    assert!(first(&records, "plan_abandoned").is_some());
+    assert!(records.iter().all(|r| r.agents[0].q.iter().zip(START).all(|(a, b)| (a - b).abs() < 1e-12)));
+    assert_safe(&records, 1000, &robot());
+}
+
+#[test]
+fn limit_violating_plan_is_rejected() {
+    let (limits, names) = (robot().limits(), robot().joint_names());
+    // Twice the velocity and acceleration limits.
+    let fast: Vec<_> = limits
+        .iter()
+        .map(|l| embodied_models::JointLimits::new(l.lower, l.upper, 2.0 * l.max_velocity, 4.0 * l.max_acceleration))
+        .collect();
+    let planner = move |r: &PlanRequest, _: &Deadline| {
+        let trajectory = time_parameterize(&[r.start.clone(), r.goal.clone()], &fast, &names, r.dt, 1.0);
+        Ok(Planned { trajectory, expansions: 10 })
+    };
+    let _ = limits;
+    let mut rt = runtime_with(injected(planner, Environment::new()));
+    let records = run(&mut rt, 1000);
+    let ev = events(&records);
+    assert!(ev.iter().any(|(_, e)| e.starts_with("plan_rejected id=1") && e.contains("exceeds")), "{ev:?}");
+    assert!(first(&records, "plan_ready").is_none());
+    assert_safe(&records, 1000, &robot());
+}
+
+/// An obstacle on the straight line from START to GOAL (at the tool point halfway), clear of
+/// both ends.
+fn obstacle_midway(robot: &Robot, radius: f64) -> [f64; 3] {
+    let mid: Vec<f64> = START.iter().zip(GOAL).map(|(a, b)| 0.5 * (a + b)).collect();
+    let p = robot.end_effector_poses(&mid, 0).1.translation.vector;
+    for end in [&START, &GOAL] {
+        let e = robot.end_effector_poses(end, 0).1.translation.vector;
+        assert!((e - p).norm() > radius + 0.05, "test setup: the obstacle must be clear of the ends");
+    }
+    [p.x, p.y, p.z]
+}
+
+#[test]
+fn colliding_plan_is_rejected() {
+    let robot = robot();
+    let c = obstacle_midway(&robot, 0.08);
+    let env = Environment::new().with(embodied_models::Obstacle::new(
+        "ball",
+        nalgebra::Isometry3::translation(c[0], c[1], c[2]),
+        embodied_models::Shape::Sphere { radius: 0.08 },
+    ));
+    let mut rt = runtime_with(injected(straight_line(&robot), env));
+    let records = run(&mut rt, 1000);
+    let ev = events(&records);
+    assert!(ev.iter().any(|(_, e)| e.starts_with("plan_rejected id=1") && e.contains("collision")), "{ev:?}");
+    assert!(first(&records, "plan_ready").is_none());
+    assert_safe(&records, 1000, &robot);
+}
+
+#[test]
+fn lost_transmission_times_out_and_replans() {
+    let settings = DeliberationSettings { plan_timeout_steps: 300, ..simulated() };
+    let mut agent_state = env_agent(settings, Environment::new());
+    let _ = &mut agent_state;
+    // Build by hand to reach the deliberator before the run.
+    let robot = robot();
+    let collision = CollisionModel::new(&robot, Environment::new());
+    let settings = DeliberationSettings { plan_timeout_steps: 300, ..simulated() };
+    let mut state = DeliberativeState::new(robot.clone(), collision, GOAL.to_vec(), settings);
+    state.deliberator.lose_next_deliveries(1);
+    let agent = Agent::embodied("arm", robot.clone(), Some(&START), state, PlanFollower::new("d")).expect("agent");
+    let mut rt = runtime_with(agent);
+    let records = run(&mut rt, 6000);
+    assert!(first(&records, "plan_late id=1").is_some(), "{:?}", events(&records));
+    assert!(first(&records, "plan_lost id=1").is_some());
+    assert!(first(&records, "plan_ready id=2").is_some());
+    assert!(first(&records, "goal_reached").is_some());
+    assert_safe(&records, 6000, &robot);
+}
+
+#[test]
+fn zero_deadline_delivers_nothing_and_halts() {
+    for clock in [PlanClock::WallClock, PlanClock::Simulated { steps_per_expansion: 0.01, fixed_steps: 0 }] {
+        let settings = DeliberationSettings {
+            clock,
+            budget: PlanBudget { wall: Some(std::time::Duration::ZERO), steps: 0, expansions: None },
+            retry_after_steps: 20,
+            ..DeliberationSettings::default()
+        };
+        let mut rt = runtime_with(env_agent(settings, Environment::new()));
+        let mut records = Vec::new();
+        for _ in 0..500 {
+            records.push(rt.step().expect("step").clone());
+            std::thread::sleep(std::time::Duration::from_micros(50));
+        }
+        assert!(first(&records, "plan_late id=1").is_some_and(|s| s == 0));
+        assert!(first(&records, "safe_halt_started").is_some());
+        assert!(first(&records, "plan_ready").is_none(), "{clock:?}: {:?}", events(&records));
+        assert!(first(&records, "plan_failed id=1").is_some(), "{clock:?}: {:?}", events(&records));
+        assert_safe(&records, 500, &robot());
+    }
+}
+
+/// The lattice planner, but reporting `extra` more expansions (a slow planner in simulated time).
+fn slow_lattice(extra: u64) -> impl MotionPlanner {
+    let robot = robot();
+    let model = CollisionModel::new(&robot, Environment::new());
+    move |r: &PlanRequest, _: &Deadline| {
+        let mut p = lattice_plan(&model, &LatticeSettings::default(), r, &Deadline::none())?;
+        p.expansions += extra;
+        Ok(p)
+    }
+}
+
+#[test]
+fn late_plan_halts_then_resumes_when_it_lands() {
+    let settings = DeliberationSettings {
+        planner: Some(Arc::new(slow_lattice(20_000))),
+        budget: PlanBudget { wall: None, steps: 50, expansions: None },
+        ..simulated()
+    };
+    let mut rt = runtime_with(env_agent(settings, Environment::new()));
+    let records = run(&mut rt, 6000);
+    let late = first(&records, "plan_late id=1").expect("late");
+    assert_eq!(late, 50);
+    assert!(first(&records, "safe_halt_started").is_some_and(|s| s == late));
+    let ready = first(&records, "plan_ready id=1 world=0 late").expect("lands late");
+    assert!(ready > 200 && ready < 300, "{ready}");
+    // At rest until it lands, then moving.
+    assert!(records[..ready as usize].iter().all(|r| r.agents[0].qd.iter().all(|v| *v == 0.0)));
+    assert!(first(&records, "goal_reached").is_some());
+    assert_safe(&records, 6000, &robot());
+}
+
+#[test]
+fn plan_for_an_old_world_is_discarded() {
+    let settings = DeliberationSettings {
+        planner: Some(Arc::new(slow_lattice(10_000))),
+        budget: PlanBudget { wall: None, steps: 500, expansions: None },
+        obstacle_sensing: Some(f64::INFINITY),
+        ..simulated()
+    };
+    let mut rt = runtime_with(env_agent(settings, Environment::new()));
+    // Far away: it changes the world model but blocks nothing.
+    rt.world_mut().add_obstacle(Obstacle { appears_at: 20, ..Obstacle::fixed("far", [10.0, 10.0, 10.0], 0.1) });
+    let records = run(&mut rt, 6000);
+    assert_eq!(first(&records, "world_changed version=1"), Some(20));
+    let stale = first(&records, "plan_discarded_stale id=1").expect("stale plan discarded");
+    assert!(first(&records, "plan_requested id=2 world=1").is_some_and(|s| s >= stale));
+    assert!(first(&records, "plan_ready id=1").is_none(), "the stale plan is never followed");
+    assert!(first(&records, "plan_ready id=2 world=1").is_some());
+    assert!(first(&records, "goal_reached").is_some());
+    assert_safe(&records, 6000, &robot());
+}
+
+#[test]
+fn obstacle_entering_the_path_halts_and_replans() {
+    let robot = robot();
+    let c = obstacle_midway(&robot, 0.05);
+    let settings = DeliberationSettings { obstacle_sensing: Some(f64::INFINITY), ..simulated() };
+    let mut rt = runtime_with(env_agent(settings, Environment::new()));
+    rt.world_mut().add_obstacle(Obstacle { appears_at: 400, ..Obstacle::fixed("intruder", c, 0.05) });
+    let records = run(&mut rt, 12_000);
+    let ev = events(&records);
+    assert!(first(&records, "plan_ready id=1").is_some_and(|s| s < 400), "{ev:?}");
+    assert_eq!(first(&records, "world_changed version=1"), Some(400));
+    assert_eq!(first(&records, "plan_invalidated id=1: obstacle in path"), Some(400), "{ev:?}");
+    let halt = first(&records, "safe_halt_started speed=").expect("halt while moving");
+    assert_eq!(halt, 400);
+    let done = first(&records, "safe_halt_done").expect("halt ends");
+    assert!(first(&records, "plan_requested id=2 world=1").is_some_and(|s| s >= done));
+    // Whatever the replan gives, nothing from the old world is followed after the change.
+    assert!(!ev.iter().any(|(s, e)| *s > 400 && e.starts_with("plan_ready") && e.contains("world=0")));
+    assert_safe(&records, 12_000, &robot);
+}
+
+#[test]
+fn avoidance_reaction_suppresses_the_plan_follower() {
+    let robot = robot();
+    let collision = CollisionModel::new(&robot, Environment::new());
+    let settings = DeliberationSettings { obstacle_sensing: Some(f64::INFINITY), ..simulated() };
+    let state = DeliberativeState::new(robot.clone(), collision, GOAL.to_vec(), settings);
+    let near = Predicate::new("obstacle-near", |_: &DeliberativeState, i: &InputImages| {
+        let r = i.sensor(0);
+        r.len >= 5 && r.values[0] < 0.3
+    });
+    let avoid = Primitive::new("avoid", 1, SafeHalt);
+    let program = Reactive::priority("main").rule(near, avoid).main_reaction(PlanFollower::new("deliberative"));
+    let agent = Agent::embodied("arm", robot.clone(), Some(&START), state, program)
+        .expect("agent")
+        .with_sensor(NearestObstacle, SensorConfig::default())
+        .with_receptors(ReceptorSpec { detector_range: Some(f64::INFINITY), ..ReceptorSpec::default() });
+    let mut rt = runtime_with(agent);
+    let tool = robot.end_effector_poses(&START, 0).1.translation.vector;
+    rt.world_mut().add_obstacle(Obstacle {
+        appears_at: 300,
+        vanishes_at: Some(1500),
+        ..Obstacle::fixed("visitor", [tool.x + 0.25, tool.y, tool.z], 0.02)
+    });
+    let records = run(&mut rt, 8000);
+    assert_eq!(records[300].agents[0].behaviour, "main/avoid");
+    assert!(records[1600].agents[0].behaviour.starts_with("main/deliberative"));
+    assert!(first(&records, "plan_suspended").is_some_and(|s| s >= 1500), "{:?}", events(&records));
+    assert!(first(&records, "goal_reached").is_some(), "{:?}", events(&records));
+    assert_safe(&records, 8000, &robot);
+}
+
+#[test]
+fn simulated_clock_replays_bit_for_bit() {
+    let log = || {
+        let settings = DeliberationSettings { obstacle_sensing: Some(f64::INFINITY), ..simulated() };
+        let mut rt = runtime_with(env_agent(settings, Environment::new()));
+        rt.world_mut().add_obstacle(Obstacle { appears_at: 500, ..Obstacle::fixed("far", [5.0, 0.0, 0.0], 0.1) });
+        let records = run(&mut rt, 4000);
+        records.iter().map(|r| serde_json::to_string(r).expect("json")).collect::<Vec<_>>().join("\n")
+    };
+    let (a, b) = (log(), log());
+    assert!(a.contains("plan_ready"));
+    assert_eq!(a, b);
+}
