@@ -8,9 +8,14 @@ use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_m
 use embodied_executor::*;
 
 fn trivial_runtime(n: usize, record: bool) -> Runtime {
-    let mut rt = Runtime::new(RuntimeConfig { record, parallelism: Parallelism::Sequential, ..RuntimeConfig::default() });
+    let mut rt =
+        Runtime::new(RuntimeConfig { record, parallelism: Parallelism::Sequential, ..RuntimeConfig::default() });
     for k in 0..n {
-        let program = Reactive::priority("main").main_reaction(Primitive::new("tick", 1, |c: &mut u64, _: &InputImages, _: &mut OutputImages| *c += 1));
+        let program = Reactive::priority("main").main_reaction(Primitive::new(
+            "tick",
+            1,
+            |c: &mut u64, _: &InputImages, _: &mut OutputImages| *c += 1,
+        ));
         rt.add_agent(Agent::new(format!("a{k}"), 0u64, program));
     }
     rt
@@ -47,14 +52,19 @@ fn bench(c: &mut Criterion) {
     for record in [false, true] {
         let mut rt = trivial_runtime(1000, record);
         g.throughput(Throughput::Elements(1000));
-        g.bench_function(BenchmarkId::new("trivial-1000-agent-steps", if record { "record" } else { "no-record" }), |b| {
-            b.iter(|| black_box(rt.step().is_ok()))
-        });
+        g.bench_function(
+            BenchmarkId::new("trivial-1000-agent-steps", if record { "record" } else { "no-record" }),
+            |b| b.iter(|| black_box(rt.step().is_ok())),
+        );
     }
-    for (name, parallelism) in [("sequential", Parallelism::Sequential), ("rayon", Parallelism::Rayon { min_agents: 256 })] {
+    for (name, parallelism) in
+        [("sequential", Parallelism::Sequential), ("rayon", Parallelism::Rayon { min_agents: 256 })]
+    {
         let mut rt = simple_runtime(1000, parallelism);
         g.throughput(Throughput::Elements(1000));
-        g.bench_function(BenchmarkId::new("simple-1000-agents-1kHz-step", name), |b| b.iter(|| black_box(rt.step().is_ok())));
+        g.bench_function(BenchmarkId::new("simple-1000-agents-1kHz-step", name), |b| {
+            b.iter(|| black_box(rt.step().is_ok()))
+        });
     }
     g.finish();
 }
