@@ -105,6 +105,10 @@ pub struct PlanningScene {
     pub name: String,
     pub objects: Vec<CollisionObject>,
     pub robot_state: Option<JointState>,
+    /// Pairs of links the scene's `allowed_collision_matrix` lets touch (its `entry_values` true
+    /// in either direction), each pair once, in matrix order. The `default_entry_*` fields are
+    /// not read.
+    pub allowed_collisions: Vec<(String, String)>,
 }
 
 /// A joint-space goal on one joint.
@@ -198,6 +202,10 @@ pub fn parse_scene(text: &str, file: &Path) -> Result<PlanningScene, MoveitError
         }
         _ => None,
     };
+    let allowed_collisions = match doc.get(root, "allowed_collision_matrix").filter(|m| !is_null(m)) {
+        Some(acm) => doc.allowed_collision_matrix(acm)?,
+        None => Vec::new(),
+    };
     let mut objects: Vec<CollisionObject> = Vec::new();
     if let Some(world) = doc.get(root, "world").filter(|w| !is_null(w)) {
         doc.expect_mapping(world, "the world (a mapping with `collision_objects`)")?;
@@ -215,7 +223,7 @@ pub fn parse_scene(text: &str, file: &Path) -> Result<PlanningScene, MoveitError
             }
         }
     }
-    Ok(PlanningScene { file: file.to_path_buf(), name, objects, robot_state })
+    Ok(PlanningScene { file: file.to_path_buf(), name, objects, robot_state, allowed_collisions })
 }
 
 /// Parse motion-plan-request YAML; `file` names the source in error messages.
@@ -399,6 +407,20 @@ impl PlanningScene {
             env.add(o);
         }
         env
+    }
+
+    /// Disable self-collision checking between the link pairs the scene's allowed collision
+    /// matrix allows (names the robot does not have, e.g. links of another model, are skipped).
+    /// Returns how many pairs were disabled.
+    pub fn apply_allowed_collisions(&self, robot: &mut Robot) -> usize {
+        let mut n = 0;
+        for (a, b) in &self.allowed_collisions {
+            if let (Some(la), Some(lb)) = (robot.link_index(a), robot.link_index(b)) {
+                robot.disable_pair(la, lb);
+                n += 1;
+            }
+        }
+        n
     }
 
     /// Check that every object is expressed in the robot's world frame: an empty `frame_id`,
@@ -589,6 +611,62 @@ impl<'a> Doc<'a> {
             None => return Err(self.err(js, &format!("missing `position` in {what} ({} names given)", names.len()))),
         };
         Ok(JointState { names, positions, locations })
+    }
+
+    fn allowed_collision_matrix(&self, acm: &Node) -> Result<Vec<(String, String)>, MoveitError> {
+        self.expect_mapping(acm, "the allowed collision matrix (a mapping with `entry_names`, `entry_values`)")?;
+        let names = match self.get(acm, "entry_names").filter(|n| !is_null(n)) {
+            Some(n) => self
+                .seq(n, "allowed_collision_matrix.entry_names")?
+                .iter()
+                .map(|x| self.string(x, "a link name"))
+                .collect::<Result<Vec<_>, _>>()?,
+            None => return Ok(Vec::new()),
+        };
+        let rows_node = self.require(acm, "entry_values", "one row of booleans per entry name")?;
+        let rows = self.seq(rows_node, "allowed_collision_matrix.entry_values")?;
+        if rows.len() != names.len() {
+            return Err(self.err(
+                rows_node,
+                &format!("expected {} rows in entry_values (one per entry name), got {}", names.len(), rows.len()),
+            ));
+        }
+        let mut allowed = vec![vec![false; names.len()]; names.len()];
+        for (i, row) in rows.iter().enumerate() {
+            let cells = self.seq(row, "an allowed collision matrix row")?;
+            if cells.len() != names.len() {
+                return Err(self.err(
+                    row,
+                    &format!(
+                        "expected a list of {} booleans for row `{}` of entry_values, got {}",
+                        names.len(),
+                        names[i],
+                        cells.len()
+                    ),
+                ));
+            }
+            for (j, cell) in cells.iter().enumerate() {
+                allowed[i][j] = match &cell.data {
+                    YamlDataOwned::Value(ScalarOwned::Boolean(b)) => *b,
+                    YamlDataOwned::Value(ScalarOwned::Integer(0)) => false,
+                    YamlDataOwned::Value(ScalarOwned::Integer(1)) => true,
+                    _ => {
+                        return Err(
+                            self.err(cell, &format!("expected true or false in entry_values, got {}", describe(cell)))
+                        );
+                    }
+                };
+            }
+        }
+        let mut pairs = Vec::new();
+        for i in 0..names.len() {
+            for j in i + 1..names.len() {
+                if allowed[i][j] || allowed[j][i] {
+                    pairs.push((names[i].clone(), names[j].clone()));
+                }
+            }
+        }
+        Ok(pairs)
     }
 
     fn pose(&self, n: &Node, what: &str) -> Result<Isometry3<f64>, MoveitError> {

@@ -76,6 +76,7 @@ fn scene_gives_box_sphere_cylinder_with_poses_and_dimensions() {
     assert_eq!(state.names, ["shoulder_pan_joint", "elbow_joint"]);
     assert_eq!(state.positions, [0.25, -0.5]);
     assert_eq!(scene.environment().len(), 3);
+    assert_eq!(scene.allowed_collisions, [("base_link".to_string(), "shoulder_link".to_string())]);
 }
 
 #[test]
