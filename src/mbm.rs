@@ -1,0 +1,594 @@
+//! `embodied bench mbm`: run the motion planner on MotionBenchMaker problems and verify every path.
+//!
+//! MotionBenchMaker (Chamzas et al., RA-L 2022) ships each problem as a MoveIt planning scene
+//! (`sceneNNNN.yaml`) and a motion plan request (`requestNNNN.yaml`) in one folder per family.
+//! For every problem this module freezes the joints outside the request's group at their start
+//! values, builds the collision environment from the scene, plans from the start to the goal's
+//! joint constraints under a deadline, and then checks the returned path independently
+//! ([`verify_path`] at [`VERIFY_RESOLUTION`], plus its end points). Only the call to
+//! [`plan_motion`] is timed: loading and checking the problem is not planning time.
+//!
+//! Problems whose start or goal is in collision (or outside the joint limits) are reported as
+//! invalid, not as planner failures: MotionBenchMaker has a few by construction.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use embodied_models::collision::disable_always_colliding;
+use embodied_models::srdf::{Srdf, load_srdf};
+use embodied_models::urdf::load_urdf;
+use embodied_models::{CollisionModel, ConfigSpace, Robot};
+use embodied_planner::deadline::Deadline;
+use embodied_planner::motion::{Goal, MotionSettings, plan_motion};
+use embodied_planner::moveit::{MoveitError, load_request, load_scene};
+use embodied_planner::verify::verify_path;
+use serde::Serialize;
+
+use crate::error::AppError;
+
+/// The resolution (rad, largest joint step) at which every returned path is re-checked.
+pub const VERIFY_RESOLUTION: f64 = 0.005;
+
+/// How far (joint-space distance) a path's first/last waypoint may be from the request's
+/// start/goal.
+pub const ENDPOINT_TOLERANCE: f64 = 1e-6;
+
+/// What `embodied bench mbm` is asked to do.
+#[derive(Debug, Clone)]
+pub struct MbmArgs {
+    /// The robot (the spherized UR5 for the public UR5 problems).
+    pub urdf: PathBuf,
+    /// Its SRDF (groups, disabled collision pairs).
+    pub srdf: PathBuf,
+    /// A folder of family folders (`problems/<family>/sceneNNNN.yaml`), the folder above it, or a
+    /// single family folder.
+    pub problems: PathBuf,
+    /// Planning deadline per problem, milliseconds.
+    pub deadline_ms: f64,
+    /// Base seed; each problem plans with a seed derived from it and the problem's place.
+    pub seed: u64,
+    /// Collision-checking resolution of the planner's edges (rad, largest joint step).
+    pub resolution: f64,
+    /// Only these families (all when `None`).
+    pub families: Option<Vec<String>>,
+    /// At most this many problems per family (the lowest indices).
+    pub limit: Option<usize>,
+    /// Whether the caller shows progress (the CLI's progress bar); `run_mbm` always reports
+    /// through its callback.
+    pub progress: bool,
+}
+
+impl MbmArgs {
+    /// Arguments with the defaults of the CLI: 1 s deadline, seed 1, 0.05 rad resolution.
+    pub fn new(urdf: impl Into<PathBuf>, srdf: impl Into<PathBuf>, problems: impl Into<PathBuf>) -> Self {
+        Self {
+            urdf: urdf.into(),
+            srdf: srdf.into(),
+            problems: problems.into(),
+            deadline_ms: 1000.0,
+            seed: 1,
+            resolution: 0.05,
+            families: None,
+            limit: None,
+            progress: false,
+        }
+    }
+}
+
+/// How one problem ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ProblemStatus {
+    Solved,
+    /// The request's start configuration is in collision or outside the joint limits.
+    InvalidStart,
+    /// The goal configuration is in collision or outside the joint limits.
+    InvalidGoal,
+    /// The planner gave up at the deadline.
+    OutOfTime,
+    /// The planner failed before the deadline, or returned a path that does not verify.
+    Failed,
+}
+
+impl ProblemStatus {
+    pub fn is_invalid(self) -> bool {
+        matches!(self, ProblemStatus::InvalidStart | ProblemStatus::InvalidGoal)
+    }
+}
+
+/// One problem's outcome; `path` runs from the request's start to its goal over `joint_names`.
+#[derive(Debug, Clone, Serialize)]
+pub struct ProblemResult {
+    pub family: String,
+    pub index: u32,
+    pub solved: bool,
+    pub status: ProblemStatus,
+    /// Wall-clock time of the `plan_motion` call, microseconds (absent for invalid problems).
+    pub planning_us: Option<f64>,
+    pub joint_names: Vec<String>,
+    pub path: Vec<Vec<f64>>,
+    /// Joint-space length of `path` (the configuration space's metric).
+    pub path_length: Option<f64>,
+    /// Whether the independent check of `path` passed (absent when there is no path).
+    pub verified: Option<bool>,
+    /// Why the problem is invalid, failed, or did not verify.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub message: Option<String>,
+}
+
+/// Counts and planning-time percentiles of a set of problems (a family or all).
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct Summary {
+    pub name: String,
+    pub total: usize,
+    /// Problems with a valid start and goal.
+    pub valid: usize,
+    pub invalid: usize,
+    pub solved: usize,
+    pub out_of_time: usize,
+    pub failed: usize,
+    /// Percentiles of the planning time of the solved problems, microseconds.
+    pub p50_us: Option<f64>,
+    pub p95_us: Option<f64>,
+    pub max_us: Option<f64>,
+    pub mean_us: Option<f64>,
+    /// Mean joint-space path length of the solved problems (rad).
+    pub mean_path_length: Option<f64>,
+    /// Returned paths that failed the independent check (must be 0).
+    pub verification_failures: usize,
+    pub all_paths_valid: bool,
+}
+
+/// The benchmark's settings, echoed in the report.
+#[derive(Debug, Clone, Serialize)]
+pub struct MbmSettings {
+    pub urdf: PathBuf,
+    pub srdf: PathBuf,
+    pub problems: PathBuf,
+    pub deadline_ms: f64,
+    pub seed: u64,
+    pub resolution: f64,
+    pub verify_resolution: f64,
+    /// Self-collision pairs disabled because they touch in every sampled configuration.
+    pub always_colliding_disabled: Vec<(String, String)>,
+}
+
+/// The whole benchmark: per-family and overall summaries and every problem with its path.
+#[derive(Debug, Clone, Serialize)]
+pub struct MbmReport {
+    pub settings: MbmSettings,
+    pub families: Vec<Summary>,
+    pub overall: Summary,
+    pub problems: Vec<ProblemResult>,
+}
+
+/// One problem found on disk.
+#[derive(Debug, Clone)]
+struct ProblemFiles {
+    family: String,
+    index: u32,
+    scene: PathBuf,
+    request: PathBuf,
+}
+
+fn from_moveit(e: MoveitError) -> AppError {
+    match e {
+        MoveitError::Parse { file, line, column, message } => AppError::Parse { file, line, column, message },
+        MoveitError::Io { file, source } => AppError::Io { file, source },
+        MoveitError::Model(m) => AppError::Model(m),
+        other => AppError::Failed(other.to_string()),
+    }
+}
+
+fn read_dir_sorted(dir: &Path) -> Result<Vec<PathBuf>, AppError> {
+    let entries = std::fs::read_dir(dir).map_err(|e| AppError::io(dir, e))?;
+    let mut out = Vec::new();
+    for entry in entries {
+        out.push(entry.map_err(|e| AppError::io(dir, e))?.path());
+    }
+    out.sort();
+    Ok(out)
+}
+
+/// `sceneNNNN.yaml` -> `NNNN`.
+fn scene_index(path: &Path) -> Option<u32> {
+    let name = path.file_name()?.to_str()?;
+    let digits = name.strip_prefix("scene")?.strip_suffix(".yaml")?;
+    if digits.is_empty() || !digits.bytes().all(|b| b.is_ascii_digit()) {
+        return None;
+    }
+    digits.parse().ok()
+}
+
+fn scenes_in(dir: &Path) -> Result<Vec<(u32, PathBuf)>, AppError> {
+    let mut scenes: Vec<(u32, PathBuf)> =
+        read_dir_sorted(dir)?.into_iter().filter_map(|p| scene_index(&p).map(|i| (i, p))).collect();
+    scenes.sort();
+    Ok(scenes)
+}
+
+/// The family folders under `root`: its sub-folders that hold scenes; else those of
+/// `root/problems` (the tarball's layout); else `root` itself as one family.
+fn family_dirs(root: &Path) -> Result<Vec<(String, PathBuf)>, AppError> {
+    if !root.is_dir() {
+        return Err(AppError::Usage(format!("problem folder {} does not exist or is not a folder", root.display())));
+    }
+    let families_under = |dir: &Path| -> Result<Vec<(String, PathBuf)>, AppError> {
+        let mut out = Vec::new();
+        for p in read_dir_sorted(dir)? {
+            if p.is_dir() && !scenes_in(&p)?.is_empty() {
+                let name = p.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+                out.push((name, p));
+            }
+        }
+        Ok(out)
+    };
+    let direct = families_under(root)?;
+    if !direct.is_empty() {
+        return Ok(direct);
+    }
+    let nested = root.join("problems");
+    if nested.is_dir() {
+        let deeper = families_under(&nested)?;
+        if !deeper.is_empty() {
+            return Ok(deeper);
+        }
+    }
+    if !scenes_in(root)?.is_empty() {
+        let name = root
+            .canonicalize()
+            .ok()
+            .and_then(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()))
+            .unwrap_or_else(|| "problems".to_string());
+        return Ok(vec![(name, root.to_path_buf())]);
+    }
+    Err(AppError::Usage(format!(
+        "no MotionBenchMaker problems under {}: expected <family>/sceneNNNN.yaml with requestNNNN.yaml \
+         (or problems/<family>/...)",
+        root.display()
+    )))
+}
+
+fn discover(args: &MbmArgs) -> Result<Vec<ProblemFiles>, AppError> {
+    let mut families = family_dirs(&args.problems)?;
+    if let Some(wanted) = &args.families {
+        let known: Vec<String> = families.iter().map(|(n, _)| n.clone()).collect();
+        for w in wanted {
+            if !known.contains(w) {
+                return Err(AppError::Usage(format!(
+                    "no family `{w}` under {}; families found: {}",
+                    args.problems.display(),
+                    known.join(", ")
+                )));
+            }
+        }
+        families.retain(|(n, _)| wanted.contains(n));
+    }
+    let mut out = Vec::new();
+    for (family, dir) in families {
+        let mut scenes = scenes_in(&dir)?;
+        if let Some(limit) = args.limit {
+            scenes.truncate(limit);
+        }
+        for (index, scene) in scenes {
+            let Some(name) = scene.file_name().and_then(|n| n.to_str()) else { continue };
+            let request = dir.join(name.replacen("scene", "request", 1));
+            if !request.is_file() {
+                return Err(AppError::Failed(format!(
+                    "{} has no matching request file {}",
+                    scene.display(),
+                    request.display()
+                )));
+            }
+            out.push(ProblemFiles { family: family.clone(), index, scene, request });
+        }
+    }
+    Ok(out)
+}
+
+/// Why `q` cannot be a start or goal: outside the limits or in collision.
+fn invalid_reason(model: &CollisionModel, q: &[f64]) -> Option<String> {
+    if let Err(e) = model.robot().check_configuration(q) {
+        return Some(e.to_string());
+    }
+    model.first_collision(q).map(|c| format!("in collision: {c}"))
+}
+
+fn path_length(space: &ConfigSpace, path: &[Vec<f64>]) -> f64 {
+    path.windows(2).map(|w| space.distance(&w[0], &w[1])).sum()
+}
+
+/// Check a returned path independently of the planner: end points at the request's start and
+/// goal, every waypoint and every segment collision-free at [`VERIFY_RESOLUTION`].
+fn check_path(model: &CollisionModel, path: &[Vec<f64>], start: &[f64], goal: &[f64]) -> Result<(), String> {
+    let space = model.robot().config_space();
+    let (Some(first), Some(last)) = (path.first(), path.last()) else {
+        return Err("the planner returned an empty path".to_string());
+    };
+    if let Some(bad) = path.iter().position(|q| q.len() != start.len()) {
+        return Err(format!("waypoint {bad} has {} values, expected {}", path[bad].len(), start.len()));
+    }
+    let d_start = space.distance(first, start);
+    if !(d_start <= ENDPOINT_TOLERANCE) {
+        return Err(format!("the path starts {d_start:.3e} rad away from the request's start"));
+    }
+    let d_goal = space.distance(last, goal);
+    if !(d_goal <= ENDPOINT_TOLERANCE) {
+        return Err(format!("the path ends {d_goal:.3e} rad away from the request's goal"));
+    }
+    verify_path(model, path, VERIFY_RESOLUTION).map_err(|v| format!("verification failed: {v}"))
+}
+
+/// A per-problem seed: the base seed mixed with the family and index (SplitMix64 finaliser), so
+/// that a problem plans the same whatever subset of the benchmark is run.
+fn problem_seed(base: u64, family: &str, index: u32) -> u64 {
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    for b in family.bytes() {
+        h = (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3);
+    }
+    let mut z = base ^ h ^ (u64::from(index) << 1);
+    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+    z ^ (z >> 31)
+}
+
+/// Random configurations sampled to find self-collision pairs that are always in contact.
+pub const ALWAYS_COLLIDING_SAMPLES: usize = 2000;
+
+struct Loaded {
+    robot: Robot,
+    srdf: Srdf,
+    always_colliding: Vec<(String, String)>,
+}
+
+/// Load the robot once. Self-collision pairs in contact in every sampled configuration are
+/// disabled, as MoveIt's setup assistant does: a spherized model's conservative spheres can make
+/// neighbouring links overlap everywhere (the spherized UR5's `wrist_2_link` and `fts_robotside`,
+/// which the SRDF written for the mesh model does not disable), which would make every
+/// configuration invalid.
+fn load_robot(args: &MbmArgs) -> Result<Loaded, AppError> {
+    let mut robot = load_urdf(&args.urdf, Some(&args.srdf))?;
+    let srdf = load_srdf(&args.srdf)?;
+    let pairs = disable_always_colliding(&mut robot, ALWAYS_COLLIDING_SAMPLES, 0x5eed);
+    let links = robot.links();
+    let always_colliding = pairs.iter().map(|&(a, b)| (links[a].name.clone(), links[b].name.clone())).collect();
+    Ok(Loaded { robot, srdf, always_colliding })
+}
+
+fn run_problem(args: &MbmArgs, loaded: &Loaded, p: &ProblemFiles) -> Result<ProblemResult, AppError> {
+    let scene = load_scene(&p.scene).map_err(from_moveit)?;
+    let request = load_request(&p.request).map_err(from_moveit)?;
+    scene.check_frames(&loaded.robot).map_err(from_moveit)?;
+    // The scene's allowed collision matrix amends the SRDF's disabled pairs, as in MoveIt.
+    let mut robot = loaded.robot.clone();
+    scene.apply_allowed_collisions(&mut robot);
+    let resolved = request.resolve(&robot, &loaded.srdf, scene.robot_state.as_ref()).map_err(from_moveit)?;
+    let arm = resolved.planning_robot(&robot)?;
+    let model = CollisionModel::new(&arm, scene.environment());
+    let mut result = ProblemResult {
+        family: p.family.clone(),
+        index: p.index,
+        solved: false,
+        status: ProblemStatus::Failed,
+        planning_us: None,
+        joint_names: resolved.joint_names.clone(),
+        path: Vec::new(),
+        path_length: None,
+        verified: None,
+        message: None,
+    };
+    if let Some(why) = invalid_reason(&model, &resolved.start) {
+        result.status = ProblemStatus::InvalidStart;
+        result.message = Some(format!("start {why}"));
+        return Ok(result);
+    }
+    if let Some(why) = invalid_reason(&model, &resolved.goal) {
+        result.status = ProblemStatus::InvalidGoal;
+        result.message = Some(format!("goal {why}"));
+        return Ok(result);
+    }
+    let budget = Duration::from_secs_f64(args.deadline_ms.max(0.0) / 1000.0);
+    let settings = MotionSettings {
+        seed: problem_seed(args.seed, &p.family, p.index),
+        resolution: args.resolution,
+        deadline: Deadline::after(budget),
+        ..MotionSettings::default()
+    };
+    let goal = Goal::Configuration(resolved.goal.clone());
+    let t0 = Instant::now();
+    let outcome = plan_motion(&model, &resolved.start, &goal, &settings);
+    let elapsed = t0.elapsed();
+    result.planning_us = Some((elapsed.as_secs_f64() * 1e7).round() / 10.0);
+    match outcome {
+        Ok(plan) => {
+            let space = arm.config_space();
+            result.path_length = Some(path_length(&space, &plan.path));
+            match check_path(&model, &plan.path, &resolved.start, &resolved.goal) {
+                Ok(()) => {
+                    result.solved = true;
+                    result.status = ProblemStatus::Solved;
+                    result.verified = Some(true);
+                }
+                Err(why) => {
+                    result.verified = Some(false);
+                    result.message = Some(why);
+                }
+            }
+            result.path = plan.path;
+        }
+        Err(e) => {
+            result.status = if elapsed >= budget { ProblemStatus::OutOfTime } else { ProblemStatus::Failed };
+            result.message = Some(e.to_string());
+        }
+    }
+    Ok(result)
+}
+
+/// Run the benchmark. `on_progress(done, total)` is called once before the first problem and
+/// after each one. Errors are for unreadable or malformed inputs; planner failures are results.
+pub fn run_mbm(args: &MbmArgs, on_progress: &mut dyn FnMut(usize, usize)) -> Result<MbmReport, AppError> {
+    if !(args.deadline_ms > 0.0 && args.deadline_ms.is_finite()) {
+        return Err(AppError::Usage(format!("--deadline-ms must be a positive number, got {}", args.deadline_ms)));
+    }
+    if !(args.resolution > 0.0 && args.resolution.is_finite()) {
+        return Err(AppError::Usage(format!("the resolution must be a positive number, got {}", args.resolution)));
+    }
+    let loaded = load_robot(args)?;
+    let problems = discover(args)?;
+    let total = problems.len();
+    on_progress(0, total);
+    let mut results = Vec::with_capacity(total);
+    for (k, p) in problems.iter().enumerate() {
+        results.push(run_problem(args, &loaded, p)?);
+        on_progress(k + 1, total);
+    }
+    let mut by_family: BTreeMap<&str, Vec<&ProblemResult>> = BTreeMap::new();
+    let mut order: Vec<&str> = Vec::new();
+    for r in &results {
+        if !by_family.contains_key(r.family.as_str()) {
+            order.push(&r.family);
+        }
+        by_family.entry(&r.family).or_default().push(r);
+    }
+    let families = order.iter().map(|f| summarize(f, by_family.get(f).map(Vec::as_slice).unwrap_or(&[]))).collect();
+    let all: Vec<&ProblemResult> = results.iter().collect();
+    let overall = summarize("overall", &all);
+    Ok(MbmReport {
+        settings: MbmSettings {
+            urdf: args.urdf.clone(),
+            srdf: args.srdf.clone(),
+            problems: args.problems.clone(),
+            deadline_ms: args.deadline_ms,
+            seed: args.seed,
+            resolution: args.resolution,
+            verify_resolution: VERIFY_RESOLUTION,
+            always_colliding_disabled: loaded.always_colliding.clone(),
+        },
+        families,
+        overall,
+        problems: results,
+    })
+}
+
+/// The `q`-quantile (0..=1) of sorted values, nearest rank.
+fn percentile(sorted: &[f64], q: f64) -> Option<f64> {
+    if sorted.is_empty() {
+        return None;
+    }
+    let rank = (q * sorted.len() as f64).ceil().max(1.0) as usize;
+    Some(sorted[rank.min(sorted.len()) - 1])
+}
+
+fn summarize(name: &str, results: &[&ProblemResult]) -> Summary {
+    let solved: Vec<&&ProblemResult> = results.iter().filter(|r| r.solved).collect();
+    let mut times: Vec<f64> = solved.iter().filter_map(|r| r.planning_us).collect();
+    times.sort_by(f64::total_cmp);
+    let lengths: Vec<f64> = solved.iter().filter_map(|r| r.path_length).collect();
+    let mean = |v: &[f64]| if v.is_empty() { None } else { Some(v.iter().sum::<f64>() / v.len() as f64) };
+    let invalid = results.iter().filter(|r| r.status.is_invalid()).count();
+    let verification_failures = results.iter().filter(|r| r.verified == Some(false)).count();
+    Summary {
+        name: name.to_string(),
+        total: results.len(),
+        valid: results.len() - invalid,
+        invalid,
+        solved: solved.len(),
+        out_of_time: results.iter().filter(|r| r.status == ProblemStatus::OutOfTime).count(),
+        failed: results.iter().filter(|r| r.status == ProblemStatus::Failed).count(),
+        p50_us: percentile(&times, 0.5),
+        p95_us: percentile(&times, 0.95),
+        max_us: times.last().copied(),
+        mean_us: mean(&times),
+        mean_path_length: mean(&lengths),
+        verification_failures,
+        all_paths_valid: verification_failures == 0,
+    }
+}
+
+/// The `--out` file: every problem with its joint names and path, for an independent checker.
+#[derive(Debug, Clone, Serialize)]
+pub struct PathsFile<'a> {
+    pub problems: &'a [ProblemResult],
+}
+
+impl MbmReport {
+    /// What `--out` writes: `{"problems": [{family, index, solved, planning_us, joint_names,
+    /// path, status, verified, ...}]}`.
+    pub fn paths_file(&self) -> PathsFile<'_> {
+        PathsFile { problems: &self.problems }
+    }
+}
+
+fn fmt_us(v: Option<f64>) -> String {
+    match v {
+        None => "-".to_string(),
+        Some(us) if us < 10_000.0 => format!("{us:.0}"),
+        Some(us) => format!("{:.0}k", us / 1000.0),
+    }
+}
+
+/// A plain-text table for the terminal: one row per family and one for all.
+pub fn render_table(report: &MbmReport) -> String {
+    let header =
+        ["family", "solved", "invalid", "timeout", "failed", "p50 us", "p95 us", "max us", "path len", "bad paths"];
+    let row = |s: &Summary| -> Vec<String> {
+        vec![
+            s.name.clone(),
+            format!("{}/{}", s.solved, s.valid),
+            s.invalid.to_string(),
+            s.out_of_time.to_string(),
+            s.failed.to_string(),
+            fmt_us(s.p50_us),
+            fmt_us(s.p95_us),
+            fmt_us(s.max_us),
+            s.mean_path_length.map_or("-".to_string(), |l| format!("{l:.2}")),
+            s.verification_failures.to_string(),
+        ]
+    };
+    let mut rows: Vec<Vec<String>> = report.families.iter().map(row).collect();
+    rows.push(row(&report.overall));
+    let mut widths: Vec<usize> = header.iter().map(|h| h.len()).collect();
+    for r in &rows {
+        for (w, c) in widths.iter_mut().zip(r) {
+            *w = (*w).max(c.len());
+        }
+    }
+    let line = |cells: &[String]| -> String {
+        let mut s = String::new();
+        for (i, (c, w)) in cells.iter().zip(&widths).enumerate() {
+            if i == 0 {
+                s.push_str(&format!("{c:<w$}"));
+            } else {
+                s.push_str(&format!("  {c:>w$}"));
+            }
+        }
+        s.trim_end().to_string() + "\n"
+    };
+    let mut out = format!(
+        "MotionBenchMaker: deadline {} ms, seed {}, edge resolution {} rad, paths re-checked at {} rad\n",
+        report.settings.deadline_ms,
+        report.settings.seed,
+        report.settings.resolution,
+        report.settings.verify_resolution
+    );
+    out.push_str(&line(&header.iter().map(|h| h.to_string()).collect::<Vec<_>>()));
+    for (i, r) in rows.iter().enumerate() {
+        if i + 1 == rows.len() {
+            out.push_str(&"-".repeat(widths.iter().sum::<usize>() + 2 * (widths.len() - 1)));
+            out.push('\n');
+        }
+        out.push_str(&line(r));
+    }
+    out.push_str("solved = solved/valid problems; times are wall-clock plan_motion calls of solved problems\n");
+    let unsolved: Vec<String> = report
+        .problems
+        .iter()
+        .filter(|p| !p.solved && !p.status.is_invalid())
+        .map(|p| format!("{}#{}", p.family, p.index))
+        .collect();
+    if !unsolved.is_empty() {
+        out.push_str(&format!("unsolved: {}\n", unsolved.join(", ")));
+    }
+    out
+}
