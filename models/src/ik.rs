@@ -30,9 +30,9 @@ impl Default for IkOptions {
         Self {
             position_tolerance: 1e-6,
             orientation_tolerance: 1e-6,
-            max_iterations: 200,
+            max_iterations: 100,
             restarts: 20,
-            damping: 1e-3,
+            damping: 1e-4,
             seed: 0x1c0ffee,
             position_only: false,
         }
@@ -71,26 +71,32 @@ impl Robot {
         let mut best = (f64::INFINITY, seed.to_vec());
         let rows = if options.position_only { 3 } else { 6 };
         let mut poses = self.forward_kinematics(seed);
+        let residual_of = |poses: &mut Vec<Isometry3<f64>>, q: &[f64]| -> (Vector6<f64>, f64, f64) {
+            self.forward_kinematics_into(q, poses);
+            let e = pose_error(&(poses[effector.link] * effector.tool), target);
+            let pos = e.fixed_rows::<3>(0).norm();
+            let rot = if options.position_only { 0.0 } else { e.fixed_rows::<3>(3).norm() };
+            (e, pos, rot)
+        };
+        let mut trial = seed.to_vec();
         for attempt in 0..=options.restarts {
             let mut q = if attempt == 0 { seed.to_vec() } else { self.random_configuration(&mut rng) };
-            let mut lambda = options.damping;
+            // Levenberg-Marquardt: accept a step only if it lowers the error, adapt the damping.
+            let mut lambda = options.damping.max(1e-9);
+            let (mut e, mut pos_err, mut rot_err) = residual_of(&mut poses, &q);
+            let mut cost = pos_err * pos_err + rot_err * rot_err;
             for _ in 0..options.max_iterations {
-                self.forward_kinematics_into(&q, &mut poses);
-                let tool = poses[effector.link] * effector.tool;
-                let e = pose_error(&tool, target);
-                let pos_err = e.fixed_rows::<3>(0).norm();
-                let rot_err = if options.position_only { 0.0 } else { e.fixed_rows::<3>(3).norm() };
-                let residual = pos_err + rot_err;
-                if residual < best.0 {
-                    best = (residual, q.clone());
+                if pos_err + rot_err < best.0 {
+                    best = (pos_err + rot_err, q.clone());
                 }
                 if pos_err <= options.position_tolerance && rot_err <= options.orientation_tolerance {
                     return Ok(q);
                 }
+                residual_of(&mut poses, &q);
                 let jac = self.jacobian_with_poses(&poses, effector.link, &effector.tool);
                 let j: DMatrix<f64> = DMatrix::from_fn(rows, self.dof(), |r, c| jac[(r, c)]);
                 let err = DVector::from_fn(rows, |r, _| e[r]);
-                let jjt = &j * j.transpose() + DMatrix::identity(rows, rows) * (lambda * lambda);
+                let jjt = &j * j.transpose() + DMatrix::identity(rows, rows) * lambda;
                 let Some(chol) = jjt.cholesky() else {
                     lambda *= 10.0;
                     continue;
@@ -99,7 +105,19 @@ impl Robot {
                 // Limit the step so that the linearisation stays valid.
                 let scale = (0.5 / dq.amax().max(1e-12)).min(1.0);
                 for i in 0..q.len() {
-                    q[i] = limits[i].clamp(q[i] + scale * dq[i]);
+                    trial[i] = limits[i].clamp(q[i] + scale * dq[i]);
+                }
+                let (e2, p2, r2) = residual_of(&mut poses, &trial);
+                let cost2 = p2 * p2 + r2 * r2;
+                if cost2 < cost {
+                    q.copy_from_slice(&trial);
+                    (e, pos_err, rot_err, cost) = (e2, p2, r2, cost2);
+                    lambda = (lambda / 3.0).max(1e-12);
+                } else {
+                    lambda *= 4.0;
+                    if lambda > 1e6 {
+                        break; // stuck (a limit or a local minimum): restart elsewhere
+                    }
                 }
             }
         }

@@ -1,4 +1,5 @@
 //! Golden kinematics: poses computed by hand from the DH tables in shared/robots/README.md.
+#![allow(clippy::unwrap_used)]
 
 use embodied_models::{BUILTIN_NAMES, builtin, nalgebra::Vector3};
 
