@@ -94,14 +94,36 @@ impl Robot {
                 }
                 residual_of(&mut poses, &q);
                 let jac = self.jacobian_with_poses(&poses, effector.link, &effector.tool);
-                let j: DMatrix<f64> = DMatrix::from_fn(rows, self.dof(), |r, c| jac[(r, c)]);
+                // Active set: a joint at a bound that the step would push further out is frozen
+                // (its column removed) and the step solved again, so bounds do not stall progress.
                 let err = DVector::from_fn(rows, |r, _| e[r]);
-                let jjt = &j * j.transpose() + DMatrix::identity(rows, rows) * lambda;
-                let Some(chol) = jjt.cholesky() else {
+                let mut frozen = vec![false; self.dof()];
+                let mut dq = DVector::zeros(self.dof());
+                let mut solved = false;
+                for _ in 0..3 {
+                    let j: DMatrix<f64> =
+                        DMatrix::from_fn(rows, self.dof(), |r, c| if frozen[c] { 0.0 } else { jac[(r, c)] });
+                    let jjt = &j * j.transpose() + DMatrix::identity(rows, rows) * lambda;
+                    let Some(chol) = jjt.cholesky() else { break };
+                    dq = j.transpose() * chol.solve(&err);
+                    solved = true;
+                    let mut changed = false;
+                    for i in 0..q.len() {
+                        let at_lower = q[i] <= limits[i].lower + 1e-12 && dq[i] < 0.0;
+                        let at_upper = q[i] >= limits[i].upper - 1e-12 && dq[i] > 0.0;
+                        if !frozen[i] && (at_lower || at_upper) {
+                            frozen[i] = true;
+                            changed = true;
+                        }
+                    }
+                    if !changed {
+                        break;
+                    }
+                }
+                if !solved {
                     lambda *= 10.0;
                     continue;
-                };
-                let dq = j.transpose() * chol.solve(&err);
+                }
                 // Limit the step so that the linearisation stays valid.
                 let scale = (0.5 / dq.amax().max(1e-12)).min(1.0);
                 for i in 0..q.len() {
