@@ -30,4 +30,29 @@ pub enum PlanError {
     /// A refiner's own failure, described in words.
     #[error("refinement failed: {reason}")]
     Refiner { reason: String },
+    /// Motion planning: the start configuration is in collision.
+    #[error("the start configuration is in collision: {contact}")]
+    StartInCollision { contact: String },
+    /// Motion planning: goal configuration `index` (of the goal set, or of the IK solutions of a
+    /// tool pose) is in collision.
+    #[error("goal {index} is in collision: {contact}")]
+    GoalInCollision { index: usize, contact: String },
+    /// Motion planning: no goal configuration exists (outside the joint limits, IK failed).
+    #[error("the goal is unreachable: {reason}")]
+    GoalUnreachable { reason: String },
+    /// Motion planning: the deadline passed before a path was found.
+    #[error(
+        "motion planning ran out of time after {:.3} ms ({} samples, {} collision checks)",
+        stats.elapsed.as_secs_f64() * 1e3, stats.samples, stats.collision_checks
+    )]
+    OutOfTime { stats: crate::motion::MotionStats },
+    /// Motion planning: the sample budget was used up without connecting start and goal.
+    #[error("no collision-free path found with {samples} samples")]
+    NoPath { samples: usize },
+    /// A roadmap query on a roadmap without vertices.
+    #[error("the roadmap is empty: build or grow it before querying")]
+    EmptyRoadmap,
+    /// Malformed motion-planning input: wrong number of joints, NaN, start outside the limits.
+    #[error("invalid motion planning input: {message}")]
+    InvalidInput { message: String },
 }

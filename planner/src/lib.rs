@@ -8,8 +8,12 @@
 
 pub mod deadline;
 pub mod error;
+pub mod motion;
+pub mod moveit;
+pub mod roadmap;
 pub mod search;
 pub mod task;
+pub mod trajectory;
+pub mod verify;
 
 pub use error::PlanError;
-pub mod moveit;

@@ -1,0 +1,173 @@
+//! Time parameterisation of a joint path into a [`Trajectory`] the executor can track.
+//!
+//! Each segment between waypoints is one synchronised trapezoidal (or triangular) velocity
+//! profile: all joints move along the straight C-space segment with a common path parameter
+//! `s(t)` in [0, 1], starting and ending at rest. The profile's peak `s'` and `s''` are the
+//! largest every joint allows (`|dq_i| s' <= v_max,i`, `|dq_i| s'' <= a_max,i`), so the joint
+//! whose limit binds moves at its limit. Stopping at waypoints costs time but keeps the path
+//! exactly the one that was checked for collisions.
+
+use embodied_models::Robot;
+
+/// A time-parameterised joint trajectory: samples `(t, q, q-dot)`.
+///
+/// Between consecutive samples the acceleration is constant (the samples include every knot
+/// where it changes), so [`Trajectory::sample`] is exact for trajectories built by
+/// [`time_parameterize`].
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Trajectory {
+    pub joint_names: Vec<String>,
+    /// Sample times, seconds, strictly increasing from 0.
+    pub t: Vec<f64>,
+    pub q: Vec<Vec<f64>>,
+    pub qd: Vec<Vec<f64>>,
+}
+
+impl Trajectory {
+    /// Total duration in seconds (0 for an empty trajectory).
+    pub fn duration(&self) -> f64 {
+        self.t.last().copied().unwrap_or(0.0)
+    }
+
+    /// Position, velocity and acceleration at time `t` (clamped into the trajectory's span):
+    /// cubic Hermite interpolation of the samples, which reproduces the piecewise-quadratic
+    /// motion of [`time_parameterize`] exactly.
+    pub fn sample(&self, t: f64) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
+        let n = self.t.len();
+        if n == 0 {
+            return (Vec::new(), Vec::new(), Vec::new());
+        }
+        let dof = self.q[0].len();
+        if n == 1 || t <= self.t[0] || t.is_nan() {
+            return (self.q[0].clone(), self.qd[0].clone(), vec![0.0; dof]);
+        }
+        if t >= self.t[n - 1] {
+            return (self.q[n - 1].clone(), self.qd[n - 1].clone(), vec![0.0; dof]);
+        }
+        let k = self.t.partition_point(|&x| x <= t).saturating_sub(1).min(n - 2);
+        let h = self.t[k + 1] - self.t[k];
+        let s = (t - self.t[k]) / h;
+        let (mut q, mut qd, mut qdd) = (vec![0.0; dof], vec![0.0; dof], vec![0.0; dof]);
+        for i in 0..dof {
+            let (p0, p1) = (self.q[k][i], self.q[k + 1][i]);
+            let (m0, m1) = (self.qd[k][i] * h, self.qd[k + 1][i] * h);
+            let (s2, s3) = (s * s, s * s * s);
+            q[i] = (2.0 * s3 - 3.0 * s2 + 1.0) * p0
+                + (s3 - 2.0 * s2 + s) * m0
+                + (-2.0 * s3 + 3.0 * s2) * p1
+                + (s3 - s2) * m1;
+            qd[i] = ((6.0 * s2 - 6.0 * s) * p0
+                + (3.0 * s2 - 4.0 * s + 1.0) * m0
+                + (-6.0 * s2 + 6.0 * s) * p1
+                + (3.0 * s2 - 2.0 * s) * m1)
+                / h;
+            qdd[i] = ((12.0 * s - 6.0) * p0 + (6.0 * s - 4.0) * m0 + (-12.0 * s + 6.0) * p1 + (6.0 * s - 2.0) * m1)
+                / (h * h);
+        }
+        (q, qd, qdd)
+    }
+}
+
+/// The synchronised rest-to-rest profile of one segment: times of the end of acceleration, the
+/// start of deceleration and the end, with the peak rate and acceleration of `s`.
+#[derive(Debug, Clone, Copy)]
+struct Profile {
+    t_acc: f64,
+    t_dec: f64,
+    t_end: f64,
+    v: f64,
+    a: f64,
+}
+
+impl Profile {
+    /// `s`, `s'` at time `t` in [0, t_end].
+    fn at(&self, t: f64) -> (f64, f64) {
+        let t = t.clamp(0.0, self.t_end);
+        if t <= self.t_acc {
+            (0.5 * self.a * t * t, self.a * t)
+        } else if t <= self.t_dec {
+            (0.5 * self.a * self.t_acc * self.t_acc + self.v * (t - self.t_acc), self.v)
+        } else {
+            let r = self.t_end - t;
+            (1.0 - 0.5 * self.a * r * r, self.a * r)
+        }
+    }
+}
+
+fn profile(delta: &[f64], robot: &Robot) -> Option<Profile> {
+    let limits = robot.limits();
+    let mut v = f64::INFINITY;
+    let mut a = f64::INFINITY;
+    for (d, l) in delta.iter().zip(&limits) {
+        let d = d.abs();
+        if d > 0.0 {
+            v = v.min(l.max_velocity / d);
+            a = a.min(l.max_acceleration / d);
+        }
+    }
+    if !(v.is_finite() && a.is_finite() && v > 0.0 && a > 0.0) {
+        return None;
+    }
+    if v * v / a >= 1.0 {
+        // Triangular: never reaches the peak rate.
+        let t_acc = (1.0 / a).sqrt();
+        Some(Profile { t_acc, t_dec: t_acc, t_end: 2.0 * t_acc, v: a * t_acc, a })
+    } else {
+        let t_acc = v / a;
+        let t_end = 1.0 / v + t_acc;
+        Some(Profile { t_acc, t_dec: t_end - t_acc, t_end, v, a })
+    }
+}
+
+/// Time-parameterise `path` for `robot`: rest-to-rest synchronised trapezoids per segment,
+/// within every joint's velocity and acceleration limit, passing exactly through every
+/// waypoint. Sampled every `sample_dt` seconds plus every knot (waypoints and profile switch
+/// points); `sample_dt <= 0` or NaN gives the knots only. Continuous joints move the short way
+/// and stay unwrapped. Repeated waypoints are skipped.
+pub fn time_parameterize(path: &[Vec<f64>], robot: &Robot, sample_dt: f64) -> Trajectory {
+    let joint_names = robot.joint_names();
+    let mut traj = Trajectory { joint_names, t: Vec::new(), q: Vec::new(), qd: Vec::new() };
+    let Some(first) = path.first() else { return traj };
+    let dof = first.len();
+    let space = robot.config_space();
+    let dt = if sample_dt.is_finite() && sample_dt > 0.0 { sample_dt } else { f64::INFINITY };
+    let mut current = first.clone();
+    traj.t.push(0.0);
+    traj.q.push(current.clone());
+    traj.qd.push(vec![0.0; dof]);
+    let mut t0 = 0.0;
+    for next in &path[1..] {
+        if next.len() != dof {
+            break;
+        }
+        let delta: Vec<f64> = (0..dof).map(|i| space.delta(i, current[i], next[i])).collect();
+        let Some(p) = profile(&delta, robot) else { continue };
+        let mut times: Vec<f64> = Vec::new();
+        if dt.is_finite() {
+            let n = (p.t_end / dt).floor() as usize;
+            times.extend((1..=n).map(|k| k as f64 * dt).filter(|&t| t < p.t_end - 1e-12));
+        }
+        times.extend([p.t_acc, p.t_dec, p.t_end]);
+        times.sort_by(f64::total_cmp);
+        times.dedup_by(|a, b| (*a - *b).abs() < 1e-12);
+        let end: Vec<f64> = (0..dof).map(|i| current[i] + delta[i]).collect();
+        for &t in &times {
+            if t <= 0.0 {
+                continue;
+            }
+            let (s, sd) = p.at(t);
+            if (t - p.t_end).abs() < 1e-12 {
+                traj.t.push(t0 + p.t_end);
+                traj.q.push(end.clone());
+                traj.qd.push(vec![0.0; dof]);
+            } else {
+                traj.t.push(t0 + t);
+                traj.q.push((0..dof).map(|i| current[i] + s * delta[i]).collect());
+                traj.qd.push((0..dof).map(|i| sd * delta[i]).collect());
+            }
+        }
+        t0 += p.t_end;
+        current = end;
+    }
+    traj
+}
