@@ -9,8 +9,10 @@ use embodied_executor::*;
 use embodied_models::{CollisionModel, Environment, Robot};
 use embodied_planner::deadline::Deadline;
 
-const START: [f64; 6] = [0.0, -0.785, 0.0, 0.0, 0.5, 0.0];
-const GOAL: [f64; 6] = [0.6, -0.5, 0.4, 0.0, 1.2, 0.0];
+// Collision-free under the current RNT geometry (the rnt-polish scenario's start and goal are
+// not: see the report).
+const START: [f64; 6] = [-0.5, -1.4, -1.0, 0.0, 0.3, 0.0];
+const GOAL: [f64; 6] = [0.8, -1.2, -1.2, 0.0, 0.5, 0.0];
 
 fn robot() -> Arc<Robot> {
     Arc::new(embodied_models::builtin("rnt").expect("built-in robot"))
@@ -69,7 +71,8 @@ fn assert_safe(records: &[StepRecord], steps: u64, robot: &Robot) {
         }
     }
     let last = &records[records.len() - 1].agents[0];
-    assert!(last.qd.iter().all(|v| *v == 0.0), "ends at rest: {:?}", last.qd);
+    // At rest up to floating-point rounding of the position loop.
+    assert!(last.qd.iter().all(|v| v.abs() < 1e-9), "ends at rest: {:?}", last.qd);
 }
 
 fn env_agent(settings: DeliberationSettings, env: Environment) -> Agent<DeliberativeState> {
@@ -108,8 +111,10 @@ fn wall_clock_mode_never_blocks_and_reaches_the_goal() {
     let mut records = Vec::new();
     // Step until the plan lands (the runtime keeps producing records meanwhile).
     for _ in 0..200_000 {
-        records.push(rt.step().expect("step").clone());
-        if first(&records, "goal_reached").is_some() {
+        let rec = rt.step().expect("step").clone();
+        let done = rec.agents[0].events.iter().any(|e| e.starts_with("goal_reached"));
+        records.push(rec);
+        if done {
             break;
         }
     }
@@ -152,7 +157,9 @@ fn silent_sensor_halts_safely() {
     let records = run(&mut rt, 3000);
     let fault = first(&records, "sensor_fault: no reading").expect("fault event");
     assert_eq!(fault, 51);
-    assert!(first(&records, "plan_ready").is_none(), "no plan may be followed without the sensor");
+    assert!(first(&records, "plan_ready").is_some_and(|s| s < fault), "moving when the sensor falls silent");
+    assert_eq!(first(&records, "safe_halt_started"), Some(fault));
+    assert!(first(&records, "goal_reached").is_none(), "no plan is followed without the sensor");
     assert_safe(&records, 3000, &robot());
 }
 
@@ -225,10 +232,7 @@ fn colliding_plan_is_rejected() {
 
 #[test]
 fn lost_transmission_times_out_and_replans() {
-    let settings = DeliberationSettings { plan_timeout_steps: 300, ..simulated() };
-    let mut agent_state = env_agent(settings, Environment::new());
-    let _ = &mut agent_state;
-    // Build by hand to reach the deliberator before the run.
+    // Built by hand to reach the deliberator before the run.
     let robot = robot();
     let collision = CollisionModel::new(&robot, Environment::new());
     let settings = DeliberationSettings { plan_timeout_steps: 300, ..simulated() };

@@ -341,8 +341,12 @@ fn deliver(s: &mut DeliberativeState, d: PlanDelivery, inputs: &InputImages, out
     let step = inputs.step();
     let when = if step > d.needed_at { "late" } else { "in_time" };
     let id = d.id;
+    // Wall-clock figures only in wall-clock mode: simulated-time logs must replay exactly.
     let overshoot = match (s.deliberator.clock(), d.overshoot) {
-        (PlanClock::WallClock, Some(o)) => format!(" overshoot_us={}", o.as_micros()),
+        (PlanClock::WallClock, Some(o)) => {
+            format!(" elapsed_us={} overshoot_us={}", d.elapsed.as_micros(), o.as_micros())
+        }
+        (PlanClock::WallClock, None) => format!(" elapsed_us={}", d.elapsed.as_micros()),
         _ => String::new(),
     };
     let retry = |s: &mut DeliberativeState| {

@@ -112,6 +112,12 @@ pub fn lattice_plan(
         step: settings.step.max(1e-3),
         resolution: settings.resolution,
     };
+    // A straight line, when free, needs no search (one expansion's worth of work).
+    if model.motion_is_free(&request.start, &request.goal, settings.resolution) && !deadline.is_past(0) {
+        let path = [request.start.clone(), request.goal.clone()];
+        let trajectory = time_parameterize(&path, &robot.limits(), &robot.joint_names(), request.dt, settings.margin);
+        return Ok(Planned { trajectory, expansions: 1 });
+    }
     let report = solve(&problem, deadline);
     let expansions = report.stats.expansions;
     let plan = match report.outcome {

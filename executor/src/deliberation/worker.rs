@@ -152,6 +152,8 @@ struct Job {
     rx: Receiver<WorkerResult>,
     /// Simulated mode: the worker's result and the step it lands at.
     held: Option<(WorkerResult, u64)>,
+    /// The answer was lost in transit: it will never be delivered.
+    lost: bool,
 }
 
 struct WorkerResult {
@@ -237,6 +239,7 @@ impl Deliberator {
             cancel,
             rx,
             held: None,
+            lost: false,
         };
         let planner = self.planner.clone();
         let verifier = self.verifier.clone();
@@ -271,6 +274,9 @@ impl Deliberator {
     /// worker vanished without answering is delivered as a failure.
     pub fn poll(&mut self, step: u64) -> Option<PlanDelivery> {
         let job = self.job.as_mut()?;
+        if job.lost {
+            return None;
+        }
         let result = match self.clock {
             PlanClock::WallClock => match job.rx.try_recv() {
                 Ok(r) => r,
@@ -290,11 +296,13 @@ impl Deliberator {
                 job.held.take()?.0
             }
         };
-        let job = self.job.take()?;
         if self.lose > 0 {
+            // Still outstanding as far as `c_c` can tell; only a timeout reveals the loss.
             self.lose -= 1;
+            job.lost = true;
             return None;
         }
+        let job = self.job.take()?;
         let overshoot = job.wall.and_then(|w| result.elapsed.checked_sub(w)).filter(|d| !d.is_zero());
         Some(PlanDelivery {
             id: job.id,
