@@ -6,8 +6,11 @@
 //! URDF path, the `model` report, scenario files and reports.
 #![forbid(unsafe_code)]
 
+pub mod deadlines;
 pub mod error;
+pub mod mbm;
 pub mod model_report;
+pub mod run;
 pub mod runlog;
 pub mod scenario;
 
