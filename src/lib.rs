@@ -10,7 +10,6 @@ pub mod deadlines;
 pub mod error;
 pub mod mbm;
 pub mod model_report;
-pub mod run;
 pub mod runlog;
 pub mod scenario;
 
