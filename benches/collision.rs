@@ -1,2 +1,251 @@
-//! Criterion benchmarks: collision (filled in by its issue).
-fn main() {}
+//! Criterion benchmarks: collision checking.
+//!
+//! - `collides/ur5-table-pick/*`: the spherized UR5 of MotionBenchMaker (40 spheres) in the
+//!   `table_pick_ur5` scene 0001 (obstacles written out below), over fixed sets of free and random
+//!   configurations. Target: median <= 1 us per call.
+//! - `collides|distance/two-irp6-20-obstacles`: the two-arm IRp-6 cell among 20 boxes/cylinders.
+
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
+use std::hint::black_box;
+use std::path::Path;
+
+use criterion::{Criterion, criterion_group, criterion_main};
+use embodied_models::collision::{CollisionModel, Environment, Obstacle, disable_always_colliding};
+use embodied_models::nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion};
+use embodied_models::{Rng, Robot, Shape, builtin};
+
+/// A MoveIt collision object: object pose (xyz, quaternion xyzw) times primitive pose (xyz).
+fn moveit(name: &str, pose: [f64; 7], prim_xyz: [f64; 3], shape: Shape) -> Obstacle {
+    let q = UnitQuaternion::from_quaternion(Quaternion::new(pose[6], pose[3], pose[4], pose[5]));
+    let object = Isometry3::from_parts(Translation3::new(pose[0], pose[1], pose[2]), q);
+    Obstacle::new(name, object * Isometry3::translation(prim_xyz[0], prim_xyz[1], prim_xyz[2]), shape)
+}
+
+/// MoveIt `box` dimensions are full sizes; `cylinder` dimensions are [height, radius].
+fn bx(x: f64, y: f64, z: f64) -> Shape {
+    Shape::cuboid(x / 2.0, y / 2.0, z / 2.0)
+}
+fn cyl(height: f64, radius: f64) -> Shape {
+    Shape::cylinder(radius, height / 2.0)
+}
+
+/// `problems/table_pick_ur5/scene0001.yaml` of /work/shared/mbm/ur5/problems-public.tar.bz2.
+fn table_pick_scene0001() -> Environment {
+    let table = [
+        -0.08882545052091238,
+        -0.0838528117056479,
+        0.08705641176758652,
+        0.0,
+        0.0,
+        0.9972514405491772,
+        0.07409159414259424,
+    ];
+    let mut env = Environment::new();
+    env.add(moveit(
+        "Can1",
+        [
+            -0.06371788662107358,
+            -0.1102475820769556,
+            0.08705641176758652,
+            0.0,
+            0.0,
+            0.9972514405491772,
+            0.07409159414259425,
+        ],
+        [0.85, 0.0, 0.8],
+        cyl(0.12, 0.03),
+    ));
+    env.add(moveit(
+        "Cube",
+        [
+            -0.08791923452392993,
+            -0.08940951248661265,
+            0.08705641176758652,
+            0.0,
+            0.0,
+            0.9974531188710987,
+            0.07132514040868118,
+        ],
+        [0.75, 0.4, 0.85],
+        bx(0.25, 0.25, 0.25),
+    ));
+    env.add(moveit(
+        "Object1",
+        [
+            -0.7615492092843769,
+            -1.105577808942591,
+            0.08705641176758652,
+            0.0,
+            0.0,
+            0.8736437177567432,
+            0.4865661870950101,
+        ],
+        [1.35, 0.0, 0.85],
+        cyl(0.35, 0.05),
+    ));
+    env.add(moveit(
+        "Object2",
+        [
+            -0.4754801784139817,
+            0.979941530894374,
+            0.08705641176758652,
+            0.0,
+            0.0,
+            -0.8748279033106394,
+            0.4844338340672655,
+        ],
+        [1.05, -0.2, 0.9],
+        bx(0.2, 0.02, 0.4),
+    ));
+    env.add(moveit(
+        "Object3",
+        [
+            -0.432097732466474,
+            -0.7753937328216794,
+            0.08705641176758652,
+            0.0,
+            0.0,
+            0.8158325401727546,
+            0.5782882208685141,
+        ],
+        [0.65, 0.2, 0.9],
+        bx(0.02, 0.2, 0.4),
+    ));
+    env.add(moveit(
+        "Object4",
+        [
+            -0.7016326445863116,
+            -0.3798568368884329,
+            0.08705641176758652,
+            0.0,
+            0.0,
+            0.8220975726243217,
+            0.5693466264809149,
+        ],
+        [0.65, -0.2, 0.9],
+        bx(0.2, 0.05, 0.35),
+    ));
+    env.add(moveit(
+        "Object5",
+        [
+            -0.02201615875713062,
+            0.149141008133426,
+            0.08705641176758652,
+            0.0,
+            0.0,
+            -0.9999817664221317,
+            0.006038776637155595,
+        ],
+        [1.05, 0.2, 0.9],
+        bx(0.2, 0.05, 0.35),
+    ));
+    env.add(moveit("table_leg_left_back", table, [1.5, 0.85, 0.35], bx(0.05, 0.05, 0.7)));
+    env.add(moveit("table_leg_left_front", table, [0.6, 0.85, 0.35], bx(0.05, 0.05, 0.7)));
+    env.add(moveit("table_leg_right_back", table, [1.5, -0.85, 0.35], bx(0.05, 0.05, 0.7)));
+    env.add(moveit("table_leg_right_front", table, [0.6, -0.85, 0.35], bx(0.05, 0.05, 0.7)));
+    env.add(moveit("table_top", table, [1.05, 0.0, 0.7], bx(1.2, 2.0, 0.04)));
+    env
+}
+
+/// The spherized UR5 with the SRDF's disabled pairs, plus the sphere pairs that touch in every
+/// configuration (e.g. `wrist_2_link`/`fts_robotside`: the spheres overlap where the meshes do not).
+fn ur5() -> Robot {
+    let dir = Path::new("/work/shared/mbm/ur5");
+    let mut robot = embodied_models::urdf::load_urdf(&dir.join("ur5_spherized.urdf"), Some(&dir.join("ur5.srdf")))
+        .expect("UR5 URDF");
+    let disabled = disable_always_colliding(&mut robot, 1000, 3);
+    let name = |l: usize| robot.links()[l].name.clone();
+    let names: Vec<(String, String)> = disabled.iter().map(|&(a, b)| (name(a), name(b))).collect();
+    eprintln!("ur5: always-colliding pairs disabled: {names:?}");
+    robot
+}
+
+/// `n` random configurations, and `n` of them that are collision-free.
+fn samples(robot: &Robot, model: &CollisionModel, n: usize, seed: u64) -> (Vec<Vec<f64>>, Vec<Vec<f64>>) {
+    let mut rng = Rng::new(seed);
+    let random: Vec<Vec<f64>> = (0..n).map(|_| robot.random_configuration(&mut rng)).collect();
+    let mut free = Vec::new();
+    for _ in 0..1000 * n {
+        if free.len() == n {
+            break;
+        }
+        let q = robot.random_configuration(&mut rng);
+        if !model.collides(&q) {
+            free.push(q);
+        }
+    }
+    assert!(!free.is_empty(), "no collision-free configuration found");
+    (random, free)
+}
+
+fn bench_cycle(c: &mut Criterion, name: &str, qs: &[Vec<f64>], f: impl Fn(&[f64]) -> bool) {
+    let mut i = 0;
+    c.bench_function(name, |b| {
+        b.iter(|| {
+            i = (i + 1) % qs.len();
+            black_box(f(black_box(&qs[i])))
+        })
+    });
+}
+
+fn ur5_table_pick(c: &mut Criterion) {
+    let robot = ur5();
+    let model = CollisionModel::new(&robot, table_pick_scene0001());
+    let (random, free) = samples(&robot, &model, 256, 1);
+    let colliding = random.iter().filter(|q| model.collides(q)).count();
+    let spheres: usize = robot.links().iter().map(|l| l.shapes.len()).sum();
+    eprintln!(
+        "ur5: {} dof, {spheres} spheres, {} self pairs checked; {colliding}/256 random configurations collide",
+        robot.dof(),
+        model.self_collision_pairs().len()
+    );
+    let mut scratch = model.scratch();
+    bench_cycle(c, "collides/ur5-table-pick/free", &free, |q| model.collides(q));
+    bench_cycle(c, "collides/ur5-table-pick/random", &random, |q| model.collides(q));
+    let mut i = 0;
+    c.bench_function("collides_with/ur5-table-pick/free", |b| {
+        b.iter(|| {
+            i = (i + 1) % free.len();
+            black_box(model.collides_with(black_box(&free[i]), &mut scratch))
+        })
+    });
+    bench_cycle(c, "distance/ur5-table-pick/free", &free, |q| model.distance(q).distance > 0.0);
+    let mut k = 0;
+    c.bench_function("motion_is_free/ur5-table-pick/free-pairs-0.05rad", |b| {
+        b.iter(|| {
+            k = (k + 1) % (free.len() - 1);
+            black_box(model.motion_is_free(&free[k], &free[k + 1], 0.05))
+        })
+    });
+}
+
+/// 20 boxes and cylinders on a ring around the two-IRp-6 cell, partly within reach.
+fn irp6_obstacles() -> Environment {
+    (0..20)
+        .map(|i| {
+            let a = i as f64 * 0.61;
+            let r = 1.9 + 0.3 * (i % 3) as f64;
+            let pose = Isometry3::translation(r * a.cos(), 1.05 + r * a.sin(), 0.2 + 0.09 * i as f64);
+            let shape = if i % 2 == 0 { Shape::cuboid(0.08, 0.1, 0.12) } else { Shape::cylinder(0.07, 0.1) };
+            Obstacle::new(format!("o{i}"), pose, shape)
+        })
+        .collect()
+}
+
+fn two_irp6(c: &mut Criterion) {
+    let robot = builtin("two-irp6").unwrap();
+    let model = CollisionModel::new(&robot, irp6_obstacles());
+    let (random, free) = samples(&robot, &model, 256, 2);
+    let colliding = random.iter().filter(|q| model.collides(q)).count();
+    eprintln!(
+        "two-irp6: {} self pairs checked; {colliding}/256 random configurations collide",
+        model.self_collision_pairs().len()
+    );
+    bench_cycle(c, "collides/two-irp6-20-obstacles/free", &free, |q| model.collides(q));
+    bench_cycle(c, "collides/two-irp6-20-obstacles/random", &random, |q| model.collides(q));
+    bench_cycle(c, "distance/two-irp6-20-obstacles/free", &free, |q| model.distance(q).distance > 0.0);
+}
+
+criterion_group!(benches, ur5_table_pick, two_irp6);
+criterion_main!(benches);
