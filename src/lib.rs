@@ -10,6 +10,8 @@ pub mod deadlines;
 pub mod error;
 pub mod mbm;
 pub mod model_report;
+pub mod plan;
+pub mod run;
 pub mod runlog;
 pub mod scenario;
 

@@ -40,12 +40,97 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
+    /// Run a scenario as embodied agents in the simulated world (default: the built-in default scenario).
+    Run {
+        /// A built-in scenario name (see `embodied scenarios`) or a scenario TOML file.
+        scenario: Option<String>,
+        /// Simulated seconds to run (default: the scenario's `[run] duration`, else 6).
+        #[arg(long)]
+        duration: Option<f64>,
+        /// Seed of all simulated noise (default: the scenario's).
+        #[arg(long)]
+        seed: Option<u64>,
+        /// Write the JSON Lines log here (header, one line per 1 ms step, summary).
+        #[arg(long)]
+        log: Option<PathBuf>,
+        /// Write an SVG plot of every joint's trajectory here.
+        #[arg(long)]
+        plot: Option<PathBuf>,
+        /// Print the summary as JSON.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Plan every agent of a scenario that has a goal and write the plan (JSON).
+    Plan {
+        /// A built-in scenario name or a scenario TOML file.
+        scenario: String,
+        /// Write the plan file here (default: print it).
+        #[arg(short = 'o', long = "out")]
+        out: Option<PathBuf>,
+        /// Planning deadline per agent, milliseconds (default: the scenario's).
+        #[arg(long)]
+        deadline_ms: Option<f64>,
+        /// Print a JSON summary (with -o) or the plan itself.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Benchmarks: MotionBenchMaker problems, planning deadlines.
+    #[command(subcommand)]
+    Bench(BenchCommand),
     /// List the built-in scenarios (name and one-line description).
     Scenarios {
         /// Print a JSON array of {"name", "description", "agents", "obstacles"}.
         #[arg(long)]
         json: bool,
     },
+}
+
+#[derive(Subcommand, Debug)]
+enum BenchCommand {
+    /// Plan every sceneNNNN.yaml/requestNNNN.yaml pair of each MotionBenchMaker family folder.
+    Mbm {
+        #[arg(long)]
+        urdf: PathBuf,
+        #[arg(long)]
+        srdf: PathBuf,
+        /// Folder of family folders (e.g. the unpacked problems/).
+        #[arg(long)]
+        problems: PathBuf,
+        /// Print the whole report as JSON.
+        #[arg(long)]
+        json: bool,
+        /// Write {"problems": [{family, index, solved, planning_us, joint_names, path}]} here.
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Planning deadline per problem, milliseconds.
+        #[arg(long, default_value_t = 1000.0)]
+        deadline_ms: f64,
+        /// Only the first N problems of each family.
+        #[arg(long)]
+        limit: Option<usize>,
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+    },
+    /// Share of plans delivered in time, safe halts and overshoot for a set of deadlines.
+    Deadlines {
+        /// Deadlines in milliseconds, comma separated.
+        #[arg(long, default_value = "0.5,1,2,5,10,50", value_delimiter = ',')]
+        deadlines_ms: Vec<f64>,
+        /// Scenarios (default: every built-in scenario).
+        #[arg(long, value_delimiter = ',')]
+        scenarios: Vec<String>,
+        #[arg(long)]
+        json: bool,
+        /// Write an SVG plot of delivered-in-time against deadline.
+        #[arg(long)]
+        plot: Option<PathBuf>,
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+    },
+}
+
+fn to_json<T: serde::Serialize>(value: &T) -> Result<String, AppError> {
+    serde_json::to_string(value).map_err(|e| AppError::Failed(e.to_string()))
 }
 
 fn run(cli: Cli) -> Result<(), AppError> {
@@ -62,6 +147,95 @@ fn run(cli: Cli) -> Result<(), AppError> {
                 println!("{text}");
             } else {
                 print!("{}", render_text(&report));
+            }
+            Ok(())
+        }
+        Command::Run { scenario, duration, seed, log, plot, json } => {
+            let args = embodied::run::RunArgs {
+                scenario: scenario.unwrap_or_else(|| embodied::scenario::DEFAULT_SCENARIO.to_string()),
+                duration,
+                seed,
+                log,
+                plot,
+            };
+            let summary = embodied::run::run_scenario(&args)?;
+            if json {
+                println!("{}", serde_json::to_string(&summary).map_err(|e| AppError::Failed(e.to_string()))?);
+            } else {
+                print!("{}", embodied::run::render_summary(&summary));
+            }
+            match summary.failure {
+                Some(f) => Err(AppError::Failed(format!("run failed: {f}"))),
+                None => Ok(()),
+            }
+        }
+        Command::Plan { scenario, out, deadline_ms, json } => {
+            let scenario = embodied::scenario::load_scenario(&scenario)?;
+            let plan = embodied::plan::plan_scenario(&scenario, deadline_ms)?;
+            let text = to_json(&plan)?;
+            match out {
+                Some(path) => {
+                    std::fs::write(&path, &text).map_err(|e| AppError::io(&path, e))?;
+                    let summary: Vec<serde_json::Value> = plan
+                        .plans
+                        .iter()
+                        .map(|p| serde_json::json!({"agent": p.agent, "duration_s": p.trajectory.duration(), "waypoints": p.path.len(), "stats": p.stats}))
+                        .collect();
+                    if json {
+                        println!("{}", serde_json::json!({"plan_file": path, "plans": summary}));
+                    } else {
+                        for p in &plan.plans {
+                            println!(
+                                "{}: {} waypoints, {:.3} s of motion, planned by {} in {} us",
+                                p.agent,
+                                p.path.len(),
+                                p.trajectory.duration(),
+                                p.stats["planner"].as_str().unwrap_or("?"),
+                                p.stats["elapsed"]["secs"].as_f64().unwrap_or(0.0) * 1e6 + p.stats["elapsed"]["nanos"].as_f64().unwrap_or(0.0) / 1e3
+                            );
+                        }
+                        println!("plan written to {}", path.display());
+                    }
+                }
+                None => println!("{text}"),
+            }
+            Ok(())
+        }
+        Command::Bench(BenchCommand::Mbm { urdf, srdf, problems, json, out, deadline_ms, limit, seed }) => {
+            let mut args = embodied::mbm::MbmArgs::new(urdf, srdf, problems);
+            args.deadline_ms = deadline_ms;
+            args.limit = limit;
+            args.seed = seed;
+            let interactive = std::io::IsTerminal::is_terminal(&std::io::stderr()) && !json;
+            let bar = indicatif::ProgressBar::hidden();
+            if interactive {
+                bar.set_draw_target(indicatif::ProgressDrawTarget::stderr());
+            }
+            let report = embodied::mbm::run_mbm(&args, &mut |done, total| {
+                bar.set_length(total as u64);
+                bar.set_position(done as u64);
+            })?;
+            bar.finish_and_clear();
+            if let Some(path) = &out {
+                std::fs::write(path, to_json(&report.paths_file())?).map_err(|e| AppError::io(path, e))?;
+            }
+            if json {
+                println!("{}", to_json(&report)?);
+            } else {
+                print!("{}", embodied::mbm::render_table(&report));
+            }
+            Ok(())
+        }
+        Command::Bench(BenchCommand::Deadlines { deadlines_ms, scenarios, json, plot, seed }) => {
+            let args = embodied::deadlines::DeadlineArgs { deadlines_ms, scenarios, seed, ..embodied::deadlines::DeadlineArgs::default() };
+            let report = embodied::deadlines::run_deadline_bench(&args)?;
+            if let Some(path) = &plot {
+                embodied::deadlines::plot_svg(&report, path)?;
+            }
+            if json {
+                println!("{}", to_json(&report)?);
+            } else {
+                print!("{}", embodied::deadlines::render_table(&report));
             }
             Ok(())
         }

@@ -1,4 +1,5 @@
 //! End-to-end tests of the `embodied` binary.
+#![allow(clippy::unwrap_used)]
 
 use std::process::Command;
 
@@ -85,4 +86,97 @@ fn scenarios_lists_the_builtins() {
     for (name, _) in embodied::scenario::BUILTIN_SCENARIOS {
         assert!(names.contains(name));
     }
+}
+
+fn tmp(name: &str) -> std::path::PathBuf {
+    let dir = std::env::temp_dir().join(format!("embodied-cli-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    dir.join(name)
+}
+
+#[test]
+fn plan_output_round_trips_and_passes_the_verifier() {
+    let path = tmp("polycrank.plan.json");
+    let (code, _, err) = embodied(&["plan", "polycrank-transfer", "-o", path.to_str().unwrap()]);
+    assert_eq!(code, 0, "{err}");
+    let plan = embodied::plan::read_plan(&path).unwrap();
+    assert_eq!(plan.scenario.name, "polycrank-transfer");
+    let p = &plan.plans[0];
+    assert_eq!(p.joint_names.len(), 7);
+    // Continuous joint 1 goes from 2.6 to -2.6 the short way (across +-pi): about 1.08 rad.
+    let q1: Vec<f64> = p.trajectory.q.iter().map(|q| q[0]).collect();
+    let travel = q1.windows(2).map(|w| (w[1] - w[0]).abs()).sum::<f64>();
+    assert!((travel - (std::f64::consts::TAU - 5.2)).abs() < 1e-6, "travel {travel}");
+    // Round trip: serialise again and compare.
+    let again: embodied::plan::PlanFile = serde_json::from_str(&serde_json::to_string(&plan).unwrap()).unwrap();
+    assert_eq!(again.plans[0].trajectory.q, p.trajectory.q);
+    // The verifier accepts the trajectory against the scenario's world.
+    let sc = embodied::scenario::load_scenario("polycrank-transfer").unwrap();
+    let model = embodied_models::collision::CollisionModel::new(&sc.agents[0].robot, sc.initial_environment());
+    embodied_planner::verify::verify_trajectory(&model, &p.trajectory, 0.005).unwrap();
+    // A file that is not a plan is a clear error.
+    std::fs::write(&path, "{\"format\": 3}").unwrap();
+    let e = embodied::plan::read_plan(&path).unwrap_err().to_string();
+    assert!(e.contains("polycrank.plan.json:1:"), "{e}");
+}
+
+#[test]
+fn plan_with_zero_deadline_is_out_of_time_not_a_hang() {
+    let (code, _, err) = embodied(&["plan", "irp6-pick", "--deadline-ms", "0"]);
+    assert_eq!(code, 2);
+    assert!(err.contains("out of time"), "{err}");
+}
+
+#[test]
+fn run_writes_a_complete_deterministic_log() {
+    let a = tmp("a.jsonl");
+    let b = tmp("b.jsonl");
+    let svg = tmp("run.svg");
+    for log in [&a, &b] {
+        let (code, out, err) = embodied(&[
+            "run", "two-irp6-cell", "--duration", "2.5", "--seed", "3", "--log", log.to_str().unwrap(), "--plot", svg.to_str().unwrap(),
+        ]);
+        assert_eq!(code, 0, "{err}");
+        assert!(out.contains("real-time factor"), "{out}");
+    }
+    let text = std::fs::read_to_string(&a).unwrap();
+    let lines: Vec<serde_json::Value> = text.lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+    // header, 2500 steps, summary
+    assert_eq!(lines.len(), 2502);
+    let header = &lines[0]["header"];
+    assert_eq!(header["seed"], 3);
+    assert_eq!(header["step_s"], 0.001);
+    assert_eq!(header["agents"]["irp6ot"]["joint_names"].as_array().unwrap().len(), 7);
+    let step = &lines[1];
+    assert_eq!(step["step"], 0);
+    assert!(step["agents"]["irp6p"]["q"].as_array().unwrap().len() == 6);
+    assert!(lines[2501]["summary"].is_object());
+    // Byte-identical for the same scenario and seed (the summary's wall time aside).
+    let text_b = std::fs::read_to_string(&b).unwrap();
+    let steps_a: Vec<&str> = text.lines().take(2501).collect();
+    let steps_b: Vec<&str> = text_b.lines().take(2501).collect();
+    assert_eq!(steps_a, steps_b);
+    // Both arms reached their goals, coordinated one after the other, within their limits.
+    let events: Vec<String> =
+        lines.iter().skip(1).take(2500).flat_map(|l| l["agents"]["coordinator"]["events"].as_array().cloned().unwrap_or_default()).map(|e| e.to_string()).collect();
+    assert!(events.iter().any(|e| e.contains("all agents done")), "{events:?}");
+    let svg_text = std::fs::read_to_string(&svg).unwrap();
+    assert!(svg_text.starts_with("<svg"));
+}
+
+#[test]
+fn run_force_limited_reaction_stops_rnt() {
+    let (code, out, err) = embodied(&["run", "rnt-polish", "--duration", "1.0", "--json"]);
+    assert_eq!(code, 0, "{err}");
+    let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+    let events = v["events"].as_array().unwrap();
+    assert!(events.iter().any(|e| e[2].as_str().unwrap_or("").starts_with("force limit")), "{events:?}");
+    assert!(v["agents"][0]["max_speed_ratio"].as_f64().unwrap() <= 1.0 + 1e-9);
+}
+
+#[test]
+fn run_rejects_a_bad_duration() {
+    let (code, _, err) = embodied(&["run", "--duration=-1"]);
+    assert_eq!(code, 2);
+    assert!(err.contains("--duration"), "{err}");
 }

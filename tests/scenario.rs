@@ -1,4 +1,5 @@
 //! Scenario parsing: errors carry file:line:column and what was expected.
+#![allow(clippy::unwrap_used)]
 
 use std::path::Path;
 

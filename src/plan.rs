@@ -1,0 +1,143 @@
+//! `embodied plan`: offline plan generation for every agent of a scenario that has a goal.
+//!
+//! The plan file (JSON) holds, per agent, the joint names, the timed trajectory
+//! (`t`, `q`, `qd` sampled at the control step), the joint-space path, the robot and the
+//! scenario it is for (name + SHA-256 of the file) and the planner's statistics.
+
+use std::time::Duration;
+
+use embodied_models::collision::{CollisionModel, Environment};
+use embodied_planner::deadline::Deadline;
+use embodied_planner::motion::{Goal, MotionSettings, MotionStats, plan_motion};
+use embodied_planner::trajectory::{Trajectory, time_parameterize};
+use embodied_planner::verify::verify_trajectory;
+use serde::{Deserialize, Serialize};
+
+use crate::AppError;
+use crate::scenario::{GoalSpec, Scenario};
+
+/// Format tag of plan files.
+pub const PLAN_FORMAT: &str = "embodied-plan/1";
+
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+pub struct NamedHash {
+    pub name: String,
+    pub hash: String,
+}
+
+/// One agent's plan.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct AgentPlan {
+    pub agent: String,
+    pub robot: NamedHash,
+    pub joint_names: Vec<String>,
+    pub path: Vec<Vec<f64>>,
+    pub trajectory: Trajectory,
+    pub stats: serde_json::Value,
+}
+
+/// A plan file.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct PlanFile {
+    pub format: String,
+    pub scenario: NamedHash,
+    pub plans: Vec<AgentPlan>,
+}
+
+fn robot_hash(robot: &embodied_models::Robot) -> String {
+    use sha2::Digest;
+    // The robot's kinematic description as the model prints it: names, kinds, limits, frames.
+    let mut text = String::new();
+    for j in robot.joints() {
+        text.push_str(&format!("{}|{:?}|{:?}|{:?}|{:?}|{:?}|{:?}\n", j.name, j.kind, j.origin, j.post, j.axis, j.offset, j.limits));
+    }
+    text.push_str(&format!("{:?}", robot.base()));
+    sha2::Sha256::digest(text.as_bytes()).iter().map(|b| format!("{b:02x}")).collect()
+}
+
+/// Plan every agent with a goal; other agents' bodies stand at their start poses, except
+/// agents planned before, which stand where their plan ends (they move first).
+pub fn plan_scenario(scenario: &Scenario, deadline_ms: Option<f64>) -> Result<PlanFile, AppError> {
+    let deadline_ms = deadline_ms.unwrap_or(scenario.planner.deadline_ms);
+    if !(deadline_ms.is_finite() && deadline_ms >= 0.0) {
+        return Err(AppError::Usage(format!("--deadline-ms must be a non-negative number, got {deadline_ms}")));
+    }
+    let mut resting: Vec<Vec<f64>> = scenario.agents.iter().map(|a| a.start.clone()).collect();
+    let mut plans = Vec::new();
+    for (k, agent) in scenario.agents.iter().enumerate() {
+        let Some(goal) = &agent.goal else { continue };
+        let mut env = scenario.initial_environment();
+        for (m, other) in scenario.agents.iter().enumerate() {
+            if m != k {
+                let model = CollisionModel::new(&other.robot, Environment::new());
+                for mut o in model.link_shapes_world(&resting[m]) {
+                    o.name = format!("{}/{}", other.name, o.name);
+                    env.add(o);
+                }
+            }
+        }
+        let model = CollisionModel::new(&agent.robot, env);
+        let goal = match goal {
+            GoalSpec::Configuration(q) => Goal::Configuration(q.clone()),
+            GoalSpec::AnyOf(qs) => Goal::AnyOf(qs.clone()),
+            GoalSpec::ToolPose { end_effector, pose } => Goal::ToolPose { end_effector: *end_effector, pose: *pose },
+        };
+        let mut deadline = Deadline::after(Duration::from_secs_f64(deadline_ms / 1000.0));
+        if let Some(n) = scenario.planner.expansions {
+            deadline = Deadline::expansions(n as u64);
+        }
+        let settings = MotionSettings {
+            seed: scenario.planner.seed,
+            resolution: scenario.planner.resolution,
+            deadline,
+            ..MotionSettings::default()
+        };
+        let plan = plan_motion(&model, &agent.start, &goal, &settings)
+            .map_err(|e| AppError::Failed(format!("scenario `{}`: agent `{}`: {e}", scenario.name, agent.name)))?;
+        let trajectory = time_parameterize(&plan.path, &agent.robot, 0.001);
+        // The verifier, not the planner, says whether the plan may drive an effector.
+        verify_trajectory(&model, &trajectory, scenario.planner.resolution.min(0.01)).map_err(|v| {
+            AppError::Failed(format!("scenario `{}`: agent `{}`: plan rejected by the verifier: {v}", scenario.name, agent.name))
+        })?;
+        if let Some(last) = plan.path.last() {
+            resting[k] = last.clone();
+        }
+        let stats: &MotionStats = &plan.stats;
+        plans.push(AgentPlan {
+            agent: agent.name.clone(),
+            robot: NamedHash { name: agent.robot.name().to_string(), hash: robot_hash(&agent.robot) },
+            joint_names: agent.robot.joint_names(),
+            path: plan.path.clone(),
+            trajectory,
+            stats: serde_json::to_value(stats).map_err(|e| AppError::Failed(e.to_string()))?,
+        });
+    }
+    if plans.is_empty() {
+        return Err(AppError::Usage(format!("scenario `{}` has no agent with a goal: nothing to plan", scenario.name)));
+    }
+    Ok(PlanFile {
+        format: PLAN_FORMAT.to_string(),
+        scenario: NamedHash { name: scenario.name.clone(), hash: scenario.hash.clone() },
+        plans,
+    })
+}
+
+/// Read a plan file back, checking its format tag.
+pub fn read_plan(path: &std::path::Path) -> Result<PlanFile, AppError> {
+    let text = std::fs::read_to_string(path).map_err(|e| AppError::io(path, e))?;
+    let plan: PlanFile = serde_json::from_str(&text).map_err(|e| AppError::Parse {
+        file: path.to_path_buf(),
+        line: e.line(),
+        column: e.column(),
+        message: format!("not a plan file: {e}"),
+    })?;
+    if plan.format != PLAN_FORMAT {
+        return Err(AppError::Parse {
+            file: path.to_path_buf(),
+            line: 1,
+            column: 1,
+            message: format!("format `{}`, expected `{PLAN_FORMAT}`", plan.format),
+        });
+    }
+    Ok(plan)
+}
