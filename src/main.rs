@@ -17,7 +17,11 @@ fn builtin_help() -> String {
 }
 
 #[derive(Parser, Debug)]
-#[command(name = "embodied", version, about = "Deliberative planning and verification of multi-robot systems (embodied agents)")]
+#[command(
+    name = "embodied",
+    version,
+    about = "Deliberative planning and verification of multi-robot systems (embodied agents)"
+)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -191,7 +195,8 @@ fn run(cli: Cli) -> Result<(), AppError> {
                                 p.path.len(),
                                 p.trajectory.duration(),
                                 p.stats["planner"].as_str().unwrap_or("?"),
-                                p.stats["elapsed"]["secs"].as_f64().unwrap_or(0.0) * 1e6 + p.stats["elapsed"]["nanos"].as_f64().unwrap_or(0.0) / 1e3
+                                p.stats["elapsed"]["secs"].as_f64().unwrap_or(0.0) * 1e6
+                                    + p.stats["elapsed"]["nanos"].as_f64().unwrap_or(0.0) / 1e3
                             );
                         }
                         println!("plan written to {}", path.display());
@@ -227,7 +232,12 @@ fn run(cli: Cli) -> Result<(), AppError> {
             Ok(())
         }
         Command::Bench(BenchCommand::Deadlines { deadlines_ms, scenarios, json, plot, seed }) => {
-            let args = embodied::deadlines::DeadlineArgs { deadlines_ms, scenarios, seed, ..embodied::deadlines::DeadlineArgs::default() };
+            let args = embodied::deadlines::DeadlineArgs {
+                deadlines_ms,
+                scenarios,
+                seed,
+                ..embodied::deadlines::DeadlineArgs::default()
+            };
             let report = embodied::deadlines::run_deadline_bench(&args)?;
             if let Some(path) = &plot {
                 embodied::deadlines::plot_svg(&report, path)?;
@@ -256,7 +266,12 @@ fn run(cli: Cli) -> Result<(), AppError> {
             } else {
                 for item in &list {
                     let default = if item["default"] == true { " (default)" } else { "" };
-                    println!("{:<22} {}{}", item["name"].as_str().unwrap_or(""), item["description"].as_str().unwrap_or(""), default);
+                    println!(
+                        "{:<22} {}{}",
+                        item["name"].as_str().unwrap_or(""),
+                        item["description"].as_str().unwrap_or(""),
+                        default
+                    );
                 }
             }
             Ok(())

@@ -28,7 +28,11 @@ pub fn parse_q(robot: &Robot, text: &str) -> Result<Vec<f64>, AppError> {
     for (i, part) in text.split(',').enumerate() {
         let part = part.trim();
         let v: f64 = part.parse().map_err(|_| {
-            AppError::Usage(format!("--q: value {} (`{part}`) is not a number; expected {} comma-separated numbers", i + 1, robot.dof()))
+            AppError::Usage(format!(
+                "--q: value {} (`{part}`) is not a number; expected {} comma-separated numbers",
+                i + 1,
+                robot.dof()
+            ))
         })?;
         q.push(v);
     }

@@ -49,7 +49,10 @@ fn robot_hash(robot: &embodied_models::Robot) -> String {
     // The robot's kinematic description as the model prints it: names, kinds, limits, frames.
     let mut text = String::new();
     for j in robot.joints() {
-        text.push_str(&format!("{}|{:?}|{:?}|{:?}|{:?}|{:?}|{:?}\n", j.name, j.kind, j.origin, j.post, j.axis, j.offset, j.limits));
+        text.push_str(&format!(
+            "{}|{:?}|{:?}|{:?}|{:?}|{:?}|{:?}\n",
+            j.name, j.kind, j.origin, j.post, j.axis, j.offset, j.limits
+        ));
     }
     text.push_str(&format!("{:?}", robot.base()));
     sha2::Sha256::digest(text.as_bytes()).iter().map(|b| format!("{b:02x}")).collect()
@@ -97,7 +100,10 @@ pub fn plan_scenario(scenario: &Scenario, deadline_ms: Option<f64>) -> Result<Pl
         let trajectory = time_parameterize(&plan.path, &agent.robot, 0.001);
         // The verifier, not the planner, says whether the plan may drive an effector.
         verify_trajectory(&model, &trajectory, scenario.planner.resolution.min(0.01)).map_err(|v| {
-            AppError::Failed(format!("scenario `{}`: agent `{}`: plan rejected by the verifier: {v}", scenario.name, agent.name))
+            AppError::Failed(format!(
+                "scenario `{}`: agent `{}`: plan rejected by the verifier: {v}",
+                scenario.name, agent.name
+            ))
         })?;
         if let Some(last) = plan.path.last() {
             resting[k] = last.clone();

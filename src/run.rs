@@ -15,8 +15,8 @@ use embodied_executor::{
     Agent, AgentId, Contact, Coordinator, Message, Predicate, Primitive, Reactive, ReceptorSpec, Runtime,
     RuntimeConfig, SensorConfig, StepRecord,
 };
-use embodied_models::collision::{CollisionModel, Environment};
 use embodied_models::Robot;
+use embodied_models::collision::{CollisionModel, Environment};
 use embodied_planner::deadline::Deadline;
 use embodied_planner::motion::{Goal, MotionSettings, plan_motion};
 use embodied_planner::trajectory::{Trajectory, time_parameterize};
@@ -100,54 +100,70 @@ fn follower(force_limit: Option<f64>) -> Reactive<Follow> {
         // stops where it is and reports it.
         program = program.rule(
             Predicate::new("force_over_limit", |_: &Follow, i| i.sensor_count() > 0 && i.sensor(0).values[1] > 0.5),
-            Primitive::new("force_stop", 1, move |c: &mut Follow, i: &embodied_executor::InputImages, o: &mut embodied_executor::OutputImages| {
-                hold(c, i, o);
-                if c.plan.is_some() {
-                    o.event(format!("force limit: {:.1} N, plan abandoned", i.sensor(0).values[0]));
-                    c.plan = None;
-                }
-            }),
+            Primitive::new(
+                "force_stop",
+                1,
+                move |c: &mut Follow, i: &embodied_executor::InputImages, o: &mut embodied_executor::OutputImages| {
+                    hold(c, i, o);
+                    if c.plan.is_some() {
+                        o.event(format!("force limit: {:.1} N, plan abandoned", i.sensor(0).values[0]));
+                        c.plan = None;
+                    }
+                },
+            ),
         );
     }
     program
         .rule(
             Predicate::new("awaiting_go", |c: &Follow, _| !c.go),
-            Primitive::new("wait_for_go", 1, move |c: &mut Follow, i: &embodied_executor::InputImages, o: &mut embodied_executor::OutputImages| {
-                hold(c, i, o);
-                if i.messages().iter().any(|m| m.message.tag == GO) {
-                    c.go = true;
-                    o.event("go received");
-                }
-            }),
+            Primitive::new(
+                "wait_for_go",
+                1,
+                move |c: &mut Follow, i: &embodied_executor::InputImages, o: &mut embodied_executor::OutputImages| {
+                    hold(c, i, o);
+                    if i.messages().iter().any(|m| m.message.tag == GO) {
+                        c.go = true;
+                        o.event("go received");
+                    }
+                },
+            ),
         )
         .rule(
             Predicate::new("plan_done", |c: &Follow, i| c.started.is_some() && c.finished(i.step() as f64 * i.dt())),
-            Primitive::new("hold", 1, move |c: &mut Follow, i: &embodied_executor::InputImages, o: &mut embodied_executor::OutputImages| {
-                let end = c.plan.as_ref().and_then(|p| p.q.last().cloned());
-                match end {
-                    Some(q) => o.set_position_target(&q, &vec![0.0; q.len()]),
+            Primitive::new(
+                "hold",
+                1,
+                move |c: &mut Follow, i: &embodied_executor::InputImages, o: &mut embodied_executor::OutputImages| {
+                    let end = c.plan.as_ref().and_then(|p| p.q.last().cloned());
+                    match end {
+                        Some(q) => o.set_position_target(&q, &vec![0.0; q.len()]),
+                        None => hold(c, i, o),
+                    }
+                    if !c.done_sent {
+                        c.done_sent = true;
+                        o.event("plan completed");
+                        if let Some(coord) = c.coordinator {
+                            o.send(coord, Message::new(DONE, &[]));
+                        }
+                    }
+                },
+            ),
+        )
+        .main_reaction(Primitive::new(
+            "follow_plan",
+            1,
+            move |c: &mut Follow, i: &embodied_executor::InputImages, o: &mut embodied_executor::OutputImages| {
+                let t = i.step() as f64 * i.dt();
+                let t0 = *c.started.get_or_insert(t);
+                match &c.plan {
+                    Some(p) => {
+                        let (q, qd, _) = p.sample(t - t0 + i.dt());
+                        o.set_position_target(&q, &qd);
+                    }
                     None => hold(c, i, o),
                 }
-                if !c.done_sent {
-                    c.done_sent = true;
-                    o.event("plan completed");
-                    if let Some(coord) = c.coordinator {
-                        o.send(coord, Message::new(DONE, &[]));
-                    }
-                }
-            }),
-        )
-        .main_reaction(Primitive::new("follow_plan", 1, move |c: &mut Follow, i: &embodied_executor::InputImages, o: &mut embodied_executor::OutputImages| {
-            let t = i.step() as f64 * i.dt();
-            let t0 = *c.started.get_or_insert(t);
-            match &c.plan {
-                Some(p) => {
-                    let (q, qd, _) = p.sample(t - t0 + i.dt());
-                    o.set_position_target(&q, &qd);
-                }
-                None => hold(c, i, o),
-            }
-        }))
+            },
+        ))
 }
 
 /// c_c of the coordinator: whose turn it is.
@@ -158,20 +174,24 @@ struct Sequencer {
 }
 
 fn sequencer() -> Primitive<Sequencer> {
-    Primitive::new("sequence", 1, |c: &mut Sequencer, i: &embodied_executor::InputImages, o: &mut embodied_executor::OutputImages| {
-        if c.waiting && i.messages().iter().any(|m| m.message.tag == DONE) {
-            c.waiting = false;
-            c.next += 1;
-        }
-        if !c.waiting && c.next < c.order.len() {
-            o.send(c.order[c.next], Message::new(GO, &[]));
-            o.event(format!("go -> agent {}", c.order[c.next].0));
-            c.waiting = true;
-        } else if !c.waiting && c.next == c.order.len() {
-            o.event("all agents done");
-            c.next += 1;
-        }
-    })
+    Primitive::new(
+        "sequence",
+        1,
+        |c: &mut Sequencer, i: &embodied_executor::InputImages, o: &mut embodied_executor::OutputImages| {
+            if c.waiting && i.messages().iter().any(|m| m.message.tag == DONE) {
+                c.waiting = false;
+                c.next += 1;
+            }
+            if !c.waiting && c.next < c.order.len() {
+                o.send(c.order[c.next], Message::new(GO, &[]));
+                o.event(format!("go -> agent {}", c.order[c.next].0));
+                c.waiting = true;
+            } else if !c.waiting && c.next == c.order.len() {
+                o.event("all agents done");
+                c.next += 1;
+            }
+        },
+    )
 }
 
 /// Where each agent's body is, as obstacles for the others' planning.
@@ -184,7 +204,10 @@ fn bodies_as_obstacles(robot: &Robot, q: &[f64], env: &mut Environment, prefix: 
 }
 
 /// Plan every agent's motion before the run, in coordinator order.
-fn plan_all(scenario: &Scenario, dt: f64) -> Result<Vec<(Option<Trajectory>, Option<f64>)>, AppError> {
+/// Each agent's trajectory (if it has a goal) and how long planning took, ms.
+type Plans = Vec<(Option<Trajectory>, Option<f64>)>;
+
+fn plan_all(scenario: &Scenario, dt: f64) -> Result<Plans, AppError> {
     let mut out = Vec::new();
     // Where each agent will be when the ones before it have finished.
     let mut resting: Vec<Vec<f64>> = scenario.agents.iter().map(|a| a.start.clone()).collect();
@@ -212,8 +235,9 @@ fn plan_all(scenario: &Scenario, dt: f64) -> Result<Vec<(Option<Trajectory>, Opt
             ..MotionSettings::default()
         };
         let t = Instant::now();
-        let plan = plan_motion(&model, &agent.start, &goal, &settings)
-            .map_err(|e| AppError::Failed(format!("scenario `{}`: agent `{}`: planning failed: {e}", scenario.name, agent.name)))?;
+        let plan = plan_motion(&model, &agent.start, &goal, &settings).map_err(|e| {
+            AppError::Failed(format!("scenario `{}`: agent `{}`: planning failed: {e}", scenario.name, agent.name))
+        })?;
         let planning_ms = t.elapsed().as_secs_f64() * 1e3;
         let traj = time_parameterize(&plan.path, &agent.robot, dt);
         if let Some(last) = plan.path.last() {
@@ -243,10 +267,7 @@ fn agent_limits_json(robot: &Robot) -> serde_json::Value {
 fn step_line(record: &StepRecord) -> serde_json::Value {
     let mut agents = serde_json::Map::new();
     for a in &record.agents {
-        agents.insert(
-            a.agent.clone(),
-            json!({"q": a.q, "qd": a.qd, "behaviour": a.behaviour, "events": a.events}),
-        );
+        agents.insert(a.agent.clone(), json!({"q": a.q, "qd": a.qd, "behaviour": a.behaviour, "events": a.events}));
     }
     json!({"step": record.step, "t": record.time, "agents": agents})
 }
@@ -258,7 +279,9 @@ pub fn run_scenario(args: &RunArgs) -> Result<RunSummary, AppError> {
     let duration = match args.duration {
         Some(d) if d.is_finite() && d > 0.0 => d,
         Some(d) => return Err(AppError::Usage(format!("--duration must be a positive number of seconds, got {d}"))),
-        None => run_table.get("duration").and_then(|v| v.as_float().or(v.as_integer().map(|i| i as f64))).unwrap_or(6.0),
+        None => {
+            run_table.get("duration").and_then(|v| v.as_float().or(v.as_integer().map(|i| i as f64))).unwrap_or(6.0)
+        }
     };
     let seed = args.seed.unwrap_or(scenario.seed);
     let dt = 0.001;
@@ -292,20 +315,22 @@ pub fn run_scenario(args: &RunArgs) -> Result<RunSummary, AppError> {
         let mut a = Agent::embodied(agent.name.clone(), robot, Some(&agent.start), state, follower(force_limit))
             .map_err(|e| AppError::Failed(format!("agent `{}`: {e}", agent.name)))?;
         if let Some(limit) = force_limit {
-            a = a
-                .with_sensor(Contact, SensorConfig { threshold: limit, ..SensorConfig::default() })
-                .with_receptors(ReceptorSpec { force_stiffness: Some(2.0e4), force_noise: 0.5, ..ReceptorSpec::default() });
+            a = a.with_sensor(Contact, SensorConfig { threshold: limit, ..SensorConfig::default() }).with_receptors(
+                ReceptorSpec { force_stiffness: Some(2.0e4), force_noise: 0.5, ..ReceptorSpec::default() },
+            );
         }
         ids.push(runtime.add_agent(a));
     }
     if coordinated {
         let order = ids.clone();
-        let id = runtime.add_agent(Coordinator::new("coordinator", Sequencer { order, next: 0, waiting: false }, sequencer()));
+        let id = runtime.add_agent(Coordinator::new(
+            "coordinator",
+            Sequencer { order, next: 0, waiting: false },
+            sequencer(),
+        ));
         debug_assert_eq!(id, coordinator_id);
         for &a in &ids {
-            runtime
-                .connect_both(id, a, embodied_executor::Link::IDEAL)
-                .map_err(|e| AppError::Failed(e.to_string()))?;
+            runtime.connect_both(id, a, embodied_executor::Link::IDEAL).map_err(|e| AppError::Failed(e.to_string()))?;
         }
     }
 
@@ -351,7 +376,7 @@ pub fn run_scenario(args: &RunArgs) -> Result<RunSummary, AppError> {
                 let limits = scenario.agents[k].robot.limits();
                 for (j, (&q, &qd)) in a.q.iter().zip(&a.qd).enumerate() {
                     max_ratio[k] = max_ratio[k].max(qd.abs() / limits[j].max_velocity);
-                    if r.step % 10 == 0 {
+                    if r.step.is_multiple_of(10) {
                         series[s].1.push((r.time, q));
                     }
                     s += 1;
@@ -413,7 +438,11 @@ pub fn run_scenario(args: &RunArgs) -> Result<RunSummary, AppError> {
 pub fn render_summary(s: &RunSummary) -> String {
     use std::fmt::Write;
     let mut out = String::new();
-    let _ = writeln!(out, "scenario {} (seed {}): {} steps, {:.3} s simulated in {:.3} s wall, real-time factor {:.1}", s.scenario, s.seed, s.steps, s.simulated_s, s.wall_s, s.real_time_factor);
+    let _ = writeln!(
+        out,
+        "scenario {} (seed {}): {} steps, {:.3} s simulated in {:.3} s wall, real-time factor {:.1}",
+        s.scenario, s.seed, s.steps, s.simulated_s, s.wall_s, s.real_time_factor
+    );
     for a in &s.agents {
         let plan = match (a.planning_ms, a.plan_duration_s) {
             (Some(ms), Some(d)) => format!("planned in {ms:.2} ms, {d:.2} s of motion"),

@@ -255,8 +255,9 @@ pub fn parse_scenario(text: &str, file: &Path, dir: &Path) -> Result<Scenario, A
             return Err(ctx.err(span, format!("two agents are named `{}`", a.name)));
         }
         let mut robot = match (&a.robot, &a.urdf) {
-            (Some(name), None) => embodied_models::builtin(name.get_ref())
-                .map_err(|e| ctx.err(name.span(), format!("robot: {e}")))?,
+            (Some(name), None) => {
+                embodied_models::builtin(name.get_ref()).map_err(|e| ctx.err(name.span(), format!("robot: {e}")))?
+            }
             (None, Some(urdf)) => {
                 let path = dir.join(urdf.get_ref());
                 let srdf = a.srdf.as_ref().map(|s| dir.join(s));
@@ -266,7 +267,10 @@ pub fn parse_scenario(text: &str, file: &Path, dir: &Path) -> Result<Scenario, A
             _ => {
                 return Err(ctx.err(
                     span,
-                    format!("agent `{}`: expected exactly one of `robot = \"<built-in>\"` or `urdf = \"<file>\"`", a.name),
+                    format!(
+                        "agent `{}`: expected exactly one of `robot = \"<built-in>\"` or `urdf = \"<file>\"`",
+                        a.name
+                    ),
                 ));
             }
         };
@@ -330,7 +334,11 @@ pub fn parse_scenario(text: &str, file: &Path, dir: &Path) -> Result<Scenario, A
         };
         let mut shapes = Vec::new();
         if let Some([x, y, z]) = o.cuboid {
-            shapes.push(Shape::cuboid(positive(x, "box x")? / 2.0, positive(y, "box y")? / 2.0, positive(z, "box z")? / 2.0));
+            shapes.push(Shape::cuboid(
+                positive(x, "box x")? / 2.0,
+                positive(y, "box y")? / 2.0,
+                positive(z, "box z")? / 2.0,
+            ));
         }
         if let Some(r) = o.sphere {
             shapes.push(Shape::sphere(positive(r, "sphere radius")?));
@@ -345,8 +353,8 @@ pub fn parse_scenario(text: &str, file: &Path, dir: &Path) -> Result<Scenario, A
         if let Some(m) = &o.mesh {
             let path = dir.join(m);
             let scale = o.scale.unwrap_or(1.0);
-            let mut file =
-                std::fs::File::open(&path).map_err(|e| ctx.err(span.clone(), format!("mesh {}: {e}", path.display())))?;
+            let mut file = std::fs::File::open(&path)
+                .map_err(|e| ctx.err(span.clone(), format!("mesh {}: {e}", path.display())))?;
             let stl = stl_io::read_stl(&mut file)
                 .map_err(|e| ctx.err(span.clone(), format!("mesh {}: not a readable STL file: {e}", path.display())))?;
             let points: Vec<Point3<f64>> = stl
@@ -381,7 +389,7 @@ pub fn parse_scenario(text: &str, file: &Path, dir: &Path) -> Result<Scenario, A
         resolution: raw.planner.resolution.unwrap_or(0.02),
         expansions: raw.planner.expansions,
     };
-    if !(planner.resolution > 0.0) {
+    if planner.resolution.is_nan() || planner.resolution <= 0.0 {
         return Err(ctx.err(0..0, "[planner] resolution must be positive"));
     }
     Ok(Scenario {

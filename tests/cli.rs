@@ -134,7 +134,16 @@ fn run_writes_a_complete_deterministic_log() {
     let svg = tmp("run.svg");
     for log in [&a, &b] {
         let (code, out, err) = embodied(&[
-            "run", "two-irp6-cell", "--duration", "2.5", "--seed", "3", "--log", log.to_str().unwrap(), "--plot", svg.to_str().unwrap(),
+            "run",
+            "two-irp6-cell",
+            "--duration",
+            "2.5",
+            "--seed",
+            "3",
+            "--log",
+            log.to_str().unwrap(),
+            "--plot",
+            svg.to_str().unwrap(),
         ]);
         assert_eq!(code, 0, "{err}");
         assert!(out.contains("real-time factor"), "{out}");
@@ -157,8 +166,13 @@ fn run_writes_a_complete_deterministic_log() {
     let steps_b: Vec<&str> = text_b.lines().take(2501).collect();
     assert_eq!(steps_a, steps_b);
     // Both arms reached their goals, coordinated one after the other, within their limits.
-    let events: Vec<String> =
-        lines.iter().skip(1).take(2500).flat_map(|l| l["agents"]["coordinator"]["events"].as_array().cloned().unwrap_or_default()).map(|e| e.to_string()).collect();
+    let events: Vec<String> = lines
+        .iter()
+        .skip(1)
+        .take(2500)
+        .flat_map(|l| l["agents"]["coordinator"]["events"].as_array().cloned().unwrap_or_default())
+        .map(|e| e.to_string())
+        .collect();
     assert!(events.iter().any(|e| e.contains("all agents done")), "{events:?}");
     let svg_text = std::fs::read_to_string(&svg).unwrap();
     assert!(svg_text.starts_with("<svg"));

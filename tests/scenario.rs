@@ -23,7 +23,8 @@ fn builtin_scenarios_parse() {
 
 #[test]
 fn wrong_joint_count_names_line_and_column() {
-    let e = err_of("name = \"x\"\ndescription = \"d\"\n[[agents]]\nname = \"a\"\nrobot = \"polycrank\"\nstart = [1, 2]\n");
+    let e =
+        err_of("name = \"x\"\ndescription = \"d\"\n[[agents]]\nname = \"a\"\nrobot = \"polycrank\"\nstart = [1, 2]\n");
     assert!(e.starts_with("bad.toml:6:9:"), "{e}");
     assert!(e.contains("7 joints, got 2"), "{e}");
 }
