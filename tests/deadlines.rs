@@ -35,11 +35,3 @@ fn bad_deadlines_are_a_usage_error() {
     let args = DeadlineArgs { deadlines_ms: vec![-1.0], ..DeadlineArgs::default() };
     assert!(run_deadline_bench(&args).is_err());
 }
-
-/// The full table (run with `cargo test -p embodied --test deadlines -- --ignored --nocapture`).
-#[test]
-#[ignore = "prints the full benchmark table; slow"]
-fn full_table() {
-    let report = run_deadline_bench(&DeadlineArgs::default()).expect("bench runs");
-    println!("{}", render_table(&report));
-}

@@ -103,7 +103,6 @@ fn other_builtins_plan_around_boxes() {
 }
 
 #[test]
-#[ignore = "the rnt model's home configuration touches its base (link6 vs base); enable when the model is fixed"]
 fn rnt_plans_from_home() {
     let model = boxed("rnt", &[("box", [1.2, 1.2, 2.8], [0.2, 0.2, 0.2])]);
     let start = model.robot().home().to_vec();

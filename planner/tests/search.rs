@@ -262,31 +262,3 @@ fn deadline_combinations() {
     assert!(Deadline::after(Duration::ZERO).is_past(0));
     assert!(Deadline::after(Duration::MAX).instant().is_none() || !Deadline::after(Duration::MAX).is_past(0));
 }
-
-/// Measurement, not a check: `cargo test -p embodied-planner --profile bench --test search --
-/// --ignored --nocapture`. The same numbers are printed by `cargo bench --bench search`.
-#[test]
-#[ignore = "measurement; run on a quiet machine"]
-fn measure_overshoot_and_expansion_rate() {
-    for (name, world) in [
-        ("solvable", GridWorld::random(2000, 2000, 0.2, 7)),
-        ("walled", GridWorld::random(2000, 2000, 0.2, 7).with_goal_walled_off()),
-    ] {
-        let report = solve(&world, &Deadline::none());
-        let s = report.stats;
-        println!(
-            "{name}: {} expansions, {} generated, {:.2?} -> {:.2} M expansions/s, solved: {:?}",
-            s.expansions,
-            s.generated,
-            s.elapsed,
-            s.expansions as f64 / s.elapsed.as_secs_f64() / 1e6,
-            report.outcome.solved().map(|p| p.cost)
-        );
-    }
-    for ms in [1u64, 10] {
-        let mut v = embodied_planner::search::deadline_overshoot_samples(200, Duration::from_millis(ms));
-        v.sort();
-        let p = |q: f64| v[((v.len() - 1) as f64 * q) as usize];
-        println!("overshoot {ms} ms: n={} p50 {:?} p95 {:?} max {:?}", v.len(), p(0.5), p(0.95), p(1.0));
-    }
-}
