@@ -799,7 +799,12 @@ impl CollisionModel {
     /// [`CollisionModel::motion_is_free`] with caller-owned working memory.
     pub fn motion_is_free_with(&self, qa: &[f64], qb: &[f64], resolution: f64, s: &mut CollisionScratch) -> bool {
         let g = &*self.geom;
-        if qa.len() != g.dof || qb.len() != g.dof || resolution.is_nan() || resolution <= 0.0 || resolution.is_infinite() {
+        if qa.len() != g.dof
+            || qb.len() != g.dof
+            || resolution.is_nan()
+            || resolution <= 0.0
+            || resolution.is_infinite()
+        {
             return false;
         }
         let steps = (g.cspace.max_joint_step(qa, qb) / resolution).ceil().max(1.0);

@@ -402,4 +402,3 @@ fn collides_and_motion_agree_with_a_brute_force_scan() {
         assert_eq!(m.motion_is_free(&qa, &qb, res), brute);
     }
 }
-
