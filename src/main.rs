@@ -114,6 +114,10 @@ enum BenchCommand {
         limit: Option<usize>,
         #[arg(long, default_value_t = 1)]
         seed: u64,
+        /// Check the planner's edges by sampling at this resolution (rad) instead of certifying
+        /// them free for the whole continuum (the default).
+        #[arg(long)]
+        resolution: Option<f64>,
     },
     /// Share of plans delivered in time, safe halts and overshoot for a set of deadlines.
     Deadlines {
@@ -206,8 +210,12 @@ fn run(cli: Cli) -> Result<(), AppError> {
             }
             Ok(())
         }
-        Command::Bench(BenchCommand::Mbm { urdf, srdf, problems, json, out, deadline_ms, limit, seed }) => {
+        Command::Bench(BenchCommand::Mbm { urdf, srdf, problems, json, out, deadline_ms, limit, seed, resolution }) => {
             let mut args = embodied::mbm::MbmArgs::new(urdf, srdf, problems);
+            if let Some(r) = resolution {
+                args.resolution = r;
+                args.edge_check = embodied_planner::motion::EdgeCheck::Sampled;
+            }
             args.deadline_ms = deadline_ms;
             args.limit = limit;
             args.seed = seed;

@@ -21,7 +21,7 @@ use embodied_models::urdf::load_urdf;
 use embodied_models::{CollisionModel, ConfigSpace, Robot};
 use embodied_planner::PlanError;
 use embodied_planner::deadline::Deadline;
-use embodied_planner::motion::{Goal, MotionSettings, plan_motion};
+use embodied_planner::motion::{CERTIFY_TOLERANCE, EdgeCheck, Goal, MotionSettings, plan_motion};
 use embodied_planner::moveit::{MoveitError, load_request, load_scene};
 use embodied_planner::verify::verify_path;
 use serde::Serialize;
@@ -49,7 +49,10 @@ pub struct MbmArgs {
     pub deadline_ms: f64,
     /// Base seed; each problem plans with a seed derived from it and the problem's place.
     pub seed: u64,
-    /// Collision-checking resolution of the planner's edges (rad, largest joint step).
+    /// How the planner checks its edges: certified (default: free for the whole continuum) or
+    /// sampled at `resolution`.
+    pub edge_check: EdgeCheck,
+    /// Collision-checking resolution of the planner's edges when sampled (rad, largest joint step).
     pub resolution: f64,
     /// Only these families (all when `None`).
     pub families: Option<Vec<String>>,
@@ -61,9 +64,9 @@ pub struct MbmArgs {
 }
 
 impl MbmArgs {
-    /// Arguments with the defaults of the CLI: 1 s deadline, seed 1, and edges checked at
-    /// [`VERIFY_RESOLUTION`]: at the planner's own default (0.02 rad) 37 of 296 MotionBenchMaker
-    /// paths, at 0.05 rad 107, pass the planner's checks and fail the 0.005 rad re-check (thin
+    /// Arguments with the defaults of the CLI: 1 s deadline, seed 1, and certified edges (when
+    /// sampled instead, at [`VERIFY_RESOLUTION`]: at 0.02 rad 37 of 296 MotionBenchMaker paths,
+    /// at 0.05 rad 107, pass the planner's sampled checks and fail the 0.005 rad re-check: thin
     /// finger-tip spheres clip cans and shelf edges between checked points).
     pub fn new(urdf: impl Into<PathBuf>, srdf: impl Into<PathBuf>, problems: impl Into<PathBuf>) -> Self {
         Self {
@@ -72,6 +75,7 @@ impl MbmArgs {
             problems: problems.into(),
             deadline_ms: 1000.0,
             seed: 1,
+            edge_check: EdgeCheck::Certified { tolerance: CERTIFY_TOLERANCE },
             resolution: VERIFY_RESOLUTION,
             families: None,
             limit: None,
@@ -116,6 +120,9 @@ pub struct ProblemResult {
     pub path_length: Option<f64>,
     /// Whether the independent check of `path` passed (absent when there is no path).
     pub verified: Option<bool>,
+    /// What planning cost (samples, segments and configurations checked), when a plan came back.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub stats: Option<embodied_planner::motion::MotionStats>,
     /// Why the problem is invalid, failed, or did not verify.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub message: Option<String>,
@@ -152,6 +159,7 @@ pub struct MbmSettings {
     pub problems: PathBuf,
     pub deadline_ms: f64,
     pub seed: u64,
+    pub edge_check: EdgeCheck,
     pub resolution: f64,
     pub verify_resolution: f64,
     /// Self-collision pairs disabled because they touch in every sampled configuration.
@@ -380,6 +388,7 @@ fn run_problem(args: &MbmArgs, loaded: &Loaded, p: &ProblemFiles) -> Result<Prob
         path: Vec::new(),
         path_length: None,
         verified: None,
+        stats: None,
         message: None,
     };
     if let Some(why) = invalid_reason(&model, &resolved.start) {
@@ -396,6 +405,7 @@ fn run_problem(args: &MbmArgs, loaded: &Loaded, p: &ProblemFiles) -> Result<Prob
     let settings = MotionSettings {
         seed: problem_seed(args.seed, &p.family, p.index),
         resolution: args.resolution,
+        edge_check: args.edge_check,
         deadline: Deadline::after(budget),
         ..MotionSettings::default()
     };
@@ -408,6 +418,7 @@ fn run_problem(args: &MbmArgs, loaded: &Loaded, p: &ProblemFiles) -> Result<Prob
         Ok(plan) => {
             let space = arm.config_space();
             result.path_length = Some(path_length(&space, &plan.path));
+            result.stats = Some(plan.stats.clone());
             match check_path(&model, &plan.path, &resolved.start, &resolved.goal) {
                 Ok(()) => {
                     result.solved = true;
@@ -468,6 +479,7 @@ pub fn run_mbm(args: &MbmArgs, on_progress: &mut dyn FnMut(usize, usize)) -> Res
             problems: args.problems.clone(),
             deadline_ms: args.deadline_ms,
             seed: args.seed,
+            edge_check: args.edge_check,
             resolution: args.resolution,
             verify_resolution: VERIFY_RESOLUTION,
             always_colliding_disabled: loaded.always_colliding.clone(),
@@ -572,12 +584,13 @@ pub fn render_table(report: &MbmReport) -> String {
         }
         s.trim_end().to_string() + "\n"
     };
+    let edges = match report.settings.edge_check {
+        EdgeCheck::Certified { tolerance } => format!("edges certified (tolerance {tolerance} m)"),
+        EdgeCheck::Sampled => format!("edges sampled at {} rad", report.settings.resolution),
+    };
     let mut out = format!(
-        "MotionBenchMaker: deadline {} ms, seed {}, edge resolution {} rad, paths re-checked at {} rad\n",
-        report.settings.deadline_ms,
-        report.settings.seed,
-        report.settings.resolution,
-        report.settings.verify_resolution
+        "MotionBenchMaker: deadline {} ms, seed {}, {edges}, paths re-checked at {} rad\n",
+        report.settings.deadline_ms, report.settings.seed, report.settings.verify_resolution
     );
     out.push_str(&line(&header.iter().map(|h| h.to_string()).collect::<Vec<_>>()));
     for (i, r) in rows.iter().enumerate() {

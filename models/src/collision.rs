@@ -52,6 +52,7 @@
 
 mod environment;
 pub mod narrow;
+mod spheres;
 
 use std::cell::RefCell;
 use std::fmt;
@@ -67,6 +68,7 @@ use crate::robot::Robot;
 pub use environment::{Environment, Obstacle};
 use narrow::View;
 pub use narrow::{Separation, parry_shape_separation, parry_shapes_intersect, shape_separation, shapes_intersect};
+use spheres::{Check, Solid, SphereGeom, SphereScratch};
 
 /// One side of a contact or distance: a robot link or an obstacle.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -191,6 +193,8 @@ struct FkBody {
     offset: f64,
     post: Option<Isometry3<f64>>,
     value: Value,
+    /// Prismatic joints: the largest |value + offset| within the limits (the joint's reach).
+    reach: f64,
 }
 
 /// A link that carries shapes (a "slot"), with its bounding sphere in its body's frame.
@@ -220,6 +224,15 @@ struct RobotGeom {
     shapes: Vec<ShapeGeom>,
     self_pairs: Vec<(u32, u32)>,
     cspace: ConfigSpace,
+    /// Lever arms of the motion certificate: `lever[slot * dof + i]` bounds how far any point of
+    /// link slot `slot` moves per unit change of joint value `i` (m/rad, or 1 for prismatic
+    /// joints), in every configuration.
+    lever: Vec<f64>,
+    /// The same for the relative motion of each self-collision pair:
+    /// `pair_lever[p * dof + i]` bounds how much pair `p`'s distance can shrink per unit change
+    /// of joint value `i`. Joints that carry both links (the pair's common ancestors) move
+    /// them together and do not count.
+    pair_lever: Vec<f64>,
 }
 
 #[derive(Debug, Clone)]
@@ -278,6 +291,7 @@ impl RobotGeom {
             offset: 0.0,
             post: None,
             value: Value::Zero,
+            reach: 0.0,
         }];
         for j in joints {
             let (p, c) = (j.parent_link, j.child_link);
@@ -291,6 +305,20 @@ impl RobotGeom {
                     _ => Value::Zero,
                 };
                 let is_identity = |t: &Isometry3<f64>| t.translation.vector.norm() == 0.0 && t.rotation.angle() == 0.0;
+                let reach = if j.kind == JointKind::Prismatic {
+                    let (lo, hi) = match value {
+                        Value::Dof(i) => (robot.dof_joint(i).limits.lower, robot.dof_joint(i).limits.upper),
+                        Value::Mimic(d, m, o) => {
+                            let l = robot.dof_joint(d).limits;
+                            (l.lower * m + o, l.upper * m + o)
+                        }
+                        Value::Zero => (0.0, 0.0),
+                    };
+                    let r = (lo + j.offset).abs().max((hi + j.offset).abs());
+                    if r.is_finite() { r } else { f64::INFINITY }
+                } else {
+                    0.0
+                };
                 bodies.push(FkBody {
                     parent: body_of[p],
                     pre: in_body[p] * j.origin,
@@ -299,6 +327,7 @@ impl RobotGeom {
                     offset: j.offset,
                     post: if is_identity(&j.post) { None } else { Some(j.post) },
                     value,
+                    reach,
                 });
                 body_of[c] = bodies.len() - 1;
                 in_body[c] = Isometry3::identity();
@@ -358,6 +387,19 @@ impl RobotGeom {
             slots.push(LinkGeom { link: l, body: remap[body_of[l]], shapes: first..shapes.len(), c, r });
         }
         let self_pairs = self_collision_pairs(robot, &slots);
+        let dof = robot.dof();
+        let mut lever = vec![0.0; slots.len() * dof];
+        for slot in 0..slots.len() {
+            lever_arms(dof, &kept, &slots, &shapes, slot, 0, &mut lever[slot * dof..(slot + 1) * dof]);
+        }
+        let mut pair_lever = vec![0.0; self_pairs.len() * dof];
+        for (p, &(a, b)) in self_pairs.iter().enumerate() {
+            let (a, b) = (a as usize, b as usize);
+            let stop = common_body(&kept, slots[a].body, slots[b].body);
+            let out = &mut pair_lever[p * dof..(p + 1) * dof];
+            lever_arms(dof, &kept, &slots, &shapes, a, stop, out);
+            lever_arms(dof, &kept, &slots, &shapes, b, stop, out);
+        }
         RobotGeom {
             dof: robot.dof(),
             base: *robot.base(),
@@ -366,8 +408,76 @@ impl RobotGeom {
             shapes,
             self_pairs,
             cspace: ConfigSpace::new(robot),
+            lever,
+            pair_lever,
         }
     }
+}
+
+/// Lever arms of the motion certificate (see [`RobotGeom::lever`]).
+///
+/// A revolute joint turning by `dq` moves a point at distance `rho` from its axis by at most
+/// `rho * |dq|`, and `rho` is at most the distance from the point to the joint's origin, which
+/// the triangle inequality bounds, whatever the configuration, by the lengths of the fixed
+/// translations on the chain between them (plus the reach of prismatic joints in between). A
+/// prismatic joint moves every point below it by `|dq|`. Along a straight joint-space segment
+/// the path of a point is therefore no longer than `sum_i lever[i] * |dq_i|`. Sphere shapes
+/// count by their centre (a ball turning about its centre covers the same set); other shapes
+/// add their bounding radius.
+///
+/// Adds link slot `slot`'s lever arms into `out` (one per DOF), over the joints from its body up
+/// to, not including, body `stop` (0, the base, for motion in the world; the deepest common
+/// ancestor for motion relative to another link).
+fn lever_arms(
+    dof: usize,
+    bodies: &[FkBody],
+    slots: &[LinkGeom],
+    shapes: &[ShapeGeom],
+    slot: usize,
+    stop: usize,
+    out: &mut [f64],
+) {
+    debug_assert_eq!(out.len(), dof);
+    let l = &slots[slot];
+    {
+        let mut dist = l
+            .shapes
+            .clone()
+            .map(|k| {
+                let sh = &shapes[k];
+                let own = if matches!(sh.local, Local::Sphere { .. }) { 0.0 } else { sh.r };
+                sh.c.coords.norm() + own
+            })
+            .fold(0.0, f64::max);
+        let mut b = l.body;
+        while b != 0 && b != stop {
+            let body = &bodies[b];
+            let post = body.post.map_or(0.0, |p| p.translation.vector.norm());
+            let arm = if body.prismatic { 1.0 } else { dist + post };
+            let (i, factor) = match body.value {
+                Value::Dof(i) => (Some(i), 1.0),
+                Value::Mimic(d, m, _) => (Some(d), m.abs()),
+                Value::Zero => (None, 0.0),
+            };
+            if let Some(i) = i {
+                out[i] += factor * arm;
+            }
+            dist += post + body.reach + body.pre.translation.vector.norm();
+            b = body.parent;
+        }
+    }
+}
+
+/// The deepest body that carries both `a` and `b` (bodies are stored parents first).
+fn common_body(bodies: &[FkBody], mut a: usize, mut b: usize) -> usize {
+    while a != b {
+        if a > b {
+            a = bodies[a].parent;
+        } else {
+            b = bodies[b].parent;
+        }
+    }
+    a
 }
 
 /// The link pairs to check for self-collision (as slot indices): not on the same link, not
@@ -425,6 +535,12 @@ pub struct CollisionScratch {
     candidates: Vec<u32>,
     q: Vec<f64>,
     intervals: Vec<(u32, u32)>,
+    spans: Vec<(f64, f64)>,
+    steps: Vec<f64>,
+    step: Vec<f64>,
+    inflation: Vec<f64>,
+    margins: Vec<f64>,
+    spheres: SphereScratch,
 }
 
 impl Default for CollisionScratch {
@@ -446,6 +562,12 @@ impl CollisionScratch {
             candidates: Vec::new(),
             q: Vec::new(),
             intervals: Vec::new(),
+            spans: Vec::new(),
+            steps: Vec::new(),
+            step: Vec::new(),
+            inflation: Vec::new(),
+            margins: Vec::new(),
+            spheres: SphereScratch::new(),
         }
     }
 
@@ -478,6 +600,17 @@ thread_local! {
 // ---------------------------------------------------------------------------------------------
 // The model.
 
+/// Margins of an inflated query: `link[slot]` against obstacles, `pair[p]` for self-collision
+/// pair `p` (the two links together).
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Inflation<'a> {
+    pub link: &'a [f64],
+    pub pair: &'a [f64],
+    /// `|dq_i|` over the whole segment times the scale of the sub-interval (half its share of
+    /// the segment): the sphere path computes its tighter per-sphere margins from it.
+    pub step: &'a [f64],
+}
+
 /// Which pair collided, by slot/obstacle index (no allocation on the hot path).
 #[derive(Debug, Clone, Copy)]
 enum Hit {
@@ -491,15 +624,30 @@ enum Hit {
 pub struct CollisionModel {
     robot: Arc<Robot>,
     geom: Arc<RobotGeom>,
+    /// The sphere fast path, when every shape of the robot is a sphere (and it is not switched off).
+    fast: Option<Arc<SphereGeom>>,
     env: Environment,
     obstacles: Vec<ObstacleGeom>,
+    solids: Vec<Solid>,
 }
 
 impl CollisionModel {
     pub fn new(robot: &Robot, env: Environment) -> Self {
         let geom = Arc::new(RobotGeom::new(robot));
-        let obstacles = env.obstacles().iter().map(ObstacleGeom::new).collect();
-        Self { robot: Arc::new(robot.clone()), geom, env, obstacles }
+        let fast = SphereGeom::new(&geom).map(Arc::new);
+        let obstacles: Vec<ObstacleGeom> = env.obstacles().iter().map(ObstacleGeom::new).collect();
+        let solids = obstacles.iter().map(|o| Solid::new(&o.world)).collect();
+        Self { robot: Arc::new(robot.clone()), geom, fast, env, obstacles, solids }
+    }
+    /// Whether queries take the sphere fast path (every shape of the robot is a sphere).
+    pub fn uses_sphere_path(&self) -> bool {
+        self.fast.is_some()
+    }
+    /// The same model answering every query through the general path (shape by shape, as for
+    /// robots with capsules and meshes): for comparisons and benchmarks of the fast path.
+    pub fn general_path_only(mut self) -> Self {
+        self.fast = None;
+        self
     }
     pub fn robot(&self) -> &Robot {
         &self.robot
@@ -510,6 +658,7 @@ impl CollisionModel {
     /// Replace the environment (rebuilds the obstacle broad phase).
     pub fn set_environment(&mut self, env: Environment) {
         self.obstacles = env.obstacles().iter().map(ObstacleGeom::new).collect();
+        self.solids = self.obstacles.iter().map(|o| Solid::new(&o.world)).collect();
         self.env = env;
     }
     /// Move the obstacle(s) of this name, updating the broad phase; `false` if there is none.
@@ -517,9 +666,10 @@ impl CollisionModel {
         if !self.env.set_pose(name, pose) {
             return false;
         }
-        for (o, g) in self.env.obstacles().iter().zip(self.obstacles.iter_mut()) {
+        for ((o, g), solid) in self.env.obstacles().iter().zip(self.obstacles.iter_mut()).zip(self.solids.iter_mut()) {
             if o.name == name {
                 *g = ObstacleGeom::new(o);
+                *solid = Solid::new(&g.world);
             }
         }
         true
@@ -554,7 +704,22 @@ impl CollisionModel {
         if q.len() != self.geom.dof {
             return true;
         }
-        self.find_hit(q, scratch).is_some()
+        match &self.fast {
+            Some(fast) => fast.check(q, &self.obstacles, &self.solids, None, &mut scratch.spheres) == Check::Hit,
+            None => self.find_hit(q, scratch).is_some(),
+        }
+    }
+
+    /// Exact or inflated query, by either path.
+    fn check(&self, q: &[f64], inflation: Option<Inflation<'_>>, s: &mut CollisionScratch) -> Check {
+        match &self.fast {
+            Some(fast) => fast.check(q, &self.obstacles, &self.solids, inflation, &mut s.spheres),
+            None => match self.scan(q, inflation, s) {
+                Err(_) => Check::Hit,
+                Ok(true) => Check::Near,
+                Ok(false) => Check::Free,
+            },
+        }
     }
 
     /// The first colliding pair found at `q` (for messages), `None` if `q` is free.
@@ -639,52 +804,77 @@ impl CollisionModel {
         }
     }
 
-    fn link_hits_obstacle(&self, slot: usize, o: &ObstacleGeom, s: &mut CollisionScratch) -> bool {
+    /// Whether link `slot` (grown by `e`) touches obstacle `o`: `Err(())` for an exact contact,
+    /// `Ok(true)` when only the grown shapes touch.
+    fn link_hits_obstacle(&self, slot: usize, o: &ObstacleGeom, e: f64, s: &mut CollisionScratch) -> Result<bool, ()> {
         let l = &self.geom.links[slot];
-        if !sphere_hits_aabb(&s.link_c[slot], l.r, o) {
-            return false;
+        if !sphere_hits_aabb(&s.link_c[slot], l.r + e, o) {
+            return Ok(false);
         }
         self.pose_link(slot, s);
         let ov = o.world.view();
-        l.shapes.clone().any(|k| {
-            sphere_hits_aabb(&s.world_c[k], self.geom.shapes[k].r, o) && narrow::intersects(&s.world[k].view(), &ov)
-        })
+        let mut near = false;
+        for k in l.shapes.clone() {
+            if !sphere_hits_aabb(&s.world_c[k], self.geom.shapes[k].r + e, o) {
+                continue;
+            }
+            let kv = s.world[k].view();
+            if narrow::intersects(&kv, &ov) {
+                return Err(());
+            }
+            near = near || (e > 0.0 && narrow::separation(&kv, &ov).distance <= e);
+        }
+        Ok(near)
     }
 
-    fn pair_hits(&self, a: usize, b: usize, s: &mut CollisionScratch) -> bool {
+    /// Self-collision pair `a`-`b`, grown by `ea` and `eb`; answers as [`Self::link_hits_obstacle`].
+    fn pair_hits(&self, a: usize, b: usize, grow: f64, s: &mut CollisionScratch) -> Result<bool, ()> {
         let g = &*self.geom;
         let (la, lb) = (&g.links[a], &g.links[b]);
-        let rr = la.r + lb.r;
+        let rr = la.r + lb.r + grow;
         if (s.link_c[a] - s.link_c[b]).norm_squared() > rr * rr {
-            return false;
+            return Ok(false);
         }
         self.pose_link(a, s);
         self.pose_link(b, s);
+        let mut near = false;
         for i in la.shapes.clone() {
             for j in lb.shapes.clone() {
-                let rr = g.shapes[i].r + g.shapes[j].r;
-                if (s.world_c[i] - s.world_c[j]).norm_squared() <= rr * rr
-                    && narrow::intersects(&s.world[i].view(), &s.world[j].view())
-                {
-                    return true;
+                let rr = g.shapes[i].r + g.shapes[j].r + grow;
+                if (s.world_c[i] - s.world_c[j]).norm_squared() > rr * rr {
+                    continue;
                 }
+                let (vi, vj) = (s.world[i].view(), s.world[j].view());
+                if narrow::intersects(&vi, &vj) {
+                    return Err(());
+                }
+                near = near || (grow > 0.0 && narrow::separation(&vi, &vj).distance <= grow);
             }
         }
-        false
+        Ok(near)
     }
 
     /// The first colliding pair; `q` has the right length.
     fn find_hit(&self, q: &[f64], s: &mut CollisionScratch) -> Option<Hit> {
+        self.scan(q, None, s).err()
+    }
+
+    /// The general path: `Err(hit)` at the first exact contact, else `Ok(near)` where `near`
+    /// says that some shapes grown by `inflation` touch.
+    fn scan(&self, q: &[f64], inflation: Option<Inflation<'_>>, s: &mut CollisionScratch) -> Result<bool, Hit> {
         self.pose_bodies(q, s);
         let g = &*self.geom;
+        let grow = |slot: usize| inflation.map_or(0.0, |e| e.link[slot]);
+        let mut near = false;
         if !self.obstacles.is_empty() && !g.links.is_empty() {
             // Obstacles near the robot at all: against the box around every link sphere.
             let mut lo = Point3::from(Vector3::repeat(f64::INFINITY));
             let mut hi = Point3::from(Vector3::repeat(f64::NEG_INFINITY));
             for (slot, l) in g.links.iter().enumerate() {
                 let c = s.link_c[slot];
-                lo = lo.inf(&(c - Vector3::repeat(l.r)));
-                hi = hi.sup(&(c + Vector3::repeat(l.r)));
+                let r = Vector3::repeat(l.r + grow(slot));
+                lo = lo.inf(&(c - r));
+                hi = hi.sup(&(c + r));
             }
             s.candidates.clear();
             for (i, o) in self.obstacles.iter().enumerate() {
@@ -702,18 +892,21 @@ impl CollisionModel {
                 let oi = s.candidates[ci] as usize;
                 let o = &self.obstacles[oi];
                 for slot in 0..g.links.len() {
-                    if self.link_hits_obstacle(slot, o, s) {
-                        return Some(Hit::Env { slot, obstacle: oi });
+                    match self.link_hits_obstacle(slot, o, grow(slot), s) {
+                        Err(()) => return Err(Hit::Env { slot, obstacle: oi }),
+                        Ok(n) => near |= n,
                     }
                 }
             }
         }
-        for &(a, b) in &g.self_pairs {
-            if self.pair_hits(a as usize, b as usize, s) {
-                return Some(Hit::Pair { a: a as usize, b: b as usize });
+        for (p, &(a, b)) in g.self_pairs.iter().enumerate() {
+            let (a, b) = (a as usize, b as usize);
+            match self.pair_hits(a, b, inflation.map_or(0.0, |e| e.pair[p]), s) {
+                Err(()) => return Err(Hit::Pair { a, b }),
+                Ok(n) => near |= n,
             }
         }
-        None
+        Ok(near)
     }
 
     /// Signed distance to the nearest contact over all checked pairs (see [`DistanceReport`]).
@@ -843,6 +1036,149 @@ impl CollisionModel {
         free
     }
 
+    /// Whether the straight joint-space motion from `qa` to `qb` (the short way round on
+    /// continuous joints) is free *for the whole continuum of configurations in between*, not
+    /// only at sampled points: a conservative certificate.
+    ///
+    /// Along the segment no point of link `l` travels further than
+    /// `sum_i lever[l][i] * |qb_i - qa_i|` (see the lever arms in this module's source: a
+    /// configuration-independent bound from the kinematic chain). So if, at the midpoint of a
+    /// sub-interval, every shape grown by the distance its points can travel in half that
+    /// sub-interval is free, the whole sub-interval is free. The check starts with the whole
+    /// segment and halves only the sub-intervals that cannot be certified, breadth first (a
+    /// collision is usually found after few checks); far from obstacles one check certifies a
+    /// long motion. A sub-interval that still cannot be certified when its margin is below
+    /// `tolerance` (m) makes the answer `false`: motions that pass closer than about
+    /// `tolerance` to contact are rejected, never let through.
+    ///
+    /// Configurations of the wrong length, non-finite values, or a `tolerance` that is not
+    /// positive and finite give `false`.
+    pub fn motion_is_certified_free(&self, qa: &[f64], qb: &[f64], tolerance: f64) -> bool {
+        self.with_scratch(|s| self.motion_is_certified_free_with(qa, qb, tolerance, s))
+    }
+
+    /// [`CollisionModel::motion_is_certified_free`] with caller-owned working memory.
+    pub fn motion_is_certified_free_with(
+        &self,
+        qa: &[f64],
+        qb: &[f64],
+        tolerance: f64,
+        s: &mut CollisionScratch,
+    ) -> bool {
+        self.certify(qa, qb, tolerance, true, s).0
+    }
+
+    /// For each link that carries shapes (as `(link index, bound)`): how far, at most, any point
+    /// of its shapes travels along the straight joint-space motion from `qa` to `qb`, whatever
+    /// the configurations (the bound the motion certificate grows shapes by). Empty for
+    /// configurations of the wrong length.
+    pub fn travel_bounds(&self, qa: &[f64], qb: &[f64]) -> Vec<(usize, f64)> {
+        let g = &*self.geom;
+        if qa.len() != g.dof || qb.len() != g.dof {
+            return Vec::new();
+        }
+        let dq: Vec<f64> = (0..g.dof).map(|i| g.cspace.delta(i, qa[i], qb[i]).abs()).collect();
+        g.links
+            .iter()
+            .enumerate()
+            .map(|(slot, l)| (l.link, (0..g.dof).map(|i| g.lever[slot * g.dof + i] * dq[i]).sum()))
+            .collect()
+    }
+
+    /// The certificate of [`CollisionModel::motion_is_certified_free`], and the number of
+    /// configurations it checked. `check_ends`: check the end configurations too (a planner
+    /// that has already checked them passes `false`).
+    pub fn certify(
+        &self,
+        qa: &[f64],
+        qb: &[f64],
+        tolerance: f64,
+        check_ends: bool,
+        s: &mut CollisionScratch,
+    ) -> (bool, u32) {
+        let g = &*self.geom;
+        let dof = g.dof;
+        if qa.len() != dof
+            || qb.len() != dof
+            || !(tolerance.is_finite() && tolerance > 0.0)
+            || qa.iter().chain(qb).any(|v| !v.is_finite())
+        {
+            return (false, 0);
+        }
+        let mut checks = 0;
+        if check_ends {
+            checks += 2;
+            if self.collides_with(qa, s) || self.collides_with(qb, s) {
+                return (false, checks);
+            }
+        }
+        let mut steps = std::mem::take(&mut s.steps);
+        let mut step = std::mem::take(&mut s.step);
+        let mut travel = std::mem::take(&mut s.inflation);
+        let mut margins = std::mem::take(&mut s.margins);
+        let mut spans = std::mem::take(&mut s.spans);
+        let mut q = std::mem::take(&mut s.q);
+        steps.clear();
+        steps.extend((0..dof).map(|i| g.cspace.delta(i, qa[i], qb[i]).abs()));
+        // How far each link's points can travel over the whole segment (against obstacles),
+        // then how far each self-collision pair can close in on itself.
+        travel.clear();
+        for arms in g.lever.chunks_exact(dof).chain(g.pair_lever.chunks_exact(dof)) {
+            travel.push(arms.iter().zip(&steps).map(|(a, d)| a * d).sum::<f64>());
+        }
+        let slots = g.links.len();
+        let most = travel.iter().copied().fold(0.0, f64::max);
+        margins.clear();
+        margins.resize(travel.len(), 0.0);
+        step.clear();
+        step.resize(dof, 0.0);
+        q.clear();
+        q.resize(dof, 0.0);
+        spans.clear();
+        spans.push((0.0, 1.0));
+        let mut free = true;
+        let mut head = 0;
+        while head < spans.len() {
+            let (t0, t1) = spans[head];
+            head += 1;
+            let half = 0.5 * (t1 - t0);
+            let tm = t0 + half;
+            // A relative and an absolute hair more than the bound, against rounding.
+            let scale = half * (1.0 + 1e-9);
+            for (m, t) in margins.iter_mut().zip(&travel) {
+                *m = t * scale + 1e-12;
+            }
+            for (m, d) in step.iter_mut().zip(&steps) {
+                *m = d * scale;
+            }
+            g.cspace.interpolate_into(qa, qb, tm, &mut q);
+            checks += 1;
+            let inflation = Inflation { link: &margins[..slots], pair: &margins[slots..], step: &step };
+            match self.check(&q, Some(inflation), s) {
+                Check::Free => {}
+                Check::Hit => {
+                    free = false;
+                    break;
+                }
+                Check::Near if most * half < tolerance => {
+                    free = false;
+                    break;
+                }
+                Check::Near => {
+                    spans.push((t0, tm));
+                    spans.push((tm, t1));
+                }
+            }
+        }
+        s.steps = steps;
+        s.step = step;
+        s.inflation = travel;
+        s.margins = margins;
+        s.spans = spans;
+        s.q = q;
+        (free, checks)
+    }
+
     /// The robot's shapes posed in the world at `q`, as obstacles for another agent's model.
     /// Names are the link names (`link#k` for the k-th shape of a link with several).
     pub fn link_shapes_world(&self, q: &[f64]) -> Vec<Obstacle> {
@@ -879,7 +1215,7 @@ pub fn disable_always_colliding(robot: &mut Robot, samples: usize, seed: u64) ->
         robot.random_configuration_into(&mut rng, &mut q);
         model.pose_bodies(&q, &mut s);
         for (p, &(a, b)) in g.self_pairs.iter().enumerate() {
-            if model.pair_hits(a as usize, b as usize, &mut s) {
+            if model.pair_hits(a as usize, b as usize, 0.0, &mut s).is_err() {
                 counts[p] += 1;
             }
         }

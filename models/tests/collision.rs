@@ -126,9 +126,15 @@ proptest! {
         let (a, pa, b, pb) = if flip { (b, pb, a, pa) } else { (a, pa, b, pb) };
         let fast = shape_separation(&a, &pa, &b, &pb);
         let reference = parry_shape_separation(&a, &pa, &b, &pb);
-        // EPA (parry's penetration depth for capsules and cylinders) is an iterative estimate.
-        // GJK's answer is a true pair of points, so it can only overestimate a gap.
-        let tol = if reference.distance < 0.0 { 1e-4 } else { 1e-5 };
+        // EPA (parry's penetration depth for capsules and cylinders) is an iterative estimate
+        // from inside the Minkowski difference: it can only underestimate a depth, by up to
+        // ~0.4% of it at deep overlaps (0.5796 analytic vs 0.5777 parry, seen). GJK's answer is
+        // a true pair of points, so it can only overestimate a gap.
+        let tol = if reference.distance < 0.0 { 1e-4 + 1e-2 * reference.distance.abs() } else { 1e-5 };
+        if reference.distance < -1e-4 && matches!((&a, &b), (Shape::Capsule { .. } | Shape::Sphere { .. }, Shape::Capsule { .. } | Shape::Sphere { .. })) {
+            // Between spheres and capsules the closed form is exact: at least as deep as EPA's.
+            prop_assert!(fast.distance <= reference.distance + 1e-6, "analytic {} shallower than parry {}", fast.distance, reference.distance);
+        }
         if reference.distance > 0.0 {
             prop_assert!(fast.distance <= reference.distance + 1e-9, "analytic {} > parry {}", fast.distance, reference.distance);
         }

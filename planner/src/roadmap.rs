@@ -226,7 +226,8 @@ impl Roadmap {
                 return Err(PlanError::GoalInCollision { index, contact: contact.to_string() });
             }
         }
-        let mut validity = Validity::new(model, crate::motion::DEFAULT_RESOLUTION);
+        let mut validity = Validity::new(model, crate::motion::DEFAULT_RESOLUTION)
+            .with_edge_check(crate::motion::EdgeCheck::Certified { tolerance: crate::motion::CERTIFY_TOLERANCE });
         let mut budget = Budget::new(deadline);
         let s = self.add_vertex(start.to_vec());
         let gs: Vec<NodeIndex> = goals.iter().map(|g| self.add_vertex(g.clone())).collect();

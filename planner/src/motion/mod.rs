@@ -37,6 +37,22 @@ pub enum Goal {
     ToolPose { end_effector: usize, pose: Isometry3<f64> },
 }
 
+/// How a straight segment between two free configurations is judged free.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub enum EdgeCheck {
+    /// The conservative certificate of
+    /// [`CollisionModel::motion_is_certified_free`]: the whole continuum of configurations
+    /// is free, not only sampled ones. Motions that pass within about `tolerance` (m) of
+    /// contact are refused.
+    Certified { tolerance: f64 },
+    /// Configurations no more than [`MotionSettings::resolution`] apart in every joint are
+    /// checked (the classic discrete check; a thin obstacle between samples can be missed).
+    Sampled,
+}
+
+/// Default tolerance of [`EdgeCheck::Certified`] (m).
+pub const CERTIFY_TOLERANCE: f64 = 1e-4;
+
 /// Which search runs after the straight segment fails.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
 pub enum PlannerKind {
@@ -51,7 +67,10 @@ pub enum PlannerKind {
 pub struct MotionSettings {
     /// Seed of every random choice: the same seed gives the same path.
     pub seed: u64,
-    /// Largest joint step between collision-checked points of a segment (rad or m).
+    /// How segments are checked: certified (the default) or sampled at `resolution`.
+    pub edge_check: EdgeCheck,
+    /// Largest joint step between collision-checked points of a segment (rad or m), for
+    /// [`EdgeCheck::Sampled`].
     pub resolution: f64,
     /// When planning must stop. Its expansion budget counts units of work: samples drawn, tree
     /// extensions and A* expansions.
@@ -81,6 +100,7 @@ impl Default for MotionSettings {
     fn default() -> Self {
         Self {
             seed: 0,
+            edge_check: EdgeCheck::Certified { tolerance: CERTIFY_TOLERANCE },
             resolution: DEFAULT_RESOLUTION,
             deadline: Deadline::none(),
             shortcut: true,
@@ -146,7 +166,14 @@ pub fn plan_motion(
     }
     check_start(model, start)?;
     let mut budget = Budget::new(&settings.deadline);
-    let mut validity = Validity::new(model, settings.resolution);
+    if let EdgeCheck::Certified { tolerance } = settings.edge_check
+        && !(tolerance.is_finite() && tolerance > 0.0)
+    {
+        return Err(PlanError::InvalidInput {
+            message: format!("the certificate tolerance must be positive and finite, got {tolerance}"),
+        });
+    }
+    let mut validity = Validity::new(model, settings.resolution).with_edge_check(settings.edge_check);
     let mut rng = Rng::new(settings.seed);
     let goals = resolve_goals(model, start, goal, settings, &mut rng)?;
     let mut stats = MotionStats::default();

@@ -1,6 +1,8 @@
 //! The planner's own validity checks: configurations and straight segments in C-space, counted.
 //!
-//! Segments are checked in bisection order (midpoint first, then quarter points...) because a
+//! Segments are certified by default (`CollisionModel::certify`: free for the whole continuum
+//! of configurations between their ends). With [`super::EdgeCheck::Sampled`] they are sampled
+//! at the resolution instead, in bisection order (midpoint first, then quarter points...) because a
 //! colliding segment usually collides somewhere in the middle: the first hit ends the check.
 //! The independent checker in [`crate::verify`] walks segments its own way.
 
@@ -16,6 +18,8 @@ pub(crate) struct Validity<'m> {
     pub model: &'m CollisionModel,
     pub space: ConfigSpace,
     pub resolution: f64,
+    /// `Some(tolerance)`: segments are certified, not sampled.
+    certify: Option<f64>,
     scratch: CollisionScratch,
     buf: Vec<f64>,
     pub collision_checks: u64,
@@ -29,11 +33,21 @@ impl<'m> Validity<'m> {
             model,
             space: robot.config_space(),
             resolution,
+            certify: None,
             scratch: model.scratch(),
             buf: vec![0.0; robot.dof()],
             collision_checks: 0,
             edges_checked: 0,
         }
+    }
+
+    /// Check segments as `check` says.
+    pub fn with_edge_check(mut self, check: super::EdgeCheck) -> Self {
+        self.certify = match check {
+            super::EdgeCheck::Certified { tolerance } => Some(tolerance),
+            super::EdgeCheck::Sampled => None,
+        };
+        self
     }
 
     /// Within the position limits and collision-free.
@@ -50,6 +64,11 @@ impl<'m> Validity<'m> {
     /// already checked.
     pub fn segment_free(&mut self, a: &[f64], b: &[f64]) -> bool {
         self.edges_checked += 1;
+        if let Some(tolerance) = self.certify {
+            let (free, checks) = self.model.certify(a, b, tolerance, false, &mut self.scratch);
+            self.collision_checks += u64::from(checks);
+            return free;
+        }
         let n = steps(&self.space, a, b, self.resolution);
         if n < 2 {
             return true;

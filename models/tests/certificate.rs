@@ -1,0 +1,248 @@
+//! The sphere fast path and the conservative motion certificate.
+#![allow(clippy::unwrap_used)]
+
+use std::path::PathBuf;
+
+use embodied_models::collision::{CollisionModel, Environment, Obstacle, disable_always_colliding};
+use embodied_models::nalgebra::{Isometry3, Point3, UnitQuaternion, Vector3};
+use embodied_models::urdf::load_urdf;
+use embodied_models::{ConvexHull, Rng, Robot, Shape, builtin};
+use proptest::prelude::*;
+
+fn fixture(name: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures").join(name)
+}
+
+fn ur5() -> Robot {
+    let mut r = load_urdf(&fixture("ur5_spherized.urdf"), Some(&fixture("ur5.srdf"))).unwrap();
+    disable_always_colliding(&mut r, 300, 3);
+    r
+}
+
+/// Boxes, cylinders, balls, capsules and a convex mesh scattered around the arm's base, at
+/// random poses (the seed picks them), none over the base itself.
+fn clutter(seed: u64, n: usize) -> Environment {
+    let mut rng = Rng::new(seed);
+    let mut env = Environment::new();
+    let mut k = 0;
+    while env.len() < n {
+        let p = Vector3::new(rng.range(-1.0, 1.0), rng.range(-1.0, 1.0), rng.range(-0.3, 1.2));
+        if p.xy().norm() < 0.3 {
+            continue;
+        }
+        let rot = UnitQuaternion::from_euler_angles(rng.range(-3.0, 3.0), rng.range(-3.0, 3.0), rng.range(-3.0, 3.0));
+        let pose = Isometry3::from_parts(p.into(), rot);
+        let shape = match k % 5 {
+            0 => Shape::cuboid(rng.range(0.02, 0.2), rng.range(0.02, 0.2), rng.range(0.02, 0.2)),
+            1 => Shape::cylinder(rng.range(0.02, 0.15), rng.range(0.05, 0.3)),
+            2 => Shape::sphere(rng.range(0.02, 0.15)),
+            3 => Shape::capsule([0.0, 0.0, -0.1], [0.0, 0.0, 0.1], rng.range(0.02, 0.1)),
+            _ => Shape::ConvexMesh(std::sync::Arc::new(
+                ConvexHull::from_points(&[
+                    Point3::new(0.0, 0.0, 0.0),
+                    Point3::new(0.15, 0.0, 0.0),
+                    Point3::new(0.0, 0.15, 0.0),
+                    Point3::new(0.0, 0.0, 0.15),
+                ])
+                .unwrap(),
+            )),
+        };
+        env.add(Obstacle::new(format!("o{k}"), pose, shape));
+        k += 1;
+    }
+    env
+}
+
+#[test]
+fn spherized_ur5_takes_the_sphere_path_and_agrees_with_the_general_path() {
+    let robot = ur5();
+    for seed in 0..4 {
+        let fast = CollisionModel::new(&robot, clutter(seed, 12));
+        assert!(fast.uses_sphere_path());
+        let general = fast.clone().general_path_only();
+        assert!(!general.uses_sphere_path());
+        let mut rng = Rng::new(seed + 100);
+        let (mut hits, mut n) = (0, 0);
+        for _ in 0..1500 {
+            let q = robot.random_configuration(&mut rng);
+            let c = fast.collides(&q);
+            assert_eq!(c, general.collides(&q), "seed {seed}, q = {q:?}");
+            assert_eq!(c, general.first_collision(&q).is_some());
+            hits += c as usize;
+            n += 1;
+        }
+        // Both answers occur, so the comparison means something.
+        assert!(hits > n / 20 && hits < n - n / 20, "{hits} of {n} collide");
+    }
+    // A robot with capsules does not take the sphere path.
+    let irp6 = builtin("irp6-postument").unwrap();
+    assert!(!CollisionModel::new(&irp6, Environment::new()).uses_sphere_path());
+}
+
+/// Points that move rigidly with each link: shape centres and capsule end points, world frame.
+fn link_points(robot: &Robot, q: &[f64]) -> Vec<(usize, Vector3<f64>)> {
+    let poses = robot.forward_kinematics(q);
+    let mut out = Vec::new();
+    for (l, link) in robot.links().iter().enumerate() {
+        for ps in &link.shapes {
+            let pose = poses[l] * ps.pose;
+            out.push((l, pose.translation.vector));
+            if let Shape::Capsule { a, b, .. } = &ps.shape {
+                out.push((l, (pose * a).coords));
+                out.push((l, (pose * b).coords));
+            }
+        }
+    }
+    out
+}
+
+fn all_robots() -> Vec<Robot> {
+    let mut v: Vec<Robot> = ["irp6-postument", "irp6-on-track", "two-irp6", "polycrank", "rnt"]
+        .iter()
+        .map(|n| builtin(n).unwrap())
+        .collect();
+    v.push(ur5());
+    v
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(64))]
+
+    /// No point of a link travels further along a straight joint-space motion than the bound
+    /// the certificate grows the link by (measured as the length of the sampled path).
+    #[test]
+    fn travel_bounds_hold_on_every_robot(which in 0usize..6, seed in any::<u64>(), scale in 0.01f64..1.0) {
+        let robots = all_robots();
+        let robot = &robots[which];
+        let model = CollisionModel::new(robot, Environment::new());
+        let mut rng = Rng::new(seed);
+        let qa = robot.random_configuration(&mut rng);
+        let target = robot.random_configuration(&mut rng);
+        let space = robot.config_space();
+        let qb = space.interpolate(&qa, &target, scale);
+        let bounds = model.travel_bounds(&qa, &qb);
+        prop_assert!(!bounds.is_empty());
+        // Path length of every point, sampled finely; the largest per link.
+        let n = 200;
+        let mut last = link_points(robot, &qa);
+        let mut length = vec![0.0; last.len()];
+        for k in 1..=n {
+            let q = space.interpolate(&qa, &qb, k as f64 / n as f64);
+            let now = link_points(robot, &q);
+            for (i, ((_, a), (_, b))) in last.iter().zip(&now).enumerate() {
+                length[i] += (b - a).norm();
+            }
+            last = now;
+        }
+        let mut travelled = vec![0.0f64; robot.links().len()];
+        for (i, (l, _)) in last.iter().enumerate() {
+            travelled[*l] = travelled[*l].max(length[i]);
+        }
+        for (l, bound) in bounds {
+            prop_assert!(travelled[l] <= bound * (1.0 + 1e-9) + 1e-12,
+                "{}: link {} travels {} > bound {}", robot.name(), robot.links()[l].name, travelled[l], bound);
+        }
+    }
+}
+
+#[test]
+fn certified_motions_are_free_at_a_fine_resolution() {
+    let robot = ur5();
+    let space = robot.config_space();
+    for seed in 0..3 {
+        let model = CollisionModel::new(&robot, clutter(seed, 10));
+        let mut rng = Rng::new(seed + 7);
+        let (mut certified, mut refused, mut tried) = (0, 0, 0);
+        while tried < 150 {
+            let qa = robot.random_configuration(&mut rng);
+            let far = robot.random_configuration(&mut rng);
+            let qb = space.interpolate(&qa, &far, 0.3);
+            if model.collides(&qa) || model.collides(&qb) {
+                continue;
+            }
+            tried += 1;
+            let fine = model.motion_is_free(&qa, &qb, 0.0005);
+            if model.motion_is_certified_free(&qa, &qb, 1e-4) {
+                certified += 1;
+                assert!(fine, "certified but collides: {qa:?} -> {qb:?}");
+            } else {
+                refused += 1;
+            }
+        }
+        assert!(certified > 20 && refused > 5, "seed {seed}: {certified} certified, {refused} refused");
+    }
+}
+
+#[test]
+fn general_path_certificate_is_sound_on_irp6_among_obstacles() {
+    let robot = builtin("irp6-postument").unwrap();
+    let space = robot.config_space();
+    let model = CollisionModel::new(&robot, clutter(11, 10));
+    let mut rng = Rng::new(5);
+    let (mut certified, mut tried) = (0, 0);
+    while tried < 60 {
+        let qa = robot.random_configuration(&mut rng);
+        let far = robot.random_configuration(&mut rng);
+        let qb = space.interpolate(&qa, &far, 0.3);
+        if model.collides(&qa) || model.collides(&qb) {
+            continue;
+        }
+        tried += 1;
+        if model.motion_is_certified_free(&qa, &qb, 1e-4) {
+            certified += 1;
+            assert!(model.motion_is_free(&qa, &qb, 0.001), "{qa:?} -> {qb:?}");
+        }
+    }
+    assert!(certified > 10, "{certified} of {tried} certified");
+}
+
+#[test]
+fn few_checks_certify_a_long_motion_with_clearance() {
+    let robot = ur5();
+    let far = Obstacle::new("far", Isometry3::translation(5.0, 0.0, 0.0), Shape::cuboid(0.5, 0.5, 0.5));
+    let model = CollisionModel::new(&robot, Environment::new().with(far));
+    // Free configurations turning their base by 1 rad (the spherized UR5 keeps only 2.5 mm
+    // between base_link and upper_arm_link, so the margins must shrink to that).
+    let mut rng = Rng::new(9);
+    let mut counts = Vec::new();
+    while counts.len() < 20 {
+        let qa = robot.random_configuration(&mut rng);
+        let mut qb = qa.clone();
+        qb[0] += 1.0;
+        if !robot.within_limits(&qb) || !model.motion_is_free(&qa, &qb, 0.005) {
+            continue;
+        }
+        let mut s = model.scratch();
+        let (free, checks) = model.certify(&qa, &qb, 1e-4, false, &mut s);
+        assert!(free);
+        counts.push(checks);
+    }
+    counts.sort_unstable();
+    eprintln!("checks to certify a 1 rad base turn: {counts:?}");
+    // Far fewer than the 200 of a 0.005 rad scan.
+    assert!(counts[10] <= 100, "median {} checks", counts[10]);
+}
+
+#[test]
+fn certificate_catches_a_thin_plate_and_bad_input() {
+    let r = builtin("irp6-postument").unwrap();
+    let (flange, _) = r.end_effector_poses(r.home(), 0);
+    let p = flange.translation.vector;
+    let plate = Obstacle::new("plate", Isometry3::translation(p.x, p.y, p.z), Shape::cuboid(0.1, 0.001, 0.1));
+    let m = CollisionModel::new(&r, Environment::new().with(plate));
+    let mut qa = r.home().to_vec();
+    let mut qb = qa.clone();
+    qa[0] = -0.5;
+    qb[0] = 0.5;
+    assert!(!m.collides(&qa) && !m.collides(&qb));
+    assert!(!m.motion_is_certified_free(&qa, &qb, 1e-4));
+    assert!(!m.motion_is_certified_free(&qb, &qa, 1e-4));
+    let empty = CollisionModel::new(&r, Environment::new());
+    assert!(empty.motion_is_certified_free(&qa, &qb, 1e-4));
+    assert!(!empty.motion_is_certified_free(&qa[..3], &qb, 1e-4));
+    assert!(!empty.motion_is_certified_free(&qa, &qb, 0.0));
+    assert!(!empty.motion_is_certified_free(&qa, &qb, f64::NAN));
+    let mut nan = qb.clone();
+    nan[2] = f64::NAN;
+    assert!(!empty.motion_is_certified_free(&qa, &nan, 1e-4));
+}
