@@ -15,7 +15,7 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
-use embodied_models::collision::disable_always_colliding;
+use embodied_models::collision::{disable_always_colliding, disable_never_colliding};
 use embodied_models::srdf::{Srdf, load_srdf};
 use embodied_models::urdf::load_urdf;
 use embodied_models::{CollisionModel, ConfigSpace, Robot};
@@ -164,6 +164,9 @@ pub struct MbmSettings {
     pub verify_resolution: f64,
     /// Self-collision pairs disabled because they touch in every sampled configuration.
     pub always_colliding_disabled: Vec<(String, String)>,
+    /// Self-collision pairs disabled because they are proven never to touch within the joint
+    /// limits ([`disable_never_colliding`]: a certificate, not sampling).
+    pub never_colliding_disabled: Vec<(String, String)>,
 }
 
 /// The whole benchmark: per-family and overall summaries and every problem with its path.
@@ -352,20 +355,32 @@ struct Loaded {
     robot: Robot,
     srdf: Srdf,
     always_colliding: Vec<(String, String)>,
+    never_colliding: Vec<(String, String)>,
 }
+
+/// Pairs moved relative to each other by at most this many joints are tried for a proof that
+/// they never touch.
+const NEVER_COLLIDING_DOFS: usize = 2;
+/// Pair checks spent at most on each such proof.
+const NEVER_COLLIDING_CHECKS: usize = 200_000;
 
 /// Load the robot once. Self-collision pairs in contact in every sampled configuration are
 /// disabled, as MoveIt's setup assistant does: a spherized model's conservative spheres can make
 /// neighbouring links overlap everywhere (the spherized UR5's `wrist_2_link` and `fts_robotside`,
 /// which the SRDF written for the mesh model does not disable), which would make every
-/// configuration invalid.
+/// configuration invalid. Pairs proven never to touch are disabled too (see
+/// [`disable_never_colliding`]).
 fn load_robot(args: &MbmArgs) -> Result<Loaded, AppError> {
     let mut robot = load_urdf(&args.urdf, Some(&args.srdf))?;
     let srdf = load_srdf(&args.srdf)?;
-    let pairs = disable_always_colliding(&mut robot, ALWAYS_COLLIDING_SAMPLES, 0x5eed);
+    let always = disable_always_colliding(&mut robot, ALWAYS_COLLIDING_SAMPLES, 0x5eed);
+    let never = disable_never_colliding(&mut robot, NEVER_COLLIDING_DOFS, NEVER_COLLIDING_CHECKS);
     let links = robot.links();
-    let always_colliding = pairs.iter().map(|&(a, b)| (links[a].name.clone(), links[b].name.clone())).collect();
-    Ok(Loaded { robot, srdf, always_colliding })
+    let names = |pairs: &[(usize, usize)]| -> Vec<(String, String)> {
+        pairs.iter().map(|&(a, b)| (links[a].name.clone(), links[b].name.clone())).collect()
+    };
+    let (always_colliding, never_colliding) = (names(&always), names(&never));
+    Ok(Loaded { robot, srdf, always_colliding, never_colliding })
 }
 
 fn run_problem(args: &MbmArgs, loaded: &Loaded, p: &ProblemFiles) -> Result<ProblemResult, AppError> {
@@ -483,6 +498,7 @@ pub fn run_mbm(args: &MbmArgs, on_progress: &mut dyn FnMut(usize, usize)) -> Res
             resolution: args.resolution,
             verify_resolution: VERIFY_RESOLUTION,
             always_colliding_disabled: loaded.always_colliding.clone(),
+            never_colliding_disabled: loaded.never_colliding.clone(),
         },
         families,
         overall,

@@ -373,6 +373,32 @@ impl SphereGeom {
         }
     }
 
+    /// Self-collision pair `p` alone, each sphere grown by its motion relative to the pair's
+    /// common body when the joints move by at most `step`.
+    pub(crate) fn pair_check(&self, q: &[f64], p: usize, step: &[f64], s: &mut SphereScratch) -> Check {
+        self.pose(q, s);
+        let (a, b) = self.self_pairs[p];
+        let (a, b) = (a as usize, b as usize);
+        self.pose_link(a, s);
+        self.pose_link(b, s);
+        let stop = self.pair_common[p] as usize;
+        let (la, lb) = (&self.links[a], &self.links[b]);
+        let mut near = false;
+        for i in la.first..la.end {
+            let ei = self.margin(i, stop, step);
+            for j in lb.first..lb.end {
+                let d2 = (s.centre[i] - s.centre[j]).norm_squared();
+                let r = self.radius[i] + self.radius[j];
+                if d2 <= r * r {
+                    return Check::Hit;
+                }
+                let re = r + ei + self.margin(j, stop, step);
+                near |= d2 <= re * re;
+            }
+        }
+        if near { Check::Near } else { Check::Free }
+    }
+
     /// Exact (`inflation` = `None`) or inflated query; see the module documentation.
     /// `q` has the right length.
     pub(crate) fn check(
