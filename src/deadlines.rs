@@ -56,7 +56,7 @@ impl Default for DeadlineArgs {
             deadlines_ms: vec![0.5, 1.0, 2.0, 5.0, 10.0, 50.0],
             scenarios: Vec::new(),
             mbm: None,
-            max_steps: 20_000,
+            max_steps: 60_000,
             seed: 1,
         }
     }
