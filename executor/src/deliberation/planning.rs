@@ -1,7 +1,7 @@
 //! The motion planner deliberative agents use: the planner crate's
 //! [`embodied_planner::motion::plan_motion`] (straight segment, RRT-Connect or lazy PRM,
 //! shortcuts) under the request's [`Deadline`], time-parameterised by
-//! [`embodied_planner::trajectory::time_parameterize`] at the control period.
+//! [`embodied_planner::trajectory::time_parameterize`] (knots only).
 //!
 //! Work is counted in collision checks: deterministic for a seed, and what planning time is made
 //! of, so that [`super::PlanClock::Simulated`] turns it into simulated planning time.
@@ -43,7 +43,11 @@ impl MotionPlanner for PlanMotion {
         };
         match plan_motion(&model, &request.start, &request.goal, &settings) {
             Ok(plan) => {
-                let trajectory = time_parameterize(&plan.path, model.robot(), request.dt);
+                // Knots only (every point where the acceleration changes): the follower's
+                // Hermite sampling reproduces the motion exactly at any control period, and the
+                // verifier checks a few knots and the straight segments between them instead of
+                // one sample per control step.
+                let trajectory = time_parameterize(&plan.path, model.robot(), 0.0);
                 Ok(Planned { trajectory, work: plan.stats.collision_checks })
             }
             Err(PlanError::OutOfTime { stats }) => Err(PlanFailure::OutOfTime {

@@ -266,8 +266,9 @@ impl Deliberator {
         let planner = self.planner.clone();
         let verifier = self.verifier.clone();
         let id = request.id;
+        // Planning time runs from the request (thread start-up included).
+        let started = Instant::now();
         std::thread::spawn(move || {
-            let started = Instant::now();
             let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| planner.plan(&request, &deadline)));
             let elapsed = started.elapsed();
             let (outcome, work) = match result {
