@@ -1,22 +1,39 @@
 //! `embodied bench deadlines`: how deliberative agents fare under planning deadlines.
 //!
-//! For every deadline and every problem (the configuration-goal agents of the built-in
-//! scenarios), a deliberative agent ([`embodied_executor::deliberative_agent`], wall-clock
-//! [`PlanClock`]) plans from its start to its goal. Once it moves, a far obstacle appears (the
-//! agent's world model changes), so it halts from speed and must replan under the same deadline.
-//! Everything is read back from the run's log events: the share of plans delivered within the
-//! deadline, the safe halts with their stopping distance and time, and the deadline overshoot.
+//! For every deadline and every problem (the agents with goals of the built-in scenarios, and
+//! optionally a sample of MotionBenchMaker UR5 problems), a deliberative agent
+//! ([`embodied_executor::deliberative_agent`], wall-clock [`PlanClock`]) asks for a plan from its
+//! start to its goal; the search ([`embodied_planner::motion::plan_motion`]) is stopped at the
+//! deadline. Once the agent moves, a far obstacle appears (its world model changes), so it
+//! halts from speed and must replan under the same deadline. Everything is read back from the
+//! run's log events: the share of plans delivered within the deadline, the safe halts with
+//! their stopping distance and time, and the deadline overshoot (how long past the deadline a
+//! stopped search took to return).
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Duration;
 
 use embodied_executor::deliberation::{DeliberationSettings, PlanBudget, PlanClock, deliberative_agent};
 use embodied_executor::{Obstacle, Runtime, RuntimeConfig, StepRecord};
 use embodied_models::CollisionModel;
+use embodied_planner::motion::Goal;
 
 use crate::error::AppError;
-use crate::scenario::{GoalSpec, load_scenario};
+use crate::plan::{agent_problem, goal_of};
+use crate::run::event_field;
+use crate::scenario::load_scenario;
+
+/// A sample of MotionBenchMaker problems to add to the built-in scenarios.
+#[derive(Debug, Clone)]
+pub struct MbmSample {
+    pub urdf: PathBuf,
+    pub srdf: PathBuf,
+    /// Folder of family folders (e.g. the unpacked `problems/`).
+    pub problems: PathBuf,
+    /// How many problems, spread evenly over the families.
+    pub count: usize,
+}
 
 /// What to run.
 #[derive(Debug, Clone)]
@@ -25,21 +42,40 @@ pub struct DeadlineArgs {
     pub deadlines_ms: Vec<f64>,
     /// Built-in scenario names or scenario files (empty: every built-in scenario).
     pub scenarios: Vec<String>,
+    /// MotionBenchMaker problems to add.
+    pub mbm: Option<MbmSample>,
     /// Upper bound on control steps per run (dt = 1 ms).
     pub max_steps: u64,
-    /// Seed of the runtime.
+    /// Seed of the runtime and the planner.
     pub seed: u64,
 }
 
 impl Default for DeadlineArgs {
     fn default() -> Self {
-        Self { deadlines_ms: vec![0.5, 1.0, 2.0, 5.0, 10.0, 50.0], scenarios: Vec::new(), max_steps: 20_000, seed: 1 }
+        Self {
+            deadlines_ms: vec![0.5, 1.0, 2.0, 5.0, 10.0, 50.0],
+            scenarios: Vec::new(),
+            mbm: None,
+            max_steps: 60_000,
+            seed: 1,
+        }
     }
 }
 
-/// Results for one deadline over all problems.
+/// One safe halt.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct HaltRecord {
+    pub problem: String,
+    /// Largest joint travel from the start of the halt to rest (rad or m).
+    pub distance: f64,
+    pub time_ms: f64,
+}
+
+/// Results for one deadline over one problem set.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct DeadlineRow {
+    /// `scenarios` or `mbm`.
+    pub set: String,
     pub deadline_ms: f64,
     pub problems: usize,
     /// Plans asked for.
@@ -51,35 +87,43 @@ pub struct DeadlineRow {
     /// Problems whose goal was reached.
     pub goals_reached: usize,
     pub safe_halts: usize,
-    /// Largest joint travel during a halt (rad or m): mean and max over halts.
+    /// Halts from speed (the others are holds at rest while a plan is late).
+    pub halts_from_speed: usize,
+    /// Largest joint travel during a halt from speed (rad or m): mean and max.
     pub halt_distance_mean: f64,
     pub halt_distance_max: f64,
-    /// Halt duration, ms: mean and max.
+    /// Duration of a halt from speed, ms: mean and max.
     pub halt_time_mean_ms: f64,
     pub halt_time_max_ms: f64,
-    /// Time the planner ran past the deadline, µs: mean and max over plans that overshot.
-    pub overshoot_mean_us: f64,
+    /// Searches stopped by the deadline.
+    pub stopped: usize,
+    /// How long past the deadline a stopped search returned, µs: median and max.
+    pub overshoot_p50_us: f64,
     pub overshoot_max_us: f64,
+    /// Every halt from speed.
+    pub halts: Vec<HaltRecord>,
 }
 
 /// The whole benchmark.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct DeadlineReport {
-    /// `scenario/agent` of every problem.
-    pub problems: Vec<String>,
+    /// `scenario/agent` or `family/index` of every problem, per set.
+    pub problems: Vec<(String, String)>,
     pub rows: Vec<DeadlineRow>,
 }
 
 struct Problem {
+    set: &'static str,
     name: String,
-    robot: Arc<embodied_models::Robot>,
     collision: CollisionModel,
     start: Vec<f64>,
-    goal: Vec<f64>,
+    goal: Goal,
+    seed: u64,
+    resolution: f64,
 }
 
 fn problems(args: &DeadlineArgs) -> Result<Vec<Problem>, AppError> {
-    let names: Vec<String> = if args.scenarios.is_empty() {
+    let names: Vec<String> = if args.scenarios.is_empty() && args.mbm.is_none() {
         crate::scenario::BUILTIN_SCENARIOS.iter().map(|(n, _)| (*n).to_string()).collect()
     } else {
         args.scenarios.clone()
@@ -87,21 +131,38 @@ fn problems(args: &DeadlineArgs) -> Result<Vec<Problem>, AppError> {
     let mut out = Vec::new();
     for name in &names {
         let sc = load_scenario(name)?;
-        let env = sc.initial_environment();
-        for a in &sc.agents {
-            if let Some(GoalSpec::Configuration(goal)) = &a.goal {
+        let starts: Vec<Vec<Vec<f64>>> = sc.agents.iter().map(|a| vec![a.start.clone()]).collect();
+        for (k, a) in sc.agents.iter().enumerate() {
+            if let Some(goal) = &a.goal {
                 out.push(Problem {
+                    set: "scenarios",
                     name: format!("{}/{}", sc.name, a.name),
-                    robot: Arc::new(a.robot.clone()),
-                    collision: CollisionModel::new(&a.robot, env.clone()),
+                    collision: agent_problem(&sc, k, &starts),
                     start: a.start.clone(),
-                    goal: goal.clone(),
+                    goal: goal_of(goal),
+                    seed: sc.planner.seed,
+                    resolution: sc.planner.resolution,
                 });
             }
         }
     }
+    if let Some(m) = &args.mbm {
+        let mut margs = crate::mbm::MbmArgs::new(&m.urdf, &m.srdf, &m.problems);
+        margs.seed = args.seed;
+        for p in crate::mbm::sample_problems(&margs, m.count)? {
+            out.push(Problem {
+                set: "mbm",
+                name: p.name,
+                collision: p.model,
+                start: p.start,
+                goal: Goal::Configuration(p.goal),
+                seed: args.seed,
+                resolution: margs.resolution,
+            });
+        }
+    }
     if out.is_empty() {
-        return Err(AppError::Usage("no scenario agent with a configuration goal to plan for".into()));
+        return Err(AppError::Usage("no problem to plan: no scenario agent with a goal, no MBM problem".into()));
     }
     Ok(out)
 }
@@ -113,36 +174,35 @@ struct Tally {
     in_time: usize,
     goal: bool,
     halts: usize,
-    halt_distance: Vec<f64>,
-    halt_ms: Vec<f64>,
+    halts_from_speed: Vec<HaltRecord>,
     overshoot_us: Vec<f64>,
 }
 
-fn field(event: &str, key: &str) -> Option<f64> {
-    let start = event.find(key)? + key.len();
-    let rest = &event[start..];
-    let end = rest.find(|c: char| c.is_whitespace() || c == ':').unwrap_or(rest.len());
-    rest[..end].parse().ok()
-}
-
-fn tally_event(t: &mut Tally, e: &str, deadline: Duration, dt: f64) {
+fn tally_event(t: &mut Tally, problem: &str, e: &str, deadline_us: f64) {
     if e.starts_with("plan_requested") {
         t.requested += 1;
-    } else if e.starts_with("plan_ready") {
-        let elapsed = field(e, "elapsed_us=").unwrap_or(f64::INFINITY);
-        if elapsed <= deadline.as_secs_f64() * 1e6 {
+    } else if e.starts_with("plan_landed") {
+        let elapsed = event_field(e, "elapsed_us").unwrap_or(f64::INFINITY);
+        if elapsed <= deadline_us && e.contains(" in_time ") {
             t.in_time += 1;
         }
     } else if e.starts_with("goal_reached") {
         t.goal = true;
     } else if e.starts_with("safe_halt_started") {
         t.halts += 1;
-    } else if e.starts_with("safe_halt_done") {
-        t.halt_distance.push(field(e, "distance=").unwrap_or(0.0));
-        t.halt_ms.push(field(e, "steps=").unwrap_or(0.0) * dt * 1e3);
+    } else if e.starts_with("safe_halt_finished") {
+        let distance = event_field(e, "distance").unwrap_or(0.0);
+        let time_ms = event_field(e, "time_s").unwrap_or(0.0) * 1e3;
+        if event_field(e, "steps").unwrap_or(0.0) > 0.0 {
+            t.halts_from_speed.push(HaltRecord { problem: problem.to_string(), distance, time_ms });
+        }
     }
-    if let Some(o) = field(e, "overshoot_us=") {
-        t.overshoot_us.push(o);
+    // A search that ran to the deadline: how long past it it returned.
+    if (e.starts_with("plan_failed") || e.starts_with("plan_landed"))
+        && let Some(elapsed) = event_field(e, "elapsed_us")
+        && elapsed >= deadline_us
+    {
+        t.overshoot_us.push(elapsed - deadline_us);
     }
 }
 
@@ -151,30 +211,47 @@ fn run_one(p: &Problem, deadline_ms: f64, args: &DeadlineArgs) -> Result<Tally, 
     let deadline = Duration::from_secs_f64(deadline_ms.max(0.0) / 1e3);
     let settings = DeliberationSettings {
         clock: PlanClock::WallClock,
-        budget: PlanBudget { wall: Some(deadline), steps: (deadline_ms / 1e3 / dt).ceil() as u64, expansions: None },
+        budget: PlanBudget {
+            steps: (deadline_ms / 1e3 / dt).ceil() as u64,
+            wall: Some(deadline),
+            give_up_steps: None,
+            work: None,
+        },
+        motion: embodied_planner::motion::MotionSettings {
+            seed: p.seed,
+            resolution: p.resolution,
+            ..embodied_planner::motion::MotionSettings::default()
+        },
         obstacle_sensing: Some(f64::INFINITY),
         halt_on_any_change: true,
         retry_after_steps: 50,
         max_attempts: 3,
+        goal_tolerance: 1e-3,
         ..DeliberationSettings::default()
     };
-    let agent = deliberative_agent(&p.name, p.robot.clone(), p.collision.clone(), &p.start, p.goal.clone(), settings)
+    let robot = Arc::new(p.collision.robot().clone());
+    let agent = deliberative_agent(&p.name, robot, p.collision.clone(), &p.start, p.goal.clone(), settings)
         .map_err(|e| AppError::Failed(format!("{}: {e}", p.name)))?;
     let mut rt = Runtime::new(RuntimeConfig { dt, seed: args.seed, ..RuntimeConfig::default() });
     rt.add_agent(agent);
     let mut t = Tally::default();
     let mut pending = false;
     let mut disturbed = false;
+    let deadline_us = deadline.as_secs_f64() * 1e6;
+    let mut pace: Option<(std::time::Instant, u64)> = None;
     for _ in 0..args.max_steps {
         let rec: StepRecord = rt.step().map_err(|e| AppError::Failed(format!("{}: {e}", p.name)))?.clone();
         for e in &rec.agents[0].events {
-            tally_event(&mut t, e, deadline, dt);
+            tally_event(&mut t, &p.name, e, deadline_us);
             if e.starts_with("plan_requested") {
                 pending = true;
-            } else if e.starts_with("plan_ready") || e.starts_with("plan_failed") || e.starts_with("plan_rejected") {
+            } else if ["plan_landed", "plan_failed", "plan_rejected", "planner_panicked", "plan_discarded_stale"]
+                .iter()
+                .any(|x| e.starts_with(x))
+            {
                 pending = false;
             }
-            if e.starts_with("plan_ready") && !disturbed {
+            if e.starts_with("plan_landed") && !disturbed {
                 // Once it moves, the world changes: halt from speed, replan.
                 disturbed = true;
                 let at = rec.step + 200;
@@ -191,17 +268,32 @@ fn run_one(p: &Problem, deadline_ms: f64, args: &DeadlineArgs) -> Result<Tally, 
         // The control loop runs in real time while a plan is being computed, so that steps and
         // the wall-clock deadline mean the same thing then.
         if pending {
-            std::thread::sleep(Duration::from_secs_f64(dt));
+            let (t0, s0) = *pace.get_or_insert((std::time::Instant::now(), rec.step));
+            let due = t0 + Duration::from_secs_f64((rec.step + 1 - s0) as f64 * dt);
+            if let Some(wait) = due.checked_duration_since(std::time::Instant::now()) {
+                std::thread::sleep(wait);
+            }
+        } else {
+            pace = None;
         }
     }
     Ok(t)
 }
 
-fn stats(v: &[f64]) -> (f64, f64) {
+fn mean_max(v: &[f64]) -> (f64, f64) {
     if v.is_empty() {
         return (0.0, 0.0);
     }
     (v.iter().sum::<f64>() / v.len() as f64, v.iter().copied().fold(0.0, f64::max))
+}
+
+fn median(v: &[f64]) -> f64 {
+    if v.is_empty() {
+        return 0.0;
+    }
+    let mut s = v.to_vec();
+    s.sort_by(f64::total_cmp);
+    s[s.len() / 2]
 }
 
 /// Run the benchmark.
@@ -211,77 +303,99 @@ pub fn run_deadline_bench(args: &DeadlineArgs) -> Result<DeadlineReport, AppErro
     }
     let problems = problems(args)?;
     let mut rows = Vec::new();
-    for &d in &args.deadlines_ms {
-        let mut total = Tally::default();
-        let mut goals = 0;
-        for p in &problems {
-            let t = run_one(p, d, args)?;
-            total.requested += t.requested;
-            total.in_time += t.in_time;
-            goals += usize::from(t.goal);
-            total.halts += t.halts;
-            total.halt_distance.extend(t.halt_distance);
-            total.halt_ms.extend(t.halt_ms);
-            total.overshoot_us.extend(t.overshoot_us);
+    for set in ["scenarios", "mbm"] {
+        let in_set: Vec<&Problem> = problems.iter().filter(|p| p.set == set).collect();
+        if in_set.is_empty() {
+            continue;
         }
-        let (hd_mean, hd_max) = stats(&total.halt_distance);
-        let (ht_mean, ht_max) = stats(&total.halt_ms);
-        let (os_mean, os_max) = stats(&total.overshoot_us);
-        rows.push(DeadlineRow {
-            deadline_ms: d,
-            problems: problems.len(),
-            requested: total.requested,
-            delivered_in_time: total.in_time,
-            delivered_share: if total.requested == 0 { 0.0 } else { total.in_time as f64 / total.requested as f64 },
-            goals_reached: goals,
-            safe_halts: total.halts,
-            halt_distance_mean: hd_mean,
-            halt_distance_max: hd_max,
-            halt_time_mean_ms: ht_mean,
-            halt_time_max_ms: ht_max,
-            overshoot_mean_us: os_mean,
-            overshoot_max_us: os_max,
-        });
+        for &d in &args.deadlines_ms {
+            let mut total = Tally::default();
+            let mut goals = 0;
+            for p in &in_set {
+                let t = run_one(p, d, args)?;
+                total.requested += t.requested;
+                total.in_time += t.in_time;
+                goals += usize::from(t.goal);
+                total.halts += t.halts;
+                total.halts_from_speed.extend(t.halts_from_speed);
+                total.overshoot_us.extend(t.overshoot_us);
+            }
+            let distances: Vec<f64> = total.halts_from_speed.iter().map(|h| h.distance).collect();
+            let times: Vec<f64> = total.halts_from_speed.iter().map(|h| h.time_ms).collect();
+            let (hd_mean, hd_max) = mean_max(&distances);
+            let (ht_mean, ht_max) = mean_max(&times);
+            rows.push(DeadlineRow {
+                set: set.to_string(),
+                deadline_ms: d,
+                problems: in_set.len(),
+                requested: total.requested,
+                delivered_in_time: total.in_time,
+                delivered_share: if total.requested == 0 { 0.0 } else { total.in_time as f64 / total.requested as f64 },
+                goals_reached: goals,
+                safe_halts: total.halts,
+                halts_from_speed: total.halts_from_speed.len(),
+                halt_distance_mean: hd_mean,
+                halt_distance_max: hd_max,
+                halt_time_mean_ms: ht_mean,
+                halt_time_max_ms: ht_max,
+                stopped: total.overshoot_us.len(),
+                overshoot_p50_us: median(&total.overshoot_us),
+                overshoot_max_us: total.overshoot_us.iter().copied().fold(0.0, f64::max),
+                halts: total.halts_from_speed,
+            });
+        }
     }
-    Ok(DeadlineReport { problems: problems.into_iter().map(|p| p.name).collect(), rows })
+    Ok(DeadlineReport { problems: problems.into_iter().map(|p| (p.set.to_string(), p.name)).collect(), rows })
 }
 
 /// The report as a terminal table.
 pub fn render_table(report: &DeadlineReport) -> String {
-    let mut s = format!("problems: {}\n", report.problems.join(", "));
+    let mut s = String::new();
+    for set in ["scenarios", "mbm"] {
+        let names: Vec<&str> = report.problems.iter().filter(|(k, _)| k == set).map(|(_, n)| n.as_str()).collect();
+        if !names.is_empty() {
+            s.push_str(&format!("{set} ({}): {}\n", names.len(), names.join(", ")));
+        }
+    }
     s.push_str(&format!(
-        "{:>9} {:>5} {:>9} {:>7} {:>6} {:>6} {:>10} {:>10} {:>10} {:>10} {:>11} {:>11}\n",
+        "{:<10} {:>8} {:>5} {:>7} {:>6} {:>6} {:>6} {:>6} {:>10} {:>10} {:>10} {:>10} {:>7} {:>9} {:>9}\n",
+        "set",
         "deadline",
         "asked",
         "in time",
         "share",
         "goals",
         "halts",
+        "moving",
         "halt d avg",
         "halt d max",
         "halt t avg",
         "halt t max",
+        "stopped",
         "overshoot",
         "overshoot"
     ));
     s.push_str(&format!(
-        "{:>9} {:>5} {:>9} {:>7} {:>6} {:>6} {:>10} {:>10} {:>10} {:>10} {:>11} {:>11}\n",
-        "ms", "", "", "", "", "", "rad|m", "rad|m", "ms", "ms", "avg µs", "max µs"
+        "{:<10} {:>8} {:>5} {:>7} {:>6} {:>6} {:>6} {:>6} {:>10} {:>10} {:>10} {:>10} {:>7} {:>9} {:>9}\n",
+        "", "ms", "", "", "", "", "", "", "rad|m", "rad|m", "ms", "ms", "", "p50 µs", "max µs"
     ));
     for r in &report.rows {
         s.push_str(&format!(
-            "{:>9.1} {:>5} {:>9} {:>7.2} {:>6} {:>6} {:>10.4} {:>10.4} {:>10.1} {:>10.1} {:>11.0} {:>11.0}\n",
+            "{:<10} {:>8.1} {:>5} {:>7} {:>6.2} {:>6} {:>6} {:>6} {:>10.4} {:>10.4} {:>10.1} {:>10.1} {:>7} {:>9.0} {:>9.0}\n",
+            r.set,
             r.deadline_ms,
             r.requested,
             r.delivered_in_time,
             r.delivered_share,
             format!("{}/{}", r.goals_reached, r.problems),
             r.safe_halts,
+            r.halts_from_speed,
             r.halt_distance_mean,
             r.halt_distance_max,
             r.halt_time_mean_ms,
             r.halt_time_max_ms,
-            r.overshoot_mean_us,
+            r.stopped,
+            r.overshoot_p50_us,
             r.overshoot_max_us
         ));
     }
@@ -310,10 +424,26 @@ pub fn plot_svg(report: &DeadlineReport, path: &Path) -> Result<(), AppError> {
         .y_desc("delivered in time")
         .draw()
         .map_err(|e| fail(e.to_string()))?;
-    let pts: Vec<(f64, f64)> = xs.iter().zip(&report.rows).map(|(x, r)| (*x, r.delivered_share)).collect();
-    chart.draw_series(LineSeries::new(pts.iter().copied(), BLUE.stroke_width(2))).map_err(|e| fail(e.to_string()))?;
+    for (set, colour) in [("scenarios", BLUE), ("mbm", RED)] {
+        let pts: Vec<(f64, f64)> =
+            report.rows.iter().filter(|r| r.set == set).map(|r| (r.deadline_ms.max(0.1), r.delivered_share)).collect();
+        if pts.is_empty() {
+            continue;
+        }
+        chart
+            .draw_series(LineSeries::new(pts.iter().copied(), colour.stroke_width(2)))
+            .map_err(|e| fail(e.to_string()))?
+            .label(set)
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], colour.stroke_width(2)));
+        chart
+            .draw_series(pts.iter().map(|&(x, y)| Circle::new((x, y), 4, colour.filled())))
+            .map_err(|e| fail(e.to_string()))?;
+    }
     chart
-        .draw_series(pts.iter().map(|&(x, y)| Circle::new((x, y), 4, BLUE.filled())))
+        .configure_series_labels()
+        .background_style(WHITE)
+        .border_style(BLACK)
+        .draw()
         .map_err(|e| fail(e.to_string()))?;
     root.present().map_err(|e| fail(e.to_string()))?;
     Ok(())

@@ -63,6 +63,15 @@ enum Command {
         /// Print the summary as JSON.
         #[arg(long)]
         json: bool,
+        /// How planning time is counted: `wall` (real planning time; the run is paced to real
+        /// time while a plan is computed) or `simulated` (from the planner's collision checks:
+        /// the same seed gives a byte-identical log). Default: the scenario's `[planner] clock`.
+        #[arg(long, value_parser = ["wall", "simulated"])]
+        clock: Option<String>,
+        /// Simulated planning time per collision check, microseconds (implies --clock simulated;
+        /// default: the scenario's `[planner] simulated_us_per_check`, else 2).
+        #[arg(long)]
+        us_per_check: Option<f64>,
     },
     /// Plan every agent of a scenario that has a goal and write the plan (JSON).
     Plan {
@@ -134,6 +143,19 @@ enum BenchCommand {
         plot: Option<PathBuf>,
         #[arg(long, default_value_t = 1)]
         seed: u64,
+        /// Add a sample of MotionBenchMaker problems from this folder of family folders (e.g.
+        /// the unpacked problems/); needs --urdf and --srdf.
+        #[arg(long, requires_all = ["urdf", "srdf"])]
+        mbm: Option<PathBuf>,
+        /// The MotionBenchMaker robot's URDF.
+        #[arg(long)]
+        urdf: Option<PathBuf>,
+        /// The MotionBenchMaker robot's SRDF.
+        #[arg(long)]
+        srdf: Option<PathBuf>,
+        /// How many MotionBenchMaker problems, spread evenly over the families.
+        #[arg(long, default_value_t = 30)]
+        mbm_sample: usize,
     },
 }
 
@@ -158,14 +180,30 @@ fn run(cli: Cli) -> Result<(), AppError> {
             }
             Ok(())
         }
-        Command::Run { scenario, duration, seed, log, plot, json } => {
-            let args = embodied::run::RunArgs {
-                scenario: scenario.unwrap_or_else(|| embodied::scenario::DEFAULT_SCENARIO.to_string()),
-                duration,
-                seed,
-                log,
-                plot,
+        Command::Run { scenario, duration, seed, log, plot, json, clock, us_per_check } => {
+            use embodied::scenario::ClockSpec;
+            let scenario = scenario.unwrap_or_else(|| embodied::scenario::DEFAULT_SCENARIO.to_string());
+            let clock = match (clock.as_deref(), us_per_check) {
+                (_, Some(us)) if !(us.is_finite() && us >= 0.0) => {
+                    return Err(AppError::Usage(format!("--us-per-check must be a time >= 0 µs, got {us}")));
+                }
+                (Some("wall"), Some(_)) => {
+                    return Err(AppError::Usage("--us-per-check needs --clock simulated".into()));
+                }
+                (Some("wall"), None) => Some(ClockSpec::Wall),
+                (_, Some(us)) => Some(ClockSpec::Simulated { us_per_check: us }),
+                (Some(_), None) => {
+                    let sc = embodied::scenario::load_scenario(&scenario)?;
+                    Some(match sc.planner.clock {
+                        ClockSpec::Simulated { us_per_check } => ClockSpec::Simulated { us_per_check },
+                        ClockSpec::Wall => {
+                            ClockSpec::Simulated { us_per_check: embodied::scenario::DEFAULT_US_PER_CHECK }
+                        }
+                    })
+                }
+                (None, None) => None,
             };
+            let args = embodied::run::RunArgs { scenario, duration, seed, log, plot, clock };
             let summary = embodied::run::run_scenario(&args)?;
             if json {
                 println!("{}", serde_json::to_string(&summary).map_err(|e| AppError::Failed(e.to_string()))?);
@@ -239,11 +277,35 @@ fn run(cli: Cli) -> Result<(), AppError> {
             }
             Ok(())
         }
-        Command::Bench(BenchCommand::Deadlines { deadlines_ms, scenarios, json, plot, seed }) => {
+        Command::Bench(BenchCommand::Deadlines {
+            deadlines_ms,
+            scenarios,
+            json,
+            plot,
+            seed,
+            mbm,
+            urdf,
+            srdf,
+            mbm_sample,
+        }) => {
+            let mbm = match (mbm, urdf, srdf) {
+                (Some(problems), Some(urdf), Some(srdf)) => {
+                    Some(embodied::deadlines::MbmSample { urdf, srdf, problems, count: mbm_sample })
+                }
+                (None, None, None) => None,
+                _ => return Err(AppError::Usage("--mbm, --urdf and --srdf go together".into())),
+            };
+            // The built-in scenarios always, the MBM sample when asked for.
+            let scenarios = if scenarios.is_empty() && mbm.is_some() {
+                embodied::scenario::BUILTIN_SCENARIOS.iter().map(|(n, _)| (*n).to_string()).collect()
+            } else {
+                scenarios
+            };
             let args = embodied::deadlines::DeadlineArgs {
                 deadlines_ms,
                 scenarios,
                 seed,
+                mbm,
                 ..embodied::deadlines::DeadlineArgs::default()
             };
             let report = embodied::deadlines::run_deadline_bench(&args)?;

@@ -383,6 +383,47 @@ fn load_robot(args: &MbmArgs) -> Result<Loaded, AppError> {
     Ok(Loaded { robot, srdf, always_colliding, never_colliding })
 }
 
+/// One loaded MotionBenchMaker problem: the planning arm among the scene's obstacles.
+pub struct MbmProblem {
+    /// `family/index`.
+    pub name: String,
+    pub model: CollisionModel,
+    pub start: Vec<f64>,
+    pub goal: Vec<f64>,
+}
+
+/// Up to `n` problems spread evenly over all problems of `args` (every family, in order), with
+/// the problems whose start or goal is invalid left out.
+pub fn sample_problems(args: &MbmArgs, n: usize) -> Result<Vec<MbmProblem>, AppError> {
+    let loaded = load_robot(args)?;
+    let files = discover(args)?;
+    let total = files.len();
+    let mut picked: Vec<usize> = (0..n.min(total)).map(|i| i * total / n.min(total).max(1)).collect();
+    picked.dedup();
+    let mut out = Vec::new();
+    for i in picked {
+        let p = &files[i];
+        let scene = load_scene(&p.scene).map_err(from_moveit)?;
+        let request = load_request(&p.request).map_err(from_moveit)?;
+        scene.check_frames(&loaded.robot).map_err(from_moveit)?;
+        let mut robot = loaded.robot.clone();
+        scene.apply_allowed_collisions(&mut robot);
+        let resolved = request.resolve(&robot, &loaded.srdf, scene.robot_state.as_ref()).map_err(from_moveit)?;
+        let arm = resolved.planning_robot(&robot)?;
+        let model = CollisionModel::new(&arm, scene.environment());
+        if invalid_reason(&model, &resolved.start).is_some() || invalid_reason(&model, &resolved.goal).is_some() {
+            continue;
+        }
+        out.push(MbmProblem {
+            name: format!("{}/{:04}", p.family, p.index),
+            model,
+            start: resolved.start.clone(),
+            goal: resolved.goal.clone(),
+        });
+    }
+    Ok(out)
+}
+
 fn run_problem(args: &MbmArgs, loaded: &Loaded, p: &ProblemFiles) -> Result<ProblemResult, AppError> {
     let scene = load_scene(&p.scene).map_err(from_moveit)?;
     let request = load_request(&p.request).map_err(from_moveit)?;

@@ -6,7 +6,8 @@
 
 use std::time::Duration;
 
-use embodied_models::collision::{CollisionModel, Environment};
+use embodied_models::Robot;
+use embodied_models::collision::{CollisionModel, Environment, Obstacle};
 use embodied_planner::deadline::Deadline;
 use embodied_planner::motion::{Goal, MotionSettings, MotionStats, plan_motion};
 use embodied_planner::trajectory::{Trajectory, time_parameterize};
@@ -58,6 +59,67 @@ fn robot_hash(robot: &embodied_models::Robot) -> String {
     sha2::Sha256::digest(text.as_bytes()).iter().map(|b| format!("{b:02x}")).collect()
 }
 
+/// The planner's goal for a scenario goal.
+pub fn goal_of(spec: &GoalSpec) -> Goal {
+    match spec {
+        GoalSpec::Configuration(q) => Goal::Configuration(q.clone()),
+        GoalSpec::AnyOf(qs) => Goal::AnyOf(qs.clone()),
+        GoalSpec::ToolPose { end_effector, pose } => Goal::ToolPose { end_effector: *end_effector, pose: *pose },
+    }
+}
+
+/// The link shapes of `robot` at each configuration of `path` (and at points between them no
+/// more than `step` apart in any joint, so that the union covers the swept volume), named
+/// `prefix/...`: another agent's body, or the space it will sweep, as obstacles.
+pub fn bodies_as_obstacles(robot: &Robot, path: &[Vec<f64>], step: f64, prefix: &str) -> Vec<Obstacle> {
+    let model = CollisionModel::new(robot, Environment::new());
+    let space = robot.config_space();
+    let mut configurations: Vec<Vec<f64>> = Vec::new();
+    for (k, q) in path.iter().enumerate() {
+        if q.len() != robot.dof() {
+            continue;
+        }
+        if let Some(prev) = k.checked_sub(1).and_then(|p| path.get(p)).filter(|p| p.len() == q.len()) {
+            let n = (space.max_joint_step(prev, q) / step.max(1e-3)).ceil().clamp(1.0, 10_000.0) as usize;
+            configurations.extend((1..n).map(|i| space.interpolate(prev, q, i as f64 / n as f64)));
+        }
+        configurations.push(q.clone());
+    }
+    let mut out = Vec::new();
+    for (k, q) in configurations.iter().enumerate() {
+        for mut o in model.link_shapes_world(q) {
+            o.name = format!("{prefix}/{k}/{}", o.name);
+            out.push(o);
+        }
+    }
+    out
+}
+
+/// Motion-planner settings of a scenario (seed, resolution) with `deadline`.
+pub fn motion_settings(scenario: &Scenario, deadline: Deadline) -> MotionSettings {
+    MotionSettings {
+        seed: scenario.planner.seed,
+        resolution: scenario.planner.resolution,
+        deadline,
+        ..MotionSettings::default()
+    }
+}
+
+/// Agent `k`'s planning problem: its robot among the obstacles present at the start, with the
+/// other agents' bodies at the configurations in `occupied[m]` (empty: agent `m` is ignored).
+pub fn agent_problem(scenario: &Scenario, k: usize, occupied: &[Vec<Vec<f64>>]) -> CollisionModel {
+    let mut env = scenario.initial_environment();
+    for (m, other) in scenario.agents.iter().enumerate() {
+        if m != k {
+            let path = occupied.get(m).map(Vec::as_slice).unwrap_or(&[]);
+            for o in bodies_as_obstacles(&other.robot, path, f64::INFINITY, &other.name) {
+                env.add(o);
+            }
+        }
+    }
+    CollisionModel::new(&scenario.agents[k].robot, env)
+}
+
 /// Plan every agent with a goal; other agents' bodies stand at their start poses, except
 /// agents planned before, which stand where their plan ends (they move first).
 pub fn plan_scenario(scenario: &Scenario, deadline_ms: Option<f64>) -> Result<PlanFile, AppError> {
@@ -65,36 +127,17 @@ pub fn plan_scenario(scenario: &Scenario, deadline_ms: Option<f64>) -> Result<Pl
     if !(deadline_ms.is_finite() && deadline_ms >= 0.0) {
         return Err(AppError::Usage(format!("--deadline-ms must be a non-negative number, got {deadline_ms}")));
     }
-    let mut resting: Vec<Vec<f64>> = scenario.agents.iter().map(|a| a.start.clone()).collect();
+    let mut resting: Vec<Vec<Vec<f64>>> = scenario.agents.iter().map(|a| vec![a.start.clone()]).collect();
     let mut plans = Vec::new();
     for (k, agent) in scenario.agents.iter().enumerate() {
         let Some(goal) = &agent.goal else { continue };
-        let mut env = scenario.initial_environment();
-        for (m, other) in scenario.agents.iter().enumerate() {
-            if m != k {
-                let model = CollisionModel::new(&other.robot, Environment::new());
-                for mut o in model.link_shapes_world(&resting[m]) {
-                    o.name = format!("{}/{}", other.name, o.name);
-                    env.add(o);
-                }
-            }
-        }
-        let model = CollisionModel::new(&agent.robot, env);
-        let goal = match goal {
-            GoalSpec::Configuration(q) => Goal::Configuration(q.clone()),
-            GoalSpec::AnyOf(qs) => Goal::AnyOf(qs.clone()),
-            GoalSpec::ToolPose { end_effector, pose } => Goal::ToolPose { end_effector: *end_effector, pose: *pose },
-        };
+        let model = agent_problem(scenario, k, &resting);
+        let goal = goal_of(goal);
         let mut deadline = Deadline::after(Duration::from_secs_f64(deadline_ms / 1000.0));
         if let Some(n) = scenario.planner.expansions {
             deadline = Deadline::expansions(n as u64);
         }
-        let settings = MotionSettings {
-            seed: scenario.planner.seed,
-            resolution: scenario.planner.resolution,
-            deadline,
-            ..MotionSettings::default()
-        };
+        let settings = motion_settings(scenario, deadline);
         let plan = plan_motion(&model, &agent.start, &goal, &settings)
             .map_err(|e| AppError::Failed(format!("scenario `{}`: agent `{}`: {e}", scenario.name, agent.name)))?;
         let trajectory = time_parameterize(&plan.path, &agent.robot, 0.001);
@@ -106,7 +149,7 @@ pub fn plan_scenario(scenario: &Scenario, deadline_ms: Option<f64>) -> Result<Pl
             ))
         })?;
         if let Some(last) = plan.path.last() {
-            resting[k] = last.clone();
+            resting[k] = vec![last.clone()];
         }
         let stats: &MotionStats = &plan.stats;
         plans.push(AgentPlan {

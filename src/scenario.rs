@@ -20,6 +20,9 @@ pub const BUILTIN_SCENARIOS: &[(&str, &str)] = &[
     ("irp6-pick", include_str!("../scenarios/irp6-pick.toml")),
     ("two-irp6-cell", include_str!("../scenarios/two-irp6-cell.toml")),
     ("rnt-polish", include_str!("../scenarios/rnt-polish.toml")),
+    ("polycrank-intruder", include_str!("../scenarios/polycrank-intruder.toml")),
+    ("irp6-late-plan", include_str!("../scenarios/irp6-late-plan.toml")),
+    ("two-irp6-together", include_str!("../scenarios/two-irp6-together.toml")),
 ];
 
 /// The scenario `embodied run` uses when given none.
@@ -39,7 +42,16 @@ struct RawScenario {
     #[serde(default)]
     planner: RawPlanner,
     #[serde(default)]
-    run: Option<toml::Table>,
+    run: RawRun,
+}
+
+#[derive(Debug, Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+struct RawRun {
+    #[serde(default)]
+    duration: Option<Spanned<f64>>,
+    #[serde(default)]
+    coordination: Option<Spanned<String>>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -98,8 +110,8 @@ struct RawObstacle {
     #[serde(default)]
     rpy: Option<[f64; 3]>,
     /// Time (s) at which the obstacle appears in a run (absent: present from the start).
-    #[serde(default)]
-    appear_at: Option<f64>,
+    #[serde(default, alias = "appears_at")]
+    appear_at: Option<Spanned<f64>>,
     /// Velocity (m/s) with which the obstacle moves in a run.
     #[serde(default)]
     velocity: Option<[f64; 3]>,
@@ -123,6 +135,12 @@ struct RawPlanner {
     resolution: Option<f64>,
     #[serde(default)]
     expansions: Option<usize>,
+    #[serde(default)]
+    give_up_ms: Option<Spanned<f64>>,
+    #[serde(default)]
+    clock: Option<Spanned<String>>,
+    #[serde(default)]
+    simulated_us_per_check: Option<Spanned<f64>>,
 }
 
 /// What an agent should reach.
@@ -148,17 +166,55 @@ pub struct AgentSpec {
 #[derive(Debug, Clone)]
 pub struct ObstacleSpec {
     pub obstacle: Obstacle,
+    /// Time (s) at which the obstacle appears during a run; `None`: there from the start, and
+    /// on every agent's map.
     pub appear_at: Option<f64>,
     pub velocity: Option<Vector3<f64>>,
 }
 
+/// How `embodied run` counts planning time.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum ClockSpec {
+    /// Wall clock: real planning time (runs are paced to real time while a plan is computed).
+    Wall,
+    /// Simulated: `us_per_check` microseconds per collision check the planner makes; runs are
+    /// reproducible bit for bit.
+    Simulated { us_per_check: f64 },
+}
+
+/// Simulated planning time per collision check when a scenario does not say, µs.
+pub const DEFAULT_US_PER_CHECK: f64 = 2.0;
+
 /// Planner settings of a scenario.
 #[derive(Debug, Clone)]
 pub struct PlannerSpec {
+    /// `embodied plan`: the search's deadline. `embodied run`: when the plan is needed (a plan
+    /// not there by then means a safe halt until it lands).
     pub deadline_ms: f64,
+    /// `embodied run`: when the search gives up (at least `deadline_ms`).
+    pub give_up_ms: f64,
     pub seed: u64,
     pub resolution: f64,
     pub expansions: Option<usize>,
+    /// `embodied run`: how planning time is counted.
+    pub clock: ClockSpec,
+}
+
+/// How the agents of a multi-agent run are coordinated.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Coordination {
+    /// One after the other: each plans when the one before has finished, around where it stands.
+    Sequential,
+    /// All at once: each plans around the space the agents before it will sweep (as the
+    /// coordinator hands on their plans) and starts as soon as its plan lands.
+    Concurrent,
+}
+
+/// Run settings of a scenario.
+#[derive(Debug, Clone)]
+pub struct RunSpec {
+    pub duration: Option<f64>,
+    pub coordination: Coordination,
 }
 
 /// A loaded, checked scenario.
@@ -173,17 +229,24 @@ pub struct Scenario {
     pub agents: Vec<AgentSpec>,
     pub obstacles: Vec<ObstacleSpec>,
     pub planner: PlannerSpec,
-    pub run: Option<toml::Table>,
+    pub run: RunSpec,
 }
 
 impl Scenario {
     /// The obstacles present at time zero.
     pub fn initial_environment(&self) -> Environment {
         let mut env = Environment::new();
-        for o in self.obstacles.iter().filter(|o| o.appear_at.is_none_or(|t| t <= 0.0)) {
+        for o in self.obstacles.iter().filter(|o| o.on_map()) {
             env.add(o.obstacle.clone());
         }
         env
+    }
+}
+
+impl ObstacleSpec {
+    /// Present from the start and still: on the agents' map.
+    pub fn on_map(&self) -> bool {
+        self.appear_at.is_none_or(|t| t <= 0.0) && self.velocity.is_none_or(|v| v.norm() == 0.0)
     }
 }
 
@@ -376,22 +439,87 @@ pub fn parse_scenario(text: &str, file: &Path, dir: &Path) -> Result<Scenario, A
             ));
         }
         let Some(shape) = shapes.pop() else { unreachable!("checked above") };
+        let appear_at = match &o.appear_at {
+            Some(t) if !(t.get_ref().is_finite() && *t.get_ref() >= 0.0) => {
+                return Err(ctx.err(
+                    t.span(),
+                    format!("obstacle `{}`: appear_at: expected a time >= 0 s, got {}", o.name, t.get_ref()),
+                ));
+            }
+            Some(t) => Some(*t.get_ref()),
+            None => None,
+        };
         obstacles.push(ObstacleSpec {
             obstacle: Obstacle { name: o.name.clone(), pose: pose(o.xyz, o.rpy), shape },
-            appear_at: o.appear_at,
+            appear_at,
             velocity: o.velocity.map(Vector3::from),
         });
     }
     let seed = raw.seed.unwrap_or(1);
+    let deadline_ms = raw.planner.deadline_ms.unwrap_or(200.0);
+    if !(deadline_ms.is_finite() && deadline_ms >= 0.0) {
+        return Err(ctx.err(0..0, format!("[planner] deadline_ms: expected a time >= 0 ms, got {deadline_ms}")));
+    }
+    let give_up_ms = match &raw.planner.give_up_ms {
+        None => deadline_ms,
+        Some(g) if g.get_ref().is_finite() && *g.get_ref() >= deadline_ms => *g.get_ref(),
+        Some(g) => {
+            return Err(ctx.err(
+                g.span(),
+                format!("give_up_ms: expected a time >= deadline_ms ({deadline_ms} ms), got {}", g.get_ref()),
+            ));
+        }
+    };
+    let us_per_check = match &raw.planner.simulated_us_per_check {
+        None => DEFAULT_US_PER_CHECK,
+        Some(u) if u.get_ref().is_finite() && *u.get_ref() >= 0.0 => *u.get_ref(),
+        Some(u) => {
+            return Err(
+                ctx.err(u.span(), format!("simulated_us_per_check: expected a time >= 0 µs, got {}", u.get_ref()))
+            );
+        }
+    };
+    let clock = match &raw.planner.clock {
+        None => ClockSpec::Wall,
+        Some(c) => match c.get_ref().as_str() {
+            "wall" => ClockSpec::Wall,
+            "simulated" => ClockSpec::Simulated { us_per_check },
+            other => {
+                return Err(ctx.err(c.span(), format!("clock: expected \"wall\" or \"simulated\", got \"{other}\"")));
+            }
+        },
+    };
     let planner = PlannerSpec {
-        deadline_ms: raw.planner.deadline_ms.unwrap_or(200.0),
+        deadline_ms,
+        give_up_ms,
         seed: raw.planner.seed.unwrap_or(seed),
         resolution: raw.planner.resolution.unwrap_or(0.02),
         expansions: raw.planner.expansions,
+        clock,
     };
     if planner.resolution.is_nan() || planner.resolution <= 0.0 {
         return Err(ctx.err(0..0, "[planner] resolution must be positive"));
     }
+    let coordination = match &raw.run.coordination {
+        None => Coordination::Sequential,
+        Some(c) => match c.get_ref().as_str() {
+            "sequential" => Coordination::Sequential,
+            "concurrent" => Coordination::Concurrent,
+            other => {
+                return Err(ctx.err(
+                    c.span(),
+                    format!("coordination: expected \"sequential\" or \"concurrent\", got \"{other}\""),
+                ));
+            }
+        },
+    };
+    let duration = match &raw.run.duration {
+        None => None,
+        Some(d) if d.get_ref().is_finite() && *d.get_ref() > 0.0 => Some(*d.get_ref()),
+        Some(d) => {
+            return Err(ctx.err(d.span(), format!("duration: expected a positive time in s, got {}", d.get_ref())));
+        }
+    };
     Ok(Scenario {
         name: raw.name,
         description: raw.description,
@@ -401,6 +529,6 @@ pub fn parse_scenario(text: &str, file: &Path, dir: &Path) -> Result<Scenario, A
         agents,
         obstacles,
         planner,
-        run: raw.run,
+        run: RunSpec { duration, coordination },
     })
 }

@@ -1,25 +1,37 @@
-//! The deadline benchmark on a small problem set: structure, and a zero deadline delivers
-//! nothing and halts. Timing is not asserted (noisy machines).
+//! The deadline benchmark on a small problem set: structure, a zero deadline delivers nothing
+//! and halts, and the MotionBenchMaker sample (fixtures only). Timing is not asserted (noisy
+//! machines).
 
-use embodied::deadlines::{DeadlineArgs, plot_svg, render_table, run_deadline_bench};
+use std::path::PathBuf;
+
+use embodied::deadlines::{DeadlineArgs, MbmSample, plot_svg, render_table, run_deadline_bench};
 
 #[test]
 fn small_deadline_bench_is_consistent() {
-    let args =
-        DeadlineArgs { deadlines_ms: vec![0.0, 200.0], scenarios: vec!["irp6-pick".into()], max_steps: 6000, seed: 1 };
+    let args = DeadlineArgs {
+        deadlines_ms: vec![0.0, 200.0],
+        scenarios: vec!["irp6-pick".into()],
+        max_steps: 6000,
+        ..DeadlineArgs::default()
+    };
     let report = run_deadline_bench(&args).expect("bench runs");
     assert_eq!(report.rows.len(), 2);
     assert!(!report.problems.is_empty());
     for r in &report.rows {
+        assert_eq!(r.set, "scenarios");
         assert!((0.0..=1.0).contains(&r.delivered_share));
         assert!(r.delivered_in_time <= r.requested);
         assert!(r.goals_reached <= r.problems);
         assert!(r.halt_distance_mean <= r.halt_distance_max + 1e-12);
+        assert!(r.overshoot_p50_us <= r.overshoot_max_us);
+        assert_eq!(r.halts.len(), r.halts_from_speed);
     }
     let zero = &report.rows[0];
     assert_eq!(zero.delivered_in_time, 0);
     assert_eq!(zero.goals_reached, 0);
     assert!(zero.requested > 0 && zero.safe_halts > 0);
+    // Every search is stopped by a zero deadline.
+    assert_eq!(zero.stopped, zero.requested);
     let table = render_table(&report);
     assert!(table.contains("deadline"));
     let json = serde_json::to_string(&report).expect("json");
@@ -28,6 +40,34 @@ fn small_deadline_bench_is_consistent() {
     plot_svg(&report, &svg).expect("plot");
     assert!(std::fs::read_to_string(&svg).expect("svg").contains("<svg"));
     let _ = std::fs::remove_file(&svg);
+}
+
+#[test]
+fn mbm_sample_is_benchmarked_as_its_own_set() {
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
+    let robot = root.join("models/tests/fixtures");
+    let args = DeadlineArgs {
+        deadlines_ms: vec![0.0, 500.0],
+        mbm: Some(MbmSample {
+            urdf: robot.join("ur5_spherized.urdf"),
+            srdf: robot.join("ur5.srdf"),
+            problems: root.join("tests/fixtures/mbm"),
+            count: 2,
+        }),
+        max_steps: 60_000,
+        ..DeadlineArgs::default()
+    };
+    let report = run_deadline_bench(&args).expect("bench runs");
+    let mbm: Vec<_> = report.problems.iter().filter(|(set, _)| set == "mbm").collect();
+    // Spread over both fixture families; problems with an invalid start or goal are left out.
+    assert!(!mbm.is_empty() && mbm.len() <= 2, "{:?}", report.problems);
+    assert!(report.problems.iter().all(|(set, _)| set == "mbm"), "only the sample was asked for");
+    assert_eq!(report.rows.len(), 2);
+    let (zero, wide) = (&report.rows[0], &report.rows[1]);
+    assert_eq!(zero.delivered_in_time, 0);
+    assert!(wide.delivered_in_time > 0, "{wide:?}");
+    assert!(wide.goals_reached > 0, "{wide:?}");
+    assert!(render_table(&report).contains(&format!("mbm ({})", mbm.len())));
 }
 
 #[test]

@@ -55,3 +55,23 @@ fn obstacle_needs_exactly_one_shape() {
     );
     assert!(e.contains("positive"), "{e}");
 }
+
+#[test]
+fn planner_clock_and_run_coordination_are_checked_with_their_place() {
+    let base = "name = \"x\"\ndescription = \"d\"\n[[agents]]\nname = \"a\"\nrobot = \"rnt\"\n";
+    let e = err_of(&format!("{base}[planner]\nclock = \"sundial\"\n"));
+    assert!(e.starts_with("bad.toml:7:9:") && e.contains("\"wall\" or \"simulated\""), "{e}");
+    let e = err_of(&format!("{base}[planner]\ndeadline_ms = 10\ngive_up_ms = 5\n"));
+    assert!(e.starts_with("bad.toml:8:14:") && e.contains(">= deadline_ms"), "{e}");
+    let e = err_of(&format!("{base}[run]\ncoordination = \"chaos\"\n"));
+    assert!(e.starts_with("bad.toml:7:16:") && e.contains("\"sequential\" or \"concurrent\""), "{e}");
+    let e = err_of(&format!("{base}[[obstacles]]\nname = \"o\"\nsphere = 0.1\nxyz = [0, 0, 0]\nappears_at = -1\n"));
+    assert!(e.starts_with("bad.toml:10:14:") && e.contains("appear_at"), "{e}");
+    // Both spellings of the appearance time are accepted.
+    for key in ["appear_at", "appears_at"] {
+        let text = format!("{base}[[obstacles]]\nname = \"o\"\nsphere = 0.1\nxyz = [0, 0, 0]\n{key} = 0.8\n");
+        let sc = parse_scenario(&text, Path::new("ok.toml"), Path::new(".")).unwrap();
+        assert_eq!(sc.obstacles[0].appear_at, Some(0.8));
+        assert!(!sc.obstacles[0].on_map());
+    }
+}

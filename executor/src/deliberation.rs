@@ -12,23 +12,29 @@
 //!   [`crate::SafeHalt`]; stale plans (old world version or old start state) are discarded,
 //!   never followed; a sensed obstacle in the path invalidates the plan and a new one is asked
 //!   for from the halted state.
-//! * [`lattice_plan`]: the built-in deterministic planner (A* on a joint-space lattice).
+//! * [`PlanMotion`]: the planner, [`embodied_planner::motion::plan_motion`] under the
+//!   request's deadline, its path time-parameterised into an
+//!   [`embodied_planner::trajectory::Trajectory`]; plans are checked by
+//!   [`embodied_planner::verify::verify_trajectory`] before they may drive an effector.
+//! * [`UnmappedObstacle`]: the virtual sensor that reports obstacles missing from the map.
 //! * [`deliberative_agent`]: a scenario agent with a goal, as a deliberative agent.
 //!
-//! Events written to the step record: `plan_requested`, `plan_ready`, `plan_late`,
-//! `plan_failed`, `plan_rejected`, `planner_panicked`, `plan_discarded_stale`, `plan_lost`,
-//! `plan_abandoned`, `plan_invalidated`, `plan_revalidated`, `plan_suspended`, `world_changed`,
-//! `sensor_fault`, `sensor_recovered`, `safe_halt_started`, `safe_halt_done`, `goal_reached`.
+//! Events written to the step record: `plan_requested`, `plan_landed` (with the planning time),
+//! `plan_late`, `plan_failed`, `plan_rejected` (with the reason), `planner_panicked`,
+//! `plan_discarded_stale`, `plan_lost`, `plan_abandoned`, `plan_invalidated`, `plan_revalidated`,
+//! `plan_suspended`, `replan`, `resumed`, `world_changed`, `sensor_fault`, `sensor_recovered`,
+//! `safe_halt_started`, `safe_halt_finished` (distance and time), `goal_reached`.
 
 pub mod follower;
-pub mod lattice;
-pub mod trajectory;
+pub mod planning;
+pub mod sensing;
 pub mod worker;
 
+pub use embodied_planner::trajectory::Trajectory;
 pub use follower::{AsDeliberation, DeliberationSettings, DeliberativeState, PlanFollower, deliberative_agent};
-pub use lattice::{LatticeSettings, lattice_plan};
-pub use trajectory::{Trajectory, TrajectoryViolation, time_parameterize, verify_trajectory};
+pub use planning::PlanMotion;
+pub use sensing::UnmappedObstacle;
 pub use worker::{
     Deliberator, MotionPlanner, PlanBudget, PlanClock, PlanDelivery, PlanFailure, PlanOutcome, PlanRequest,
-    PlanVerifier, Planned,
+    PlanVerifier, Planned, misses_goal,
 };

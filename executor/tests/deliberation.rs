@@ -8,6 +8,8 @@ use embodied_executor::deliberation::*;
 use embodied_executor::*;
 use embodied_models::{CollisionModel, Environment, Robot};
 use embodied_planner::deadline::Deadline;
+use embodied_planner::motion::{Goal, MotionSettings};
+use embodied_planner::trajectory::time_parameterize;
 
 // Collision-free under the current RNT geometry (the rnt-polish scenario's start and goal are
 // not: see the report).
@@ -20,19 +22,24 @@ fn robot() -> Arc<Robot> {
 
 fn simulated() -> DeliberationSettings {
     DeliberationSettings {
-        clock: PlanClock::Simulated { steps_per_expansion: 0.01, fixed_steps: 5 },
-        budget: PlanBudget { wall: None, steps: 200, expansions: None },
+        clock: PlanClock::Simulated { steps_per_unit: 0.01, fixed_steps: 5 },
+        budget: PlanBudget { steps: 200, wall: None, give_up_steps: None, work: None },
         retry_after_steps: 50,
         ..DeliberationSettings::default()
     }
 }
 
-/// A planner that ignores obstacles: a straight line, time-parameterised within limits.
+fn goal() -> Goal {
+    Goal::Configuration(GOAL.to_vec())
+}
+
+/// A test-double planner that ignores obstacles: a straight line, time-parameterised within limits.
 fn straight_line(robot: &Robot) -> impl Fn(&PlanRequest, &Deadline) -> Result<Planned, PlanFailure> + use<> {
-    let (limits, names) = (robot.limits(), robot.joint_names());
+    let robot = robot.clone();
     move |r: &PlanRequest, _: &Deadline| {
-        let trajectory = time_parameterize(&[r.start.clone(), r.goal.clone()], &limits, &names, r.dt, 0.9);
-        Ok(Planned { trajectory, expansions: 100 })
+        let Goal::Configuration(g) = &r.goal else { return Err(PlanFailure::Error("configuration goals only".into())) };
+        let trajectory = time_parameterize(&[r.start.clone(), g.clone()], &robot, r.dt);
+        Ok(Planned { trajectory, work: 100 })
     }
 }
 
@@ -78,7 +85,7 @@ fn assert_safe(records: &[StepRecord], steps: u64, robot: &Robot) {
 fn env_agent(settings: DeliberationSettings, env: Environment) -> Agent<DeliberativeState> {
     let robot = robot();
     let collision = CollisionModel::new(&robot, env);
-    deliberative_agent("arm", robot, collision, &START, GOAL.to_vec(), settings).expect("agent")
+    deliberative_agent("arm", robot, collision, &START, goal(), settings).expect("agent")
 }
 
 fn runtime_with(agent: Agent<DeliberativeState>) -> Runtime {
@@ -92,7 +99,7 @@ fn plans_and_reaches_the_goal() {
     let mut rt = runtime_with(env_agent(simulated(), Environment::new()));
     let records = run(&mut rt, 6000);
     assert!(first(&records, "plan_requested id=1").is_some());
-    assert!(first(&records, "plan_ready id=1 world=0 in_time").is_some(), "{:?}", events(&records));
+    assert!(first(&records, "plan_landed id=1 world=0 in_time").is_some(), "{:?}", events(&records));
     assert!(first(&records, "goal_reached").is_some(), "{:?}", events(&records));
     let last = &records[records.len() - 1].agents[0];
     for (q, g) in last.q.iter().zip(GOAL) {
@@ -106,7 +113,12 @@ fn wall_clock_mode_never_blocks_and_reaches_the_goal() {
     let settings = DeliberationSettings {
         // The step budget is wide: simulated steps outrun a loaded machine's planner thread, and this
         // test is about never blocking, not about the budget.
-        budget: PlanBudget { wall: Some(std::time::Duration::from_secs(5)), steps: 150_000, expansions: None },
+        budget: PlanBudget {
+            steps: 150_000,
+            wall: Some(std::time::Duration::from_secs(5)),
+            give_up_steps: None,
+            work: None,
+        },
         ..DeliberationSettings::default()
     };
     let mut rt = runtime_with(env_agent(settings, Environment::new()));
@@ -121,7 +133,7 @@ fn wall_clock_mode_never_blocks_and_reaches_the_goal() {
         }
     }
     // Under load the first plan may come late and be superseded by a second request.
-    assert!(first(&records, "plan_ready id=").is_some(), "{:?}", events(&records));
+    assert!(first(&records, "plan_landed id=").is_some(), "{:?}", events(&records));
     assert!(first(&records, "goal_reached").is_some(), "{:?}", events(&records));
 }
 
@@ -129,7 +141,7 @@ fn midway_fault_agent(sensor: impl VirtualSensor + 'static, config: SensorConfig
     let robot = robot();
     let collision = CollisionModel::new(&robot, Environment::new());
     let settings = DeliberationSettings { obstacle_sensing: Some(f64::INFINITY), ..simulated() };
-    let state = DeliberativeState::new(robot.clone(), collision, GOAL.to_vec(), settings);
+    let state = DeliberativeState::new(robot.clone(), collision, goal(), settings);
     Agent::embodied("arm", robot, Some(&START), state, PlanFollower::new("deliberative"))
         .expect("agent")
         .with_sensor(sensor, config)
@@ -145,9 +157,9 @@ fn nan_sensor_reading_halts_safely() {
     let records = run(&mut rt, 3000);
     let fault = first(&records, "sensor_fault: non-finite").expect("fault event");
     assert_eq!(fault, 600);
-    assert!(first(&records, "plan_ready").is_some_and(|s| s < fault), "moving when the fault comes");
+    assert!(first(&records, "plan_landed").is_some_and(|s| s < fault), "moving when the fault comes");
     assert!(first(&records, "safe_halt_started").is_some_and(|s| s == fault));
-    assert!(first(&records, "safe_halt_done").is_some_and(|s| s > fault));
+    assert!(first(&records, "safe_halt_finished").is_some_and(|s| s > fault));
     assert!(first(&records, "goal_reached").is_none());
     assert_safe(&records, 3000, &robot());
 }
@@ -160,7 +172,7 @@ fn silent_sensor_halts_safely() {
     let records = run(&mut rt, 3000);
     let fault = first(&records, "sensor_fault: no reading").expect("fault event");
     assert_eq!(fault, 51);
-    assert!(first(&records, "plan_ready").is_some_and(|s| s < fault), "moving when the sensor falls silent");
+    assert!(first(&records, "plan_landed").is_some_and(|s| s < fault), "moving when the sensor falls silent");
     assert_eq!(first(&records, "safe_halt_started"), Some(fault));
     assert!(first(&records, "goal_reached").is_none(), "no plan is followed without the sensor");
     assert_safe(&records, 3000, &robot());
@@ -185,22 +197,20 @@ fn planner_panic_halts_safely() {
 
 #[test]
 fn limit_violating_plan_is_rejected() {
-    let (limits, names) = (robot().limits(), robot().joint_names());
-    // Twice the velocity and acceleration limits.
-    let fast: Vec<_> = limits
-        .iter()
-        .map(|l| embodied_models::JointLimits::new(l.lower, l.upper, 2.0 * l.max_velocity, 4.0 * l.max_acceleration))
-        .collect();
-    let planner = move |r: &PlanRequest, _: &Deadline| {
-        let trajectory = time_parameterize(&[r.start.clone(), r.goal.clone()], &fast, &names, r.dt, 1.0);
-        Ok(Planned { trajectory, expansions: 10 })
+    // The straight line played twice as fast: twice the velocity limit, four times the
+    // acceleration limit.
+    let line = straight_line(&robot());
+    let planner = move |r: &PlanRequest, d: &Deadline| {
+        let mut p = line(r, d)?;
+        p.trajectory.t.iter_mut().for_each(|t| *t /= 2.0);
+        p.trajectory.qd.iter_mut().flatten().for_each(|v| *v *= 2.0);
+        Ok(p)
     };
-    let _ = limits;
     let mut rt = runtime_with(injected(planner, Environment::new()));
     let records = run(&mut rt, 1000);
     let ev = events(&records);
     assert!(ev.iter().any(|(_, e)| e.starts_with("plan_rejected id=1") && e.contains("exceeds")), "{ev:?}");
-    assert!(first(&records, "plan_ready").is_none());
+    assert!(first(&records, "plan_landed").is_none());
     assert_safe(&records, 1000, &robot());
 }
 
@@ -229,7 +239,7 @@ fn colliding_plan_is_rejected() {
     let records = run(&mut rt, 1000);
     let ev = events(&records);
     assert!(ev.iter().any(|(_, e)| e.starts_with("plan_rejected id=1") && e.contains("collision")), "{ev:?}");
-    assert!(first(&records, "plan_ready").is_none());
+    assert!(first(&records, "plan_landed").is_none());
     assert_safe(&records, 1000, &robot);
 }
 
@@ -239,24 +249,24 @@ fn lost_transmission_times_out_and_replans() {
     let robot = robot();
     let collision = CollisionModel::new(&robot, Environment::new());
     let settings = DeliberationSettings { plan_timeout_steps: 300, ..simulated() };
-    let mut state = DeliberativeState::new(robot.clone(), collision, GOAL.to_vec(), settings);
+    let mut state = DeliberativeState::new(robot.clone(), collision, goal(), settings);
     state.deliberator.lose_next_deliveries(1);
     let agent = Agent::embodied("arm", robot.clone(), Some(&START), state, PlanFollower::new("d")).expect("agent");
     let mut rt = runtime_with(agent);
     let records = run(&mut rt, 6000);
     assert!(first(&records, "plan_late id=1").is_some(), "{:?}", events(&records));
     assert!(first(&records, "plan_lost id=1").is_some());
-    assert!(first(&records, "plan_ready id=2").is_some());
+    assert!(first(&records, "plan_landed id=2").is_some());
     assert!(first(&records, "goal_reached").is_some());
     assert_safe(&records, 6000, &robot);
 }
 
 #[test]
 fn zero_deadline_delivers_nothing_and_halts() {
-    for clock in [PlanClock::WallClock, PlanClock::Simulated { steps_per_expansion: 0.01, fixed_steps: 0 }] {
+    for clock in [PlanClock::WallClock, PlanClock::Simulated { steps_per_unit: 0.01, fixed_steps: 0 }] {
         let settings = DeliberationSettings {
             clock,
-            budget: PlanBudget { wall: Some(std::time::Duration::ZERO), steps: 0, expansions: None },
+            budget: PlanBudget::hard(0, 0.001),
             retry_after_steps: 20,
             ..DeliberationSettings::default()
         };
@@ -268,19 +278,19 @@ fn zero_deadline_delivers_nothing_and_halts() {
         }
         assert!(first(&records, "plan_late id=1").is_some_and(|s| s == 0));
         assert!(first(&records, "safe_halt_started").is_some());
-        assert!(first(&records, "plan_ready").is_none(), "{clock:?}: {:?}", events(&records));
+        assert!(first(&records, "plan_landed").is_none(), "{clock:?}: {:?}", events(&records));
         assert!(first(&records, "plan_failed id=1").is_some(), "{clock:?}: {:?}", events(&records));
         assert_safe(&records, 500, &robot());
     }
 }
 
-/// The lattice planner, but reporting `extra` more expansions (a slow planner in simulated time).
-fn slow_lattice(extra: u64) -> impl MotionPlanner {
+/// The motion planner, but reporting `extra` more work units (a slow planner in simulated time).
+fn slow_planner(extra: u64) -> impl MotionPlanner {
     let robot = robot();
-    let model = CollisionModel::new(&robot, Environment::new());
-    move |r: &PlanRequest, _: &Deadline| {
-        let mut p = lattice_plan(&model, &LatticeSettings::default(), r, &Deadline::none())?;
-        p.expansions += extra;
+    let planner = PlanMotion::new(CollisionModel::new(&robot, Environment::new()), MotionSettings::default());
+    move |r: &PlanRequest, d: &Deadline| {
+        let mut p = planner.plan(r, d)?;
+        p.work += extra;
         Ok(p)
     }
 }
@@ -288,8 +298,8 @@ fn slow_lattice(extra: u64) -> impl MotionPlanner {
 #[test]
 fn late_plan_halts_then_resumes_when_it_lands() {
     let settings = DeliberationSettings {
-        planner: Some(Arc::new(slow_lattice(20_000))),
-        budget: PlanBudget { wall: None, steps: 50, expansions: None },
+        planner: Some(Arc::new(slow_planner(20_000))),
+        budget: PlanBudget { steps: 50, wall: None, give_up_steps: None, work: None },
         ..simulated()
     };
     let mut rt = runtime_with(env_agent(settings, Environment::new()));
@@ -297,7 +307,7 @@ fn late_plan_halts_then_resumes_when_it_lands() {
     let late = first(&records, "plan_late id=1").expect("late");
     assert_eq!(late, 50);
     assert!(first(&records, "safe_halt_started").is_some_and(|s| s == late));
-    let ready = first(&records, "plan_ready id=1 world=0 late").expect("lands late");
+    let ready = first(&records, "plan_landed id=1 world=0 late").expect("lands late");
     assert!(ready > 200 && ready < 300, "{ready}");
     // At rest until it lands, then moving.
     assert!(records[..ready as usize].iter().all(|r| r.agents[0].qd.iter().all(|v| *v == 0.0)));
@@ -308,8 +318,8 @@ fn late_plan_halts_then_resumes_when_it_lands() {
 #[test]
 fn plan_for_an_old_world_is_discarded() {
     let settings = DeliberationSettings {
-        planner: Some(Arc::new(slow_lattice(10_000))),
-        budget: PlanBudget { wall: None, steps: 500, expansions: None },
+        planner: Some(Arc::new(slow_planner(10_000))),
+        budget: PlanBudget { steps: 500, wall: None, give_up_steps: None, work: None },
         obstacle_sensing: Some(f64::INFINITY),
         ..simulated()
     };
@@ -320,8 +330,8 @@ fn plan_for_an_old_world_is_discarded() {
     assert_eq!(first(&records, "world_changed version=1"), Some(20));
     let stale = first(&records, "plan_discarded_stale id=1").expect("stale plan discarded");
     assert!(first(&records, "plan_requested id=2 world=1").is_some_and(|s| s >= stale));
-    assert!(first(&records, "plan_ready id=1").is_none(), "the stale plan is never followed");
-    assert!(first(&records, "plan_ready id=2 world=1").is_some());
+    assert!(first(&records, "plan_landed id=1").is_none(), "the stale plan is never followed");
+    assert!(first(&records, "plan_landed id=2 world=1").is_some());
     assert!(first(&records, "goal_reached").is_some());
     assert_safe(&records, 6000, &robot());
 }
@@ -335,15 +345,15 @@ fn obstacle_entering_the_path_halts_and_replans() {
     rt.world_mut().add_obstacle(Obstacle { appears_at: 400, ..Obstacle::fixed("intruder", c, 0.05) });
     let records = run(&mut rt, 12_000);
     let ev = events(&records);
-    assert!(first(&records, "plan_ready id=1").is_some_and(|s| s < 400), "{ev:?}");
+    assert!(first(&records, "plan_landed id=1").is_some_and(|s| s < 400), "{ev:?}");
     assert_eq!(first(&records, "world_changed version=1"), Some(400));
     assert_eq!(first(&records, "plan_invalidated id=1: obstacle in path"), Some(400), "{ev:?}");
-    let halt = first(&records, "safe_halt_started speed=").expect("halt while moving");
+    let halt = first(&records, "safe_halt_started reason=no_valid_plan speed=").expect("halt while moving");
     assert_eq!(halt, 400);
-    let done = first(&records, "safe_halt_done").expect("halt ends");
+    let done = first(&records, "safe_halt_finished").expect("halt ends");
     assert!(first(&records, "plan_requested id=2 world=1").is_some_and(|s| s >= done));
     // Whatever the replan gives, nothing from the old world is followed after the change.
-    assert!(!ev.iter().any(|(s, e)| *s > 400 && e.starts_with("plan_ready") && e.contains("world=0")));
+    assert!(!ev.iter().any(|(s, e)| *s > 400 && e.starts_with("plan_landed") && e.contains("world=0")));
     assert_safe(&records, 12_000, &robot);
 }
 
@@ -352,7 +362,7 @@ fn avoidance_reaction_suppresses_the_plan_follower() {
     let robot = robot();
     let collision = CollisionModel::new(&robot, Environment::new());
     let settings = DeliberationSettings { obstacle_sensing: Some(f64::INFINITY), ..simulated() };
-    let state = DeliberativeState::new(robot.clone(), collision, GOAL.to_vec(), settings);
+    let state = DeliberativeState::new(robot.clone(), collision, goal(), settings);
     let near = Predicate::new("obstacle-near", |_: &DeliberativeState, i: &InputImages| {
         let r = i.sensor(0);
         r.len >= 5 && r.values[0] < 0.3
@@ -388,6 +398,6 @@ fn simulated_clock_replays_bit_for_bit() {
         records.iter().map(|r| serde_json::to_string(r).expect("json")).collect::<Vec<_>>().join("\n")
     };
     let (a, b) = (log(), log());
-    assert!(a.contains("plan_ready"));
+    assert!(a.contains("plan_landed"));
     assert_eq!(a, b);
 }

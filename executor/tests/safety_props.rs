@@ -8,6 +8,7 @@ use embodied_executor::deliberation::*;
 use embodied_executor::*;
 use embodied_models::{CollisionModel, Environment, Robot};
 use embodied_planner::deadline::Deadline;
+use embodied_planner::motion::{Goal, MotionSettings};
 use proptest::prelude::*;
 
 const START: [f64; 6] = [-0.5, -1.4, -1.0, 0.0, 0.3, 0.0];
@@ -18,19 +19,19 @@ fn robot() -> Arc<Robot> {
     Arc::new(embodied_models::builtin("rnt").expect("built-in robot"))
 }
 
-/// One run: the lattice planner made slower by `extra` expansions, a far obstacle appearing at
+/// One run: the motion planner made slower by `extra` work units, a far obstacle appearing at
 /// `appear` (the agent halts from speed and replans), `steps` steps.
 fn run(extra: u64, deadline_steps: u64, appear: u64, seed: u64, steps: u64) -> Vec<StepRecord> {
     let robot = robot();
-    let model = CollisionModel::new(&robot, Environment::new());
+    let inner = PlanMotion::new(CollisionModel::new(&robot, Environment::new()), MotionSettings::default());
     let planner = move |r: &PlanRequest, d: &Deadline| {
-        let mut p = lattice_plan(&model, &LatticeSettings::default(), r, d)?;
-        p.expansions += extra;
+        let mut p = inner.plan(r, d)?;
+        p.work += extra;
         Ok(p)
     };
     let settings = DeliberationSettings {
-        clock: PlanClock::Simulated { steps_per_expansion: 0.01, fixed_steps: 2 },
-        budget: PlanBudget { wall: None, steps: deadline_steps, expansions: None },
+        clock: PlanClock::Simulated { steps_per_unit: 0.01, fixed_steps: 2 },
+        budget: PlanBudget { steps: deadline_steps, wall: None, give_up_steps: None, work: None },
         planner: Some(Arc::new(planner)),
         obstacle_sensing: Some(f64::INFINITY),
         halt_on_any_change: true,
@@ -38,7 +39,8 @@ fn run(extra: u64, deadline_steps: u64, appear: u64, seed: u64, steps: u64) -> V
         ..DeliberationSettings::default()
     };
     let collision = CollisionModel::new(&robot, Environment::new());
-    let agent = deliberative_agent("arm", robot, collision, &START, GOAL.to_vec(), settings).expect("agent");
+    let agent = deliberative_agent("arm", robot, collision, &START, Goal::Configuration(GOAL.to_vec()), settings)
+        .expect("agent");
     let mut rt = Runtime::new(RuntimeConfig { seed, dt: DT, ..RuntimeConfig::default() });
     rt.add_agent(agent);
     rt.world_mut().add_obstacle(Obstacle { appears_at: appear, ..Obstacle::fixed("far", [20.0, 0.0, 0.0], 0.1) });
@@ -79,13 +81,13 @@ proptest! {
                     world = v as u64;
                 }
                 // A stale plan is never followed: every plan taken is for the current world.
-                if e.starts_with("plan_ready") {
+                if e.starts_with("plan_landed") {
                     prop_assert_eq!(field(e, "world=").map(|v| v as u64), Some(world), "{}", e);
                 }
-                if e.starts_with("safe_halt_started speed=") && i > 0 {
+                if e.starts_with("safe_halt_started reason=no_valid_plan speed=") && i > 0 {
                     halt_from = Some(i - 1);
                 }
-                if e.starts_with("safe_halt_done")
+                if e.starts_with("safe_halt_finished")
                     && let Some(s) = halt_from.take()
                 {
                     // Stopping distance for the speed at the start of the halt: the path-preserving

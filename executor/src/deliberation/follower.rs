@@ -5,6 +5,8 @@
 use std::sync::Arc;
 
 use embodied_models::{CollisionModel, Environment, Obstacle, Robot, Shape};
+use embodied_planner::motion::{Goal, MotionSettings};
+use embodied_planner::trajectory::Trajectory;
 use nalgebra::Isometry3;
 
 use crate::agent::Agent;
@@ -12,11 +14,10 @@ use crate::behaviour::{Behaviour, Status};
 use crate::effector::SafeHalt;
 use crate::error::{ExecutorError, Violation};
 use crate::image::{InputImages, JointCommand, OutputImages, SensorConfig};
-use crate::sensor::NearestObstacle;
 use crate::world::ReceptorSpec;
 
-use super::lattice::{LatticeSettings, lattice_plan};
-use super::trajectory::Trajectory;
+use super::planning::PlanMotion;
+use super::sensing::UnmappedObstacle;
 use super::worker::{
     Deliberator, MotionPlanner, PlanBudget, PlanClock, PlanDelivery, PlanOutcome, PlanRequest, PlanVerifier,
 };
@@ -26,19 +27,22 @@ use super::worker::{
 pub struct DeliberationSettings {
     pub clock: PlanClock,
     pub budget: PlanBudget,
-    /// Settings of the built-in lattice planner (used when `planner` is `None`).
-    pub lattice: LatticeSettings,
-    /// An injected planner instead of the built-in one.
+    /// Settings of [`embodied_planner::motion::plan_motion`] (used when `planner` is `None`;
+    /// its deadline is replaced by each request's).
+    pub motion: MotionSettings,
+    /// An injected planner instead of [`PlanMotion`].
     pub planner: Option<Arc<dyn MotionPlanner>>,
     /// Collision-check resolution of the verifier, rad or m.
     pub verify_resolution: f64,
+    /// Largest distance between a plan's end and its goal that the verifier accepts.
+    pub goal_tolerance: f64,
     /// Steps to wait after a failed, rejected or panicked plan before asking again.
     pub retry_after_steps: u64,
     /// Requests after which the agent gives up and holds (`plan_abandoned`).
     pub max_attempts: u32,
     /// Steps after `needed_at` after which an outstanding request counts as lost.
     pub plan_timeout_steps: u64,
-    /// Obstacle detector range (m); `Some` adds a [`NearestObstacle`] virtual sensor (index 0).
+    /// Obstacle detector range (m); `Some` adds an [`UnmappedObstacle`] virtual sensor (index 0).
     pub obstacle_sensing: Option<f64>,
     /// Steps without a fresh obstacle reading after which the sensor counts as failed.
     pub sensor_max_age: u64,
@@ -53,9 +57,10 @@ impl Default for DeliberationSettings {
         Self {
             clock: PlanClock::WallClock,
             budget: PlanBudget::default(),
-            lattice: LatticeSettings::default(),
+            motion: MotionSettings::default(),
             planner: None,
             verify_resolution: 0.01,
+            goal_tolerance: 1e-6,
             retry_after_steps: 100,
             max_attempts: 3,
             plan_timeout_steps: 2000,
@@ -78,6 +83,13 @@ struct Halt {
     q0: Vec<f64>,
 }
 
+/// Distance (largest joint travel) and duration (s) of a halt.
+fn halt_report(h: &Halt, q: &[f64], step: u64, dt: f64) -> String {
+    let distance = q.iter().zip(&h.q0).fold(0.0_f64, |m, (a, b)| m.max((a - b).abs()));
+    let steps = step - h.started_at;
+    format!("safe_halt_finished distance={distance:.6} time_s={:.3} steps={steps}", steps as f64 * dt)
+}
+
 #[derive(Debug, Clone, Copy, PartialEq)]
 struct SensedObstacle {
     id: usize,
@@ -88,10 +100,12 @@ struct SensedObstacle {
 /// `c_c` of a deliberative agent: the deliberator, the goal, the world model and the plan.
 pub struct DeliberativeState {
     pub deliberator: Deliberator,
-    pub goal: Vec<f64>,
+    pub goal: Goal,
     settings: DeliberationSettings,
     robot: Arc<Robot>,
     base_env: Environment,
+    /// Obstacles the agent was told about (e.g. other agents' bodies or reserved space).
+    known: Vec<Obstacle>,
     collision: CollisionModel,
     sensed: Vec<SensedObstacle>,
     world_version: u64,
@@ -101,6 +115,9 @@ pub struct DeliberativeState {
     attempts: u32,
     next_request_at: u64,
     late_reported: bool,
+    /// Step at which the agent last started halting (from speed or for a late plan), until it
+    /// resumes.
+    halted_since: Option<u64>,
     goal_reached: bool,
     abandoned: bool,
     last_fresh: u64,
@@ -109,27 +126,22 @@ pub struct DeliberativeState {
 
 impl DeliberativeState {
     /// `c_c` for `robot` planning to `goal` in `collision`'s environment.
-    pub fn new(robot: Arc<Robot>, collision: CollisionModel, goal: Vec<f64>, settings: DeliberationSettings) -> Self {
+    pub fn new(robot: Arc<Robot>, collision: CollisionModel, goal: Goal, settings: DeliberationSettings) -> Self {
         let planner: Arc<dyn MotionPlanner> = match &settings.planner {
             Some(p) => p.clone(),
-            None => {
-                let model = collision.clone();
-                let lattice = settings.lattice;
-                Arc::new(move |r: &PlanRequest, d: &embodied_planner::deadline::Deadline| {
-                    lattice_plan(&model, &lattice, r, d)
-                })
-            }
+            None => Arc::new(PlanMotion::new(collision.clone(), settings.motion.clone())),
         };
         let verifier = PlanVerifier {
-            limits: robot.limits(),
-            collision: Some(collision.clone()),
+            collision: collision.clone(),
             resolution: settings.verify_resolution,
+            goal_tolerance: settings.goal_tolerance,
         };
         let dof = robot.dof();
         Self {
             deliberator: Deliberator::new(planner, verifier, settings.clock),
             goal,
             base_env: collision.environment().clone(),
+            known: Vec::new(),
             collision,
             robot,
             settings,
@@ -141,6 +153,7 @@ impl DeliberativeState {
             attempts: 0,
             next_request_at: 0,
             late_reported: false,
+            halted_since: None,
             goal_reached: false,
             abandoned: false,
             last_fresh: 0,
@@ -159,9 +172,62 @@ impl DeliberativeState {
     pub fn goal_reached(&self) -> bool {
         self.goal_reached
     }
+    /// Whether the agent gave up planning (`plan_abandoned`).
+    pub fn abandoned(&self) -> bool {
+        self.abandoned
+    }
+    /// Id of the plan being followed, if any.
+    pub fn plan_id(&self) -> Option<u64> {
+        self.plan.as_ref().map(|p| p.id)
+    }
+    /// Give up: drop the plan, cancel any request, ask for no more plans (e.g. a reaction
+    /// decided the task cannot go on). The behaviour halts from then on.
+    pub fn abandon(&mut self) {
+        self.plan = None;
+        self.deliberator.cancel();
+        self.abandoned = true;
+    }
+    /// The trajectory being followed, if any.
+    pub fn trajectory(&self) -> Option<&Trajectory> {
+        self.plan.as_ref().map(|p| &*p.trajectory)
+    }
+    /// The agent's settings.
+    pub fn settings(&self) -> &DeliberationSettings {
+        &self.settings
+    }
+    /// The robot.
+    pub fn robot(&self) -> &Robot {
+        &self.robot
+    }
 
-    fn environment(&self) -> Environment {
+    /// Replace the obstacles the agent was told about (other agents' bodies, reserved space):
+    /// a change of its world model, so an outstanding request becomes stale and a plan whose
+    /// remaining path now collides is dropped (the agent halts and replans). Returns whether
+    /// the plan being followed was dropped.
+    pub fn set_known_obstacles(&mut self, obstacles: Vec<Obstacle>, step: u64, dt: f64) -> bool {
+        self.known = obstacles;
+        self.world_version += 1;
+        let env = self.environment();
+        self.collision.set_environment(env);
+        let Some(plan) = &self.plan else { return false };
+        let k = sample_at(&plan.trajectory, step.saturating_sub(plan.started_at) as f64 * dt);
+        if remaining_collides(&self.collision, &plan.trajectory, k, self.settings.verify_resolution) {
+            self.plan = None;
+            self.goal_reached = false;
+            self.attempts = 0;
+            self.next_request_at = step;
+            true
+        } else {
+            false
+        }
+    }
+
+    /// The environment as the agent knows it: the map, what it was told, what it sensed.
+    pub fn environment(&self) -> Environment {
         let mut env = self.base_env.clone();
+        for o in &self.known {
+            env.add(o.clone());
+        }
         for o in &self.sensed {
             let [x, y, z] = o.centre;
             env.add(Obstacle::new(
@@ -220,7 +286,8 @@ impl<C: AsDeliberation + Send> Behaviour<C> for PlanFollower {
             deliver(s, d, inputs, outputs);
         }
         // An answer that never comes (e.g. its transmission was lost).
-        if s.deliberator.pending().is_some_and(|_| step > s.next_request_at + s.settings.plan_timeout_steps)
+        let timeout = s.next_request_at + s.settings.budget.steps + s.settings.plan_timeout_steps;
+        if s.deliberator.pending().is_some_and(|_| step > timeout)
             && let Some(id) = s.deliberator.pending()
         {
             s.deliberator.cancel();
@@ -235,9 +302,8 @@ impl<C: AsDeliberation + Send> Behaviour<C> for PlanFollower {
         if let Some(plan) = &s.plan {
             let k = step.saturating_sub(plan.started_at) + 1;
             let t = k as f64 * inputs.dt();
-            let n = inputs.dof();
-            plan.trajectory.sample(t, &mut s.scratch.q[..n], &mut s.scratch.qd[..n]);
-            outputs.set_position_target(&s.scratch.q, &s.scratch.qd);
+            let (q, qd, _) = plan.trajectory.sample(t);
+            outputs.set_position_target(&q, &qd);
             if t >= plan.trajectory.duration() {
                 if !s.goal_reached {
                     s.goal_reached = true;
@@ -281,9 +347,7 @@ fn maybe_request(s: &mut DeliberativeState, inputs: &InputImages, outputs: &mut 
     if let Some(id) = s.deliberator.pending() {
         if step >= s.next_request_at + s.settings.budget.steps && !s.late_reported {
             s.late_reported = true;
-            outputs.event(format!("plan_late id={id}"));
-            outputs.event("safe_halt_started reason=plan_late");
-            outputs.event("safe_halt_done distance=0 steps=0");
+            late_halt(s, id, step, outputs);
         }
         return;
     }
@@ -308,14 +372,25 @@ fn maybe_request(s: &mut DeliberativeState, inputs: &InputImages, outputs: &mut 
     let id = s.deliberator.request(request);
     s.next_request_at = step;
     s.late_reported = false;
-    outputs.event(format!("plan_requested id={id} world={}", s.world_version));
+    outputs.event(format!(
+        "plan_requested id={id} world={} deadline_ms={:.3}",
+        s.world_version,
+        s.settings.budget.steps as f64 * inputs.dt() * 1e3
+    ));
     if s.settings.budget.steps == 0 {
-        // The plan is needed now and cannot be there: halt (at rest, a hold).
+        // The plan is needed now and cannot be there.
         s.late_reported = true;
-        outputs.event(format!("plan_late id={id}"));
-        outputs.event("safe_halt_started reason=plan_late");
-        outputs.event("safe_halt_done distance=0 steps=0");
+        late_halt(s, id, step, outputs);
     }
+}
+
+/// The plan is late: `c^{i+1}` is computed without it and halts the effector. The agent is at
+/// rest when it asks for a plan, so this halt is a hold: no distance, no time.
+fn late_halt(s: &mut DeliberativeState, id: u64, step: u64, outputs: &mut OutputImages) {
+    outputs.event(format!("plan_late id={id}"));
+    outputs.event("safe_halt_started reason=plan_late speed=0.000000");
+    outputs.event("safe_halt_finished distance=0.000000 time_s=0.000 steps=0");
+    s.halted_since.get_or_insert(step);
 }
 
 /// Halt command for this step, with the halt's start and end logged.
@@ -323,15 +398,15 @@ fn halt(s: &mut DeliberativeState, inputs: &InputImages, outputs: &mut OutputIma
     let (q, qd) = (inputs.q(), inputs.qd());
     if !at_rest(qd) && s.halt.is_none() {
         s.halt = Some(Halt { started_at: inputs.step(), q0: q.to_vec() });
+        s.halted_since = Some(inputs.step());
         let speed = qd.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
-        outputs.event(format!("safe_halt_started speed={speed:.6}"));
+        let reason = if s.fault.is_some() { "fault" } else { "no_valid_plan" };
+        outputs.event(format!("safe_halt_started reason={reason} speed={speed:.6}"));
     }
     if at_rest(qd)
         && let Some(h) = s.halt.take()
     {
-        let distance = q.iter().zip(&h.q0).fold(0.0_f64, |m, (a, b)| m.max((a - b).abs()));
-        let steps = inputs.step() - h.started_at;
-        outputs.event(format!("safe_halt_done distance={distance:.6} steps={steps}"));
+        outputs.event(halt_report(&h, q, inputs.step(), inputs.dt()));
     }
     SafeHalt::command_into(q, qd, inputs.limits(), inputs.dt(), &mut s.scratch);
     outputs.set_command(&s.scratch);
@@ -341,13 +416,21 @@ fn deliver(s: &mut DeliberativeState, d: PlanDelivery, inputs: &InputImages, out
     let step = inputs.step();
     let when = if step > d.needed_at { "late" } else { "in_time" };
     let id = d.id;
-    // Wall-clock figures only in wall-clock mode: simulated-time logs must replay exactly.
+    // Planning time: simulated (reproducible) or wall clock. Wall-clock figures only in
+    // wall-clock mode: simulated-time logs must replay exactly.
     let overshoot = match (s.deliberator.clock(), d.overshoot) {
-        (PlanClock::WallClock, Some(o)) => {
-            format!(" elapsed_us={} overshoot_us={}", d.elapsed.as_micros(), o.as_micros())
+        (PlanClock::WallClock, Some(o)) => format!(
+            " planning_ms={:.3} elapsed_us={} overshoot_us={}",
+            d.elapsed.as_secs_f64() * 1e3,
+            d.elapsed.as_micros(),
+            o.as_micros()
+        ),
+        (PlanClock::WallClock, None) => {
+            format!(" planning_ms={:.3} elapsed_us={}", d.elapsed.as_secs_f64() * 1e3, d.elapsed.as_micros())
         }
-        (PlanClock::WallClock, None) => format!(" elapsed_us={}", d.elapsed.as_micros()),
-        _ => String::new(),
+        (PlanClock::Simulated { .. }, _) => {
+            format!(" planning_ms={:.3}", (d.landed_at - d.requested_at) as f64 * inputs.dt() * 1e3)
+        }
     };
     let retry = |s: &mut DeliberativeState| {
         s.attempts += 1;
@@ -370,13 +453,22 @@ fn deliver(s: &mut DeliberativeState, d: PlanDelivery, inputs: &InputImages, out
             match stale {
                 Some(why) => {
                     outputs.event(format!("plan_discarded_stale id={id}: {why}"));
+                    outputs.event("replan reason=stale_plan");
                     s.next_request_at = step;
                 }
                 None => {
                     outputs.event(format!(
-                        "plan_ready id={id} world={} {when} expansions={}{overshoot}",
-                        d.world_version, d.expansions
+                        "plan_landed id={id} world={} {when} work={}{overshoot} duration_s={:.3}",
+                        d.world_version,
+                        d.work,
+                        trajectory.duration()
                     ));
+                    if let Some(since) = s.halted_since.take() {
+                        outputs.event(format!(
+                            "resumed id={id} after_s={:.3}",
+                            step.saturating_sub(since) as f64 * inputs.dt()
+                        ));
+                    }
                     s.attempts = 0;
                     s.plan = Some(ActivePlan { trajectory, id, started_at: step });
                 }
@@ -441,7 +533,9 @@ fn sense(s: &mut DeliberativeState, inputs: &InputImages, outputs: &mut OutputIm
             nalgebra::Vector3::zeros()
         };
         let centre_dist = ((p.x - centre[0]).powi(2) + (p.y - centre[1]).powi(2) + (p.z - centre[2]).powi(2)).sqrt();
-        let radius = (centre_dist - v[0]).max(0.0);
+        // A sensor that reports the radius (word 5) is believed; otherwise it is inferred from
+        // the distance to the sensing point.
+        let radius = if r.len >= 6 { v[5].max(0.0) } else { (centre_dist - v[0]).max(0.0) };
         let tol = s.settings.move_tolerance;
         match s.sensed.iter_mut().find(|o| o.id == id) {
             Some(o) => {
@@ -465,10 +559,11 @@ fn sense(s: &mut DeliberativeState, inputs: &InputImages, outputs: &mut OutputIm
     s.collision.set_environment(env);
     outputs.event(format!("world_changed version={}", s.world_version));
     let Some(plan) = &s.plan else { return };
-    let k = (step.saturating_sub(plan.started_at) as usize).min(plan.trajectory.len().saturating_sub(1));
+    let k = sample_at(&plan.trajectory, step.saturating_sub(plan.started_at) as f64 * inputs.dt());
     let hit = remaining_collides(&s.collision, &plan.trajectory, k, s.settings.verify_resolution);
     if hit || s.settings.halt_on_any_change {
         outputs.event(format!("plan_invalidated id={}{}", plan.id, if hit { ": obstacle in path" } else { "" }));
+        outputs.event(format!("replan reason={}", if hit { "obstacle_in_path" } else { "world_changed" }));
         s.plan = None;
         s.attempts = 0;
         s.goal_reached = false;
@@ -478,12 +573,18 @@ fn sense(s: &mut DeliberativeState, inputs: &InputImages, outputs: &mut OutputIm
     }
 }
 
+/// Index of the last sample at or before time `t` of `traj`.
+fn sample_at(traj: &Trajectory, t: f64) -> usize {
+    traj.t.partition_point(|x| *x <= t).saturating_sub(1)
+}
+
 fn remaining_collides(model: &CollisionModel, traj: &Trajectory, from: usize, resolution: f64) -> bool {
     let mut scratch = model.scratch();
     let stride = 4.0 * resolution.max(1e-4);
     let mut knot = from;
-    for k in from + 1..traj.len() {
-        let last = k + 1 == traj.len();
+    let n = traj.q.len();
+    for k in from + 1..n {
+        let last = k + 1 == n;
         let next_far = !last && traj.q[k + 1].iter().zip(&traj.q[knot]).any(|(a, b)| (a - b).abs() > stride);
         if (last || next_far) && !model.motion_is_free_with(&traj.q[knot], &traj.q[k], resolution, &mut scratch) {
             return true;
@@ -492,24 +593,30 @@ fn remaining_collides(model: &CollisionModel, traj: &Trajectory, from: usize, re
             knot = k;
         }
     }
-    from < traj.len() && model.collides_with(&traj.q[from], &mut scratch)
+    from < n && model.collides_with(&traj.q[from], &mut scratch)
 }
 
 /// A deliberative agent in a few lines: `robot` at `start` planning to `goal` in `collision`'s
 /// environment, its program the [`PlanFollower`]; with `settings.obstacle_sensing` it also gets
-/// an obstacle detector and a [`NearestObstacle`] virtual sensor (index 0).
+/// an obstacle detector and an [`UnmappedObstacle`] virtual sensor (index 0).
 pub fn deliberative_agent(
     name: impl Into<String>,
     robot: Arc<Robot>,
     collision: CollisionModel,
     start: &[f64],
-    goal: Vec<f64>,
+    goal: Goal,
     settings: DeliberationSettings,
 ) -> Result<Agent<DeliberativeState>, ExecutorError> {
     let dof = robot.dof();
-    for (what, v) in [("start configuration", start), ("goal configuration", &goal[..])] {
-        if v.len() != dof {
-            return Err(ExecutorError::DimensionMismatch { what: what.into(), expected: dof, got: v.len() });
+    let mut sizes = vec![("start configuration", start.len())];
+    match &goal {
+        Goal::Configuration(q) => sizes.push(("goal configuration", q.len())),
+        Goal::AnyOf(qs) => sizes.extend(qs.iter().map(|q| ("goal configuration", q.len()))),
+        Goal::ToolPose { .. } => {}
+    }
+    for (what, len) in sizes {
+        if len != dof {
+            return Err(ExecutorError::DimensionMismatch { what: what.into(), expected: dof, got: len });
         }
     }
     let sensing = settings.obstacle_sensing;
@@ -517,7 +624,7 @@ pub fn deliberative_agent(
     let mut agent = Agent::embodied(name, robot, Some(start), state, PlanFollower::new("deliberative"))?;
     if let Some(range) = sensing {
         agent = agent
-            .with_sensor(NearestObstacle, SensorConfig::default())
+            .with_sensor(UnmappedObstacle::default(), SensorConfig::default())
             .with_receptors(ReceptorSpec { detector_range: Some(range), ..ReceptorSpec::default() });
     }
     Ok(agent)

@@ -2,47 +2,68 @@
 //!
 //! A request starts a planning job on its own thread; the control step only ever calls
 //! [`Deliberator::poll`], which never blocks in [`PlanClock::WallClock`] mode. Every plan is
-//! checked by [`verify_trajectory`] on the worker thread, after the planner and independently
-//! of it, and a planner panic is caught there and delivered as an outcome. In
-//! [`PlanClock::Simulated`] mode the delivery step is computed from the planner's expansion
-//! count, so runs replay bit for bit whatever the thread timing.
+//! checked by the planner crate's independent verifier
+//! ([`embodied_planner::verify::verify_trajectory`]: collisions at a fine resolution, position,
+//! velocity and acceleration limits) and against the request's start and goal on the worker
+//! thread, after the planner; a planner panic is caught there and delivered as an outcome. In
+//! [`PlanClock::Simulated`] mode the delivery step is computed from the planner's count of work
+//! units (for [`embodied_planner::motion::plan_motion`]: collision checks), so runs replay bit
+//! for bit whatever the thread timing.
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{Receiver, TryRecvError, channel};
 use std::time::{Duration, Instant};
 
-use embodied_models::{CollisionModel, Environment, JointLimits};
+use embodied_models::{CollisionModel, Environment};
 use embodied_planner::deadline::Deadline;
-
-use super::trajectory::{Trajectory, verify_trajectory};
+use embodied_planner::motion::Goal;
+use embodied_planner::trajectory::Trajectory;
+use embodied_planner::verify::verify_trajectory;
 
 /// How planning time is counted.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub enum PlanClock {
     /// Real runs: the plan lands when the worker finishes; the deadline is wall-clock time.
     WallClock,
-    /// Reproducible runs: the plan lands `fixed_steps + ceil(expansions * steps_per_expansion)`
-    /// control steps after the request, and the deadline is that many steps. The control step
-    /// waits for the worker's result (only in this mode) to learn the expansion count.
-    Simulated { steps_per_expansion: f64, fixed_steps: u64 },
+    /// Reproducible runs: planning time is simulated from the work the planner reports; the
+    /// plan lands `fixed_steps + ceil(work * steps_per_unit)` control steps after the request
+    /// (at least one). The control step waits for the worker's result (only in this mode) to
+    /// learn the work count.
+    Simulated { steps_per_unit: f64, fixed_steps: u64 },
 }
 
-/// How long a plan may take.
+/// How long a plan may take: when it is needed, and when the search gives up.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct PlanBudget {
-    /// Wall-clock deadline (in [`PlanClock::WallClock`] mode).
-    pub wall: Option<Duration>,
-    /// Deadline in control steps after the request: the step at which the plan is needed
-    /// (in [`PlanClock::Simulated`] mode this also bounds the expansions).
+    /// The deadline, in control steps after the request: the step at which the plan is needed.
+    /// A plan not in `c_c` by then is late: the agent halts safely and waits for it.
     pub steps: u64,
-    /// Expansion budget given to the search (deterministic in both modes).
-    pub expansions: Option<u64>,
+    /// [`PlanClock::WallClock`] mode: the search is stopped this long after the request.
+    pub wall: Option<Duration>,
+    /// [`PlanClock::Simulated`] mode: a search whose simulated time exceeds this many steps is
+    /// delivered as out of time at that step.
+    pub give_up_steps: Option<u64>,
+    /// Work budget given to the search (deterministic in both modes).
+    pub work: Option<u64>,
 }
 
 impl Default for PlanBudget {
     fn default() -> Self {
-        Self { wall: Some(Duration::from_millis(50)), steps: 50, expansions: None }
+        Self { steps: 50, wall: Some(Duration::from_millis(50)), give_up_steps: Some(50), work: None }
+    }
+}
+
+impl PlanBudget {
+    /// The same deadline in both clocks: needed after `steps` steps of `dt` seconds, the search
+    /// stopped then.
+    pub fn hard(steps: u64, dt: f64) -> Self {
+        Self {
+            steps,
+            wall: Some(Duration::from_secs_f64((steps as f64 * dt).max(0.0))),
+            give_up_steps: Some(steps),
+            work: None,
+        }
     }
 }
 
@@ -57,8 +78,8 @@ pub struct PlanRequest {
     pub step: u64,
     /// Start configuration (the agent is at rest there).
     pub start: Vec<f64>,
-    /// Goal configuration.
-    pub goal: Vec<f64>,
+    /// Where the motion must end.
+    pub goal: Goal,
     /// Control period, s (the trajectory's sampling period).
     pub dt: f64,
     /// The environment as the agent knows it (base environment plus sensed obstacles); `None`
@@ -67,29 +88,30 @@ pub struct PlanRequest {
     pub budget: PlanBudget,
 }
 
-/// A successful plan and the work it took.
+/// A successful plan and the work it took (units of the planner's choosing, deterministic:
+/// [`super::PlanMotion`] counts collision checks).
 #[derive(Debug, Clone)]
 pub struct Planned {
     pub trajectory: Trajectory,
-    pub expansions: u64,
+    pub work: u64,
 }
 
 /// Why no plan came back.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 #[non_exhaustive]
 pub enum PlanFailure {
-    #[error("out of time after {expansions} expansions ({reason})")]
-    OutOfTime { expansions: u64, reason: String },
-    #[error("infeasible after {expansions} expansions")]
-    Infeasible { expansions: u64 },
+    #[error("out of time after {work} work units ({reason})")]
+    OutOfTime { work: u64, reason: String },
+    #[error("infeasible after {work} work units")]
+    Infeasible { work: u64 },
     #[error("{0}")]
     Error(String),
 }
 
 impl PlanFailure {
-    fn expansions(&self) -> u64 {
+    fn work(&self) -> u64 {
         match self {
-            PlanFailure::OutOfTime { expansions, .. } | PlanFailure::Infeasible { expansions } => *expansions,
+            PlanFailure::OutOfTime { work, .. } | PlanFailure::Infeasible { work } => *work,
             PlanFailure::Error(_) => 0,
         }
     }
@@ -134,7 +156,9 @@ pub struct PlanDelivery {
     /// Step at which the plan was needed (request step + budget steps).
     pub needed_at: u64,
     pub outcome: PlanOutcome,
-    pub expansions: u64,
+    pub work: u64,
+    /// Step at which the delivery landed in `c_c`.
+    pub landed_at: u64,
     /// Wall-clock time the planner took (not for logs: it is not reproducible).
     pub elapsed: Duration,
     /// Wall-clock time past the wall deadline, if the planner ran over it.
@@ -148,6 +172,7 @@ struct Job {
     requested_at: u64,
     needed_at: u64,
     wall: Option<Duration>,
+    give_up_steps: Option<u64>,
     cancel: Arc<AtomicBool>,
     rx: Receiver<WorkerResult>,
     /// Simulated mode: the worker's result and the step it lands at.
@@ -158,18 +183,20 @@ struct Job {
 
 struct WorkerResult {
     outcome: PlanOutcome,
-    expansions: u64,
+    work: u64,
     elapsed: Duration,
 }
 
 /// What the verifier checks a plan against.
 #[derive(Clone)]
 pub struct PlanVerifier {
-    pub limits: Vec<JointLimits>,
-    /// Collision model (its environment is replaced by the request's, when given).
-    pub collision: Option<CollisionModel>,
+    /// The robot and its world (the environment is replaced by the request's, when given).
+    pub collision: CollisionModel,
     /// Collision-check resolution, rad or m.
     pub resolution: f64,
+    /// Largest distance (C-space, or metres and radians for a tool pose) between the plan's end
+    /// and its goal.
+    pub goal_tolerance: f64,
 }
 
 /// The deliberation part of `c_c`: issues requests, runs them off the control thread, and
@@ -211,19 +238,13 @@ impl Deliberator {
         self.next_id += 1;
         let cancel = Arc::new(AtomicBool::new(false));
         let mut deadline = Deadline::none().with_cancel_flag(cancel.clone());
-        if let Some(n) = request.budget.expansions {
+        if let Some(n) = request.budget.work {
             deadline = deadline.and_expansions(n);
         }
-        let wall = match self.clock {
-            PlanClock::WallClock => request.budget.wall,
-            PlanClock::Simulated { steps_per_expansion, fixed_steps } => {
-                // The expansions that fit into the step budget.
-                if steps_per_expansion > 0.0 {
-                    let fit = (request.budget.steps.saturating_sub(fixed_steps) as f64 / steps_per_expansion).floor();
-                    deadline = deadline.and_expansions(fit.max(0.0) as u64);
-                }
-                None
-            }
+        // Simulated time never reads the clock: the give-up step is applied on delivery.
+        let (wall, give_up_steps) = match self.clock {
+            PlanClock::WallClock => (request.budget.wall, None),
+            PlanClock::Simulated { .. } => (None, request.budget.give_up_steps),
         };
         if let Some(w) = wall {
             deadline = deadline.and_after(w);
@@ -236,6 +257,7 @@ impl Deliberator {
             requested_at: request.step,
             needed_at: request.step + request.budget.steps,
             wall,
+            give_up_steps,
             cancel,
             rx,
             held: None,
@@ -244,20 +266,21 @@ impl Deliberator {
         let planner = self.planner.clone();
         let verifier = self.verifier.clone();
         let id = request.id;
+        // Planning time runs from the request (thread start-up included).
+        let started = Instant::now();
         std::thread::spawn(move || {
-            let started = Instant::now();
             let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| planner.plan(&request, &deadline)));
             let elapsed = started.elapsed();
-            let (outcome, expansions) = match result {
+            let (outcome, work) = match result {
                 Err(payload) => (PlanOutcome::Panicked(panic_message(payload.as_ref())), 0),
                 Ok(Err(failure)) => {
-                    let n = failure.expansions();
+                    let n = failure.work();
                     (PlanOutcome::Failed(failure), n)
                 }
-                Ok(Ok(planned)) => (verify(&verifier, &request, planned.trajectory), planned.expansions),
+                Ok(Ok(planned)) => (verify(&verifier, &request, planned.trajectory), planned.work),
             };
             // The receiver may be gone (request superseded): nothing to do then.
-            let _ = tx.send(WorkerResult { outcome, expansions, elapsed });
+            let _ = tx.send(WorkerResult { outcome, work, elapsed });
         });
         self.job = Some(job);
         id
@@ -283,11 +306,28 @@ impl Deliberator {
                 Err(TryRecvError::Empty) => return None,
                 Err(TryRecvError::Disconnected) => lost_worker(),
             },
-            PlanClock::Simulated { steps_per_expansion, fixed_steps } => {
+            PlanClock::Simulated { steps_per_unit, fixed_steps } => {
                 if job.held.is_none() {
-                    let r = job.rx.recv().unwrap_or_else(|_| lost_worker());
-                    let latency = fixed_steps + (r.expansions as f64 * steps_per_expansion.max(0.0)).ceil() as u64;
-                    job.held = Some((r, job.requested_at + latency.max(1)));
+                    let mut r = job.rx.recv().unwrap_or_else(|_| lost_worker());
+                    let mut latency =
+                        fixed_steps.saturating_add((r.work as f64 * steps_per_unit.max(0.0)).ceil() as u64).max(1);
+                    if let Some(limit) = job.give_up_steps
+                        && latency > limit
+                    {
+                        // The search would still be running when it is stopped: out of time.
+                        let work = if steps_per_unit > 0.0 {
+                            (limit.saturating_sub(fixed_steps) as f64 / steps_per_unit).floor() as u64
+                        } else {
+                            r.work
+                        };
+                        r.outcome = PlanOutcome::Failed(PlanFailure::OutOfTime {
+                            work,
+                            reason: format!("simulated planning time over {limit} steps"),
+                        });
+                        r.work = work;
+                        latency = limit.max(1);
+                    }
+                    job.held = Some((r, job.requested_at + latency));
                 }
                 match &job.held {
                     Some((_, due)) if *due <= step => {}
@@ -311,7 +351,8 @@ impl Deliberator {
             requested_at: job.requested_at,
             needed_at: job.needed_at,
             outcome: result.outcome,
-            expansions: result.expansions,
+            work: result.work,
+            landed_at: step,
             elapsed: result.elapsed,
             overshoot,
         })
@@ -327,31 +368,49 @@ impl Drop for Deliberator {
 fn lost_worker() -> WorkerResult {
     WorkerResult {
         outcome: PlanOutcome::Failed(PlanFailure::Error("planner channel lost".into())),
-        expansions: 0,
+        work: 0,
         elapsed: Duration::ZERO,
     }
 }
 
 fn verify(verifier: &PlanVerifier, request: &PlanRequest, trajectory: Trajectory) -> PlanOutcome {
     let mut model = verifier.collision.clone();
-    if let (Some(m), Some(env)) = (model.as_mut(), &request.environment) {
-        m.set_environment(env.clone());
+    if let Some(env) = &request.environment {
+        model.set_environment(env.clone());
     }
-    if let Some(first) = trajectory.start() {
-        let off = first.iter().zip(&request.start).any(|(a, b)| (a - b).abs() > 1e-6);
-        if off || first.len() != request.start.len() {
-            return PlanOutcome::Rejected("does not start at the requested start state".into());
-        }
+    let robot = model.robot();
+    let space = robot.config_space();
+    let (Some(first), Some(last)) = (trajectory.q.first(), trajectory.q.last()) else {
+        return PlanOutcome::Rejected("empty trajectory".into());
+    };
+    if first.len() != request.start.len() || space.distance(first, &request.start) > 1e-6 {
+        return PlanOutcome::Rejected("does not start at the requested start state".into());
     }
-    if let Some(last) = trajectory.end() {
-        let off = last.iter().zip(&request.goal).any(|(a, b)| (a - b).abs() > 1e-6);
-        if off || last.len() != request.goal.len() {
-            return PlanOutcome::Rejected("does not end at the goal".into());
-        }
+    if let Some(why) = misses_goal(robot, last, &request.goal, verifier.goal_tolerance) {
+        return PlanOutcome::Rejected(why);
     }
-    match verify_trajectory(&trajectory, &verifier.limits, model.as_ref(), verifier.resolution) {
+    match verify_trajectory(&model, &trajectory, verifier.resolution) {
         Ok(()) => PlanOutcome::Ready(Arc::new(trajectory)),
         Err(v) => PlanOutcome::Rejected(v.to_string()),
+    }
+}
+
+/// Why `q` does not satisfy `goal` (`None` when it does). Continuous joints compare modulo a turn.
+pub fn misses_goal(robot: &embodied_models::Robot, q: &[f64], goal: &Goal, tolerance: f64) -> Option<String> {
+    let space = robot.config_space();
+    let near = |g: &Vec<f64>| g.len() == q.len() && space.distance(g, q) <= tolerance;
+    match goal {
+        Goal::Configuration(g) if near(g) => None,
+        Goal::AnyOf(gs) if gs.iter().any(near) => None,
+        Goal::ToolPose { end_effector, pose }
+            if *end_effector < robot.end_effectors().len() && q.len() == robot.dof() =>
+        {
+            let tool = robot.end_effector_poses(q, *end_effector).1;
+            let dp = (tool.translation.vector - pose.translation.vector).norm();
+            let dr = tool.rotation.angle_to(&pose.rotation);
+            (dp > tolerance || dr > tolerance).then(|| format!("ends {dp:.4} m and {dr:.4} rad from the goal pose"))
+        }
+        _ => Some("does not end at the goal".into()),
     }
 }
 

@@ -1,0 +1,61 @@
+//! The motion planner deliberative agents use: the planner crate's
+//! [`embodied_planner::motion::plan_motion`] (straight segment, RRT-Connect or lazy PRM,
+//! shortcuts) under the request's [`Deadline`], time-parameterised by
+//! [`embodied_planner::trajectory::time_parameterize`] (knots only).
+//!
+//! Work is counted in collision checks: deterministic for a seed, and what planning time is made
+//! of, so that [`super::PlanClock::Simulated`] turns it into simulated planning time.
+
+use embodied_models::CollisionModel;
+use embodied_planner::deadline::Deadline;
+use embodied_planner::error::PlanError;
+use embodied_planner::motion::{MotionSettings, plan_motion};
+use embodied_planner::trajectory::time_parameterize;
+
+use super::worker::{MotionPlanner, PlanFailure, PlanRequest, Planned};
+
+/// [`plan_motion`] as a [`MotionPlanner`]: `model` gives the robot (and the environment when the
+/// request has none); `settings` everything but the deadline, which comes with each request.
+/// Each request plans with seed `settings.seed + request id`, so a replan is a fresh draw and a
+/// run is still reproducible.
+#[derive(Clone)]
+pub struct PlanMotion {
+    pub model: CollisionModel,
+    pub settings: MotionSettings,
+}
+
+impl PlanMotion {
+    pub fn new(model: CollisionModel, settings: MotionSettings) -> Self {
+        Self { model, settings }
+    }
+}
+
+impl MotionPlanner for PlanMotion {
+    fn plan(&self, request: &PlanRequest, deadline: &Deadline) -> Result<Planned, PlanFailure> {
+        let mut model = self.model.clone();
+        if let Some(env) = &request.environment {
+            model.set_environment(env.clone());
+        }
+        let settings = MotionSettings {
+            seed: self.settings.seed.wrapping_add(request.id),
+            deadline: deadline.clone(),
+            ..self.settings.clone()
+        };
+        match plan_motion(&model, &request.start, &request.goal, &settings) {
+            Ok(plan) => {
+                // Knots only (every point where the acceleration changes): the follower's
+                // Hermite sampling reproduces the motion exactly at any control period, and the
+                // verifier checks a few knots and the straight segments between them instead of
+                // one sample per control step.
+                let trajectory = time_parameterize(&plan.path, model.robot(), 0.0);
+                Ok(Planned { trajectory, work: plan.stats.collision_checks })
+            }
+            Err(PlanError::OutOfTime { stats }) => Err(PlanFailure::OutOfTime {
+                work: stats.collision_checks,
+                reason: format!("{} samples, {} collision checks", stats.samples, stats.collision_checks),
+            }),
+            Err(PlanError::NoPath { samples }) => Err(PlanFailure::Infeasible { work: samples as u64 }),
+            Err(e) => Err(PlanFailure::Error(e.to_string())),
+        }
+    }
+}
