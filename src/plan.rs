@@ -9,7 +9,7 @@ use std::time::Duration;
 use embodied_models::Robot;
 use embodied_models::collision::{CollisionModel, Environment, Obstacle};
 use embodied_planner::deadline::Deadline;
-use embodied_planner::motion::{Goal, MotionSettings, MotionStats, plan_motion};
+use embodied_planner::motion::{CERTIFY_TOLERANCE, EdgeCheck, Goal, MotionSettings, MotionStats, plan_motion};
 use embodied_planner::trajectory::{Trajectory, time_parameterize};
 use embodied_planner::verify::verify_trajectory;
 use serde::{Deserialize, Serialize};
@@ -95,10 +95,16 @@ pub fn bodies_as_obstacles(robot: &Robot, path: &[Vec<f64>], step: f64, prefix: 
     out
 }
 
-/// Motion-planner settings of a scenario (seed, resolution) with `deadline`.
+/// Motion-planner settings of a scenario (seed, edge check, resolution) with `deadline`.
 pub fn motion_settings(scenario: &Scenario, deadline: Deadline) -> MotionSettings {
+    let edge_check = if scenario.planner.certify {
+        EdgeCheck::Certified { tolerance: CERTIFY_TOLERANCE }
+    } else {
+        EdgeCheck::Sampled
+    };
     MotionSettings {
         seed: scenario.planner.seed,
+        edge_check,
         resolution: scenario.planner.resolution,
         deadline,
         ..MotionSettings::default()

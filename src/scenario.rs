@@ -134,6 +134,8 @@ struct RawPlanner {
     #[serde(default)]
     resolution: Option<f64>,
     #[serde(default)]
+    edge_check: Option<Spanned<String>>,
+    #[serde(default)]
     expansions: Option<usize>,
     #[serde(default)]
     give_up_ms: Option<Spanned<f64>>,
@@ -194,6 +196,8 @@ pub struct PlannerSpec {
     /// `embodied run`: when the search gives up (at least `deadline_ms`).
     pub give_up_ms: f64,
     pub seed: u64,
+    /// Segments certified free for the whole continuum (default), or sampled at `resolution`.
+    pub certify: bool,
     pub resolution: f64,
     pub expansions: Option<usize>,
     /// `embodied run`: how planning time is counted.
@@ -489,9 +493,22 @@ pub fn parse_scenario(text: &str, file: &Path, dir: &Path) -> Result<Scenario, A
             }
         },
     };
+    let certify = match &raw.planner.edge_check {
+        None => true,
+        Some(c) => match c.get_ref().as_str() {
+            "certified" => true,
+            "sampled" => false,
+            other => {
+                return Err(
+                    ctx.err(c.span(), format!("edge_check: expected \"certified\" or \"sampled\", got \"{other}\""))
+                );
+            }
+        },
+    };
     let planner = PlannerSpec {
         deadline_ms,
         give_up_ms,
+        certify,
         seed: raw.planner.seed.unwrap_or(seed),
         resolution: raw.planner.resolution.unwrap_or(0.02),
         expansions: raw.planner.expansions,

@@ -75,3 +75,15 @@ fn planner_clock_and_run_coordination_are_checked_with_their_place() {
         assert!(!sc.obstacles[0].on_map());
     }
 }
+
+#[test]
+fn edge_check_is_certified_by_default_and_checked_with_its_place() {
+    let base = "name = \"x\"\ndescription = \"d\"\n[[agents]]\nname = \"a\"\nrobot = \"polycrank\"\n";
+    let sc = parse_scenario(base, Path::new("ok.toml"), Path::new(".")).unwrap();
+    assert!(sc.planner.certify);
+    let sampled = format!("{base}[planner]\nedge_check = \"sampled\"\n");
+    assert!(!parse_scenario(&sampled, Path::new("ok.toml"), Path::new(".")).unwrap().planner.certify);
+    let e = err_of(&format!("{base}[planner]\nedge_check = \"exact\"\n"));
+    assert!(e.starts_with("bad.toml:7:14:"), "{e}");
+    assert!(e.contains("\"certified\" or \"sampled\""), "{e}");
+}
