@@ -127,6 +127,9 @@ enum BenchCommand {
         /// them free for the whole continuum (the default).
         #[arg(long)]
         resolution: Option<f64>,
+        /// Random shortcut attempts per path after the greedy pass (more: shorter paths, slower).
+        #[arg(long)]
+        shortcut_attempts: Option<usize>,
     },
     /// Share of plans delivered in time, safe halts and overshoot for a set of deadlines.
     Deadlines {
@@ -248,11 +251,25 @@ fn run(cli: Cli) -> Result<(), AppError> {
             }
             Ok(())
         }
-        Command::Bench(BenchCommand::Mbm { urdf, srdf, problems, json, out, deadline_ms, limit, seed, resolution }) => {
+        Command::Bench(BenchCommand::Mbm {
+            urdf,
+            srdf,
+            problems,
+            json,
+            out,
+            deadline_ms,
+            limit,
+            seed,
+            resolution,
+            shortcut_attempts,
+        }) => {
             let mut args = embodied::mbm::MbmArgs::new(urdf, srdf, problems);
             if let Some(r) = resolution {
                 args.resolution = r;
                 args.edge_check = embodied_planner::motion::EdgeCheck::Sampled;
+            }
+            if let Some(n) = shortcut_attempts {
+                args.shortcut_attempts = n;
             }
             args.deadline_ms = deadline_ms;
             args.limit = limit;

@@ -54,6 +54,8 @@ pub struct MbmArgs {
     pub edge_check: EdgeCheck,
     /// Collision-checking resolution of the planner's edges when sampled (rad, largest joint step).
     pub resolution: f64,
+    /// Random shortcut attempts after the greedy shortcut pass (the planner's default: 10).
+    pub shortcut_attempts: usize,
     /// Only these families (all when `None`).
     pub families: Option<Vec<String>>,
     /// At most this many problems per family (the lowest indices).
@@ -77,6 +79,7 @@ impl MbmArgs {
             seed: 1,
             edge_check: EdgeCheck::Certified { tolerance: CERTIFY_TOLERANCE },
             resolution: VERIFY_RESOLUTION,
+            shortcut_attempts: MotionSettings::default().shortcut_attempts,
             families: None,
             limit: None,
             progress: false,
@@ -161,6 +164,7 @@ pub struct MbmSettings {
     pub seed: u64,
     pub edge_check: EdgeCheck,
     pub resolution: f64,
+    pub shortcut_attempts: usize,
     pub verify_resolution: f64,
     /// Self-collision pairs disabled because they touch in every sampled configuration.
     pub always_colliding_disabled: Vec<(String, String)>,
@@ -463,6 +467,7 @@ fn run_problem(args: &MbmArgs, loaded: &Loaded, p: &ProblemFiles) -> Result<Prob
         resolution: args.resolution,
         edge_check: args.edge_check,
         deadline: Deadline::after(budget),
+        shortcut_attempts: args.shortcut_attempts,
         ..MotionSettings::default()
     };
     let goal = Goal::Configuration(resolved.goal.clone());
@@ -537,6 +542,7 @@ pub fn run_mbm(args: &MbmArgs, on_progress: &mut dyn FnMut(usize, usize)) -> Res
             seed: args.seed,
             edge_check: args.edge_check,
             resolution: args.resolution,
+            shortcut_attempts: args.shortcut_attempts,
             verify_resolution: VERIFY_RESOLUTION,
             always_colliding_disabled: loaded.always_colliding.clone(),
             never_colliding_disabled: loaded.never_colliding.clone(),

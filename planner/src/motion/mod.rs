@@ -77,7 +77,9 @@ pub struct MotionSettings {
     pub deadline: Deadline,
     /// Shorten the path by random shortcuts.
     pub shortcut: bool,
-    /// Shortcut attempts (each is one segment check).
+    /// Random shortcut attempts after the greedy pass (each is one segment check). On the
+    /// MotionBenchMaker UR5 problems (one run): 0 attempts, median 927 collision checks and path
+    /// length 7.0; 10 (the default), 1279 and 6.56; 20, 1744 and 6.25; 40, 2551 and 6.08.
     pub shortcut_attempts: usize,
     /// The search after the straight segment.
     pub planner: PlannerKind,
@@ -104,7 +106,7 @@ impl Default for MotionSettings {
             resolution: DEFAULT_RESOLUTION,
             deadline: Deadline::none(),
             shortcut: true,
-            shortcut_attempts: 40,
+            shortcut_attempts: 10,
             planner: PlannerKind::RrtConnect,
             batch_size: 200,
             k_neighbours: 10,
