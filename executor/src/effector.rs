@@ -24,6 +24,13 @@ pub trait Effector: Send {
     fn qd(&self) -> &[f64];
     /// Execute `command` for one control period `dt`.
     fn execute(&mut self, command: &JointCommand, dt: f64);
+    /// Execute a command that a [`SafetyLimiter`] has already made feasible for the current
+    /// measured state: the consistent one-step command `q + v dt` with feed-forward velocity `v`
+    /// inside the [`velocity_window`]. The default is [`Effector::execute`]; an effector may
+    /// skip recomputing what the limiter guarantees, but must still never exceed its limits.
+    fn execute_limited(&mut self, command: &JointCommand, dt: f64) {
+        self.execute(command, dt)
+    }
 }
 
 impl Effector for Box<dyn Effector> {
@@ -38,6 +45,9 @@ impl Effector for Box<dyn Effector> {
     }
     fn execute(&mut self, command: &JointCommand, dt: f64) {
         (**self).execute(command, dt)
+    }
+    fn execute_limited(&mut self, command: &JointCommand, dt: f64) {
+        (**self).execute_limited(command, dt)
     }
 }
 
@@ -71,10 +81,17 @@ pub fn velocity_window(q: f64, v: f64, lim: &JointLimits, dt: f64) -> (f64, f64)
     // Stopping distance after one step at v' with semi-implicit integration is at most
     // v' dt + v'^2 / (2a); keep it within the remaining room d.
     let bound = |d: f64| -a * dt + (a * a * dt * dt + 2.0 * a * d.max(0.0)).sqrt();
-    if lim.upper.is_finite() {
+    // Far from a bound the square root is skipped: if `x + 2 a dt <= 0` or `(x + 2 a dt)^2 <
+    // 2 a d`, then `bound(d) > x + a dt > x` (a margin of `a dt`, far above rounding), so
+    // `min(x, bound(d)) = x` exactly.
+    let far = |x: f64, d: f64| {
+        let s = x + 2.0 * a * dt;
+        s <= 0.0 || s * s < 2.0 * a * d
+    };
+    if lim.upper.is_finite() && !far(hi, lim.upper - q) {
         hi = hi.min(bound(lim.upper - q));
     }
-    if lim.lower.is_finite() {
+    if lim.lower.is_finite() && !far(-lo, q - lim.lower) {
         lo = lo.max(-bound(q - lim.lower));
     }
     if lo > hi {
@@ -146,6 +163,34 @@ impl Effector for ServoModel {
             self.q[i] = lim.clamp(q + v_next * dt);
         }
     }
+    /// The limiter already tracked the target and clamped the velocity into the window of this
+    /// very state, so the tracking law would reproduce its feed-forward velocity; the servo only
+    /// re-checks (without square roots) the hard bounds: velocity, acceleration and position.
+    fn execute_limited(&mut self, command: &JointCommand, dt: f64) {
+        let n = self.limits.len().min(command.qd.len());
+        for i in 0..n {
+            let lim = &self.limits[i];
+            let (q, v) = (self.q[i], self.qd[i]);
+            let dv = lim.max_acceleration * dt;
+            // max/min rather than clamp: no panic whatever `dt` a caller passes.
+            let v_next = finite_or(command.qd[i], 0.0)
+                .max(v - dv)
+                .min(v + dv)
+                .max(-lim.max_velocity)
+                .min(lim.max_velocity);
+            self.qd[i] = v_next;
+            self.q[i] = lim.clamp(q + v_next * dt);
+        }
+        // A short command (never produced by the limiter) brakes the remaining joints.
+        for i in n..self.limits.len() {
+            let lim = &self.limits[i];
+            let (q, v) = (self.q[i], self.qd[i]);
+            let (lo, hi) = velocity_window(q, v, lim, dt);
+            let v_next = 0.0_f64.max(lo).min(hi);
+            self.qd[i] = v_next;
+            self.q[i] = lim.clamp(q + v_next * dt);
+        }
+    }
 }
 
 /// The velocity joint `i` at `q` should take to follow `command` (see [`ServoModel`]); zero for
@@ -157,7 +202,15 @@ pub fn tracking_velocity(command: &JointCommand, i: usize, q: f64, lim: &JointLi
         CommandMode::Position => match command.q.get(i).copied().filter(|t| t.is_finite()) {
             Some(target) => {
                 let e = lim.clamp(target) - (q + ff * dt);
-                let correction = (gain.min(1.0 / dt) * e.abs()).min((2.0 * lim.max_acceleration * e.abs()).sqrt());
+                let linear = gain.min(1.0 / dt) * e.abs();
+                let braking_sq = 2.0 * lim.max_acceleration * e.abs();
+                // min(linear, sqrt(braking_sq)), skipping the square root when `linear` is
+                // clearly the smaller (the margin covers rounding, so the result is the same).
+                let correction = if linear * linear * (1.0 + 1e-9) < braking_sq {
+                    linear
+                } else {
+                    linear.min(braking_sq.sqrt())
+                };
                 ff + correction.copysign(e)
             }
             None => 0.0,
@@ -227,7 +280,7 @@ impl<E: Effector> Effector for SafetyLimiter<E> {
             JointCommand { mode: CommandMode::Position, q: Vec::new(), qd: Vec::new() },
         );
         self.limit_into(command, dt, &mut limited);
-        self.inner.execute(&limited, dt);
+        self.inner.execute_limited(&limited, dt);
         self.limited = limited;
     }
 }
