@@ -74,6 +74,7 @@ pub fn validate_limits(limits: &[JointLimits]) -> Result<(), ExecutorError> {
 /// before a position bound decelerating at `max_acceleration` (so that bounds are never
 /// crossed). From a state that already violates the last condition the window is the hardest
 /// allowed braking.
+#[inline]
 pub fn velocity_window(q: f64, v: f64, lim: &JointLimits, dt: f64) -> (f64, f64) {
     let a = lim.max_acceleration;
     let mut lo = (-lim.max_velocity).max(v - a * dt);
@@ -168,18 +169,13 @@ impl Effector for ServoModel {
     /// re-checks (without square roots) the hard bounds: velocity, acceleration and position.
     fn execute_limited(&mut self, command: &JointCommand, dt: f64) {
         let n = self.limits.len().min(command.qd.len());
-        for i in 0..n {
-            let lim = &self.limits[i];
-            let (q, v) = (self.q[i], self.qd[i]);
+        let joints = self.limits.iter().zip(self.q.iter_mut()).zip(self.qd.iter_mut()).zip(&command.qd);
+        for (((lim, q), v), &wanted) in joints {
             let dv = lim.max_acceleration * dt;
             // max/min rather than clamp: no panic whatever `dt` a caller passes.
-            let v_next = finite_or(command.qd[i], 0.0)
-                .max(v - dv)
-                .min(v + dv)
-                .max(-lim.max_velocity)
-                .min(lim.max_velocity);
-            self.qd[i] = v_next;
-            self.q[i] = lim.clamp(q + v_next * dt);
+            let v_next = finite_or(wanted, 0.0).max(*v - dv).min(*v + dv).max(-lim.max_velocity).min(lim.max_velocity);
+            *v = v_next;
+            *q = lim.clamp(*q + v_next * dt);
         }
         // A short command (never produced by the limiter) brakes the remaining joints.
         for i in n..self.limits.len() {
@@ -195,14 +191,21 @@ impl Effector for ServoModel {
 
 /// The velocity joint `i` at `q` should take to follow `command` (see [`ServoModel`]); zero for
 /// non-finite targets.
+#[inline]
 pub fn tracking_velocity(command: &JointCommand, i: usize, q: f64, lim: &JointLimits, gain: f64, dt: f64) -> f64 {
-    let ff = finite_or(command.qd.get(i).copied().unwrap_or(0.0), 0.0);
-    match command.mode {
+    track(command.mode, command.q.get(i).copied(), command.qd.get(i).copied(), q, lim, gain.min(1.0 / dt), dt)
+}
+
+/// [`tracking_velocity`] for one joint with the loop gain `k = min(gain, 1/dt)` given.
+#[inline(always)]
+fn track(mode: CommandMode, target: Option<f64>, ff: Option<f64>, q: f64, lim: &JointLimits, k: f64, dt: f64) -> f64 {
+    let ff = finite_or(ff.unwrap_or(0.0), 0.0);
+    match mode {
         CommandMode::Velocity => ff,
-        CommandMode::Position => match command.q.get(i).copied().filter(|t| t.is_finite()) {
+        CommandMode::Position => match target.filter(|t| t.is_finite()) {
             Some(target) => {
                 let e = lim.clamp(target) - (q + ff * dt);
-                let linear = gain.min(1.0 / dt) * e.abs();
+                let linear = k * e.abs();
                 let braking_sq = 2.0 * lim.max_acceleration * e.abs();
                 // min(linear, sqrt(braking_sq)), skipping the square root when `linear` is
                 // clearly the smaller (the margin covers rounding, so the result is the same).
@@ -255,11 +258,14 @@ impl<E: Effector> SafetyLimiter<E> {
     pub fn limit_into(&self, command: &JointCommand, dt: f64, out: &mut JointCommand) {
         let (q, v, limits) = (self.inner.q(), self.inner.qd(), self.inner.limits());
         out.mode = CommandMode::Position;
-        for i in 0..limits.len().min(out.q.len()) {
-            let (lo, hi) = velocity_window(q[i], v[i], &limits[i], dt);
-            let v_next = tracking_velocity(command, i, q[i], &limits[i], self.gain, dt).clamp(lo, hi);
-            out.qd[i] = v_next;
-            out.q[i] = limits[i].clamp(q[i] + v_next * dt);
+        let k = self.gain.min(1.0 / dt);
+        let joints = limits.iter().zip(q).zip(v).zip(out.q.iter_mut().zip(out.qd.iter_mut()));
+        for (i, (((lim, &q), &v), (out_q, out_qd))) in joints.enumerate() {
+            let (lo, hi) = velocity_window(q, v, lim, dt);
+            let wanted = track(command.mode, command.q.get(i).copied(), command.qd.get(i).copied(), q, lim, k, dt);
+            let v_next = wanted.clamp(lo, hi);
+            *out_qd = v_next;
+            *out_q = lim.clamp(q + v_next * dt);
         }
     }
 }
