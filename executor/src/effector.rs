@@ -209,11 +209,8 @@ fn track(mode: CommandMode, target: Option<f64>, ff: Option<f64>, q: f64, lim: &
                 let braking_sq = 2.0 * lim.max_acceleration * e.abs();
                 // min(linear, sqrt(braking_sq)), skipping the square root when `linear` is
                 // clearly the smaller (the margin covers rounding, so the result is the same).
-                let correction = if linear * linear * (1.0 + 1e-9) < braking_sq {
-                    linear
-                } else {
-                    linear.min(braking_sq.sqrt())
-                };
+                let correction =
+                    if linear * linear * (1.0 + 1e-9) < braking_sq { linear } else { linear.min(braking_sq.sqrt()) };
                 ff + correction.copysign(e)
             }
             None => 0.0,
