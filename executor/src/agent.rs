@@ -283,7 +283,8 @@ impl<C: Send> Steppable for Agent<C> {
         self.effector.as_ref().is_none_or(|e| e.qd().iter().all(|v| *v == 0.0))
     }
     fn record(&self, rec: &mut AgentRecord) {
-        if rec.agent != self.name {
+        // A record slot belongs to one agent for the runtime's life: name it once.
+        if rec.agent.is_empty() {
             rec.agent.clone_from(&self.name);
         }
         rec.q.clear();

@@ -41,11 +41,26 @@ pub struct RuntimeConfig {
     pub parallelism: Parallelism,
     /// Fill the per-step [`StepRecord`] (off saves a little time in benchmarks).
     pub record: bool,
+    /// With [`Parallelism::Rayon`]: tasks per thread in one step (default 1, i.e. one contiguous
+    /// chunk of agents per thread and a single fork-join). More tasks let an idle thread take
+    /// over work from one the OS has descheduled, at the price of more hand-overs.
+    #[serde(default = "one_task")]
+    pub tasks_per_thread: usize,
+}
+
+fn one_task() -> usize {
+    1
 }
 
 impl Default for RuntimeConfig {
     fn default() -> Self {
-        Self { dt: 0.001, seed: 0, parallelism: Parallelism::Rayon { min_agents: 256 }, record: true }
+        Self {
+            dt: 0.001,
+            seed: 0,
+            parallelism: Parallelism::Rayon { min_agents: 256 },
+            record: true,
+            tasks_per_thread: 1,
+        }
     }
 }
 
@@ -203,8 +218,8 @@ impl Runtime {
 
     /// Phase 2 of a step for every agent, each followed by its log record when recording (in
     /// the same pass, while the agent is in cache). Returns whether any agent has an error or
-    /// outgoing messages to collect. In parallel the agents are cut into one contiguous chunk
-    /// per thread, so a step costs one fork-join.
+    /// outgoing messages to collect. In parallel the agents are cut into contiguous chunks,
+    /// [`RuntimeConfig::tasks_per_thread`] per thread (by default one: a single fork-join).
     fn step_agents(&mut self) -> bool {
         let (world, step, dt, record) = (&self.world, self.step, self.config.dt, self.config.record);
         let one = |a: &mut Box<dyn Steppable>, rec: &mut AgentRecord| {
@@ -218,7 +233,8 @@ impl Runtime {
             agents.iter_mut().zip(recs.iter_mut()).fold(false, |any, (a, r)| one(a, r) | any)
         };
         if self.parallel() {
-            let size = self.agents.len().div_ceil(rayon::current_num_threads()).max(1);
+            let tasks = rayon::current_num_threads().saturating_mul(self.config.tasks_per_thread.max(1));
+            let size = self.agents.len().div_ceil(tasks).max(1);
             self.agents
                 .par_chunks_mut(size)
                 .zip(self.record.agents.par_chunks_mut(size))
