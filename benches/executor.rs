@@ -21,9 +21,9 @@ fn trivial_runtime(n: usize, record: bool) -> Runtime {
     rt
 }
 
-fn simple_runtime(n: usize, parallelism: Parallelism) -> Runtime {
+fn simple_runtime(n: usize, parallelism: Parallelism, tasks_per_thread: usize) -> Runtime {
     let robot = std::sync::Arc::new(embodied_models::builtin("rnt").expect("built-in robot"));
-    let mut rt = Runtime::new(RuntimeConfig { seed: 1, parallelism, ..RuntimeConfig::default() });
+    let mut rt = Runtime::new(RuntimeConfig { seed: 1, parallelism, tasks_per_thread, ..RuntimeConfig::default() });
     for k in 0..n {
         let phase = k as f64 * 0.01;
         let program = Reactive::priority("main")
@@ -57,10 +57,13 @@ fn bench(c: &mut Criterion) {
             |b| b.iter(|| black_box(rt.step().is_ok())),
         );
     }
-    for (name, parallelism) in
-        [("sequential", Parallelism::Sequential), ("rayon", Parallelism::Rayon { min_agents: 256 })]
+    // "rayon": one chunk per thread (one fork-join per step); "rayon-4-tasks-per-thread": finer
+    // chunks, so that an idle thread can take over work from a descheduled one on a busy machine.
+    let rayon = Parallelism::Rayon { min_agents: 256 };
+    for (name, parallelism, tasks) in
+        [("sequential", Parallelism::Sequential, 1), ("rayon", rayon, 1), ("rayon-4-tasks-per-thread", rayon, 4)]
     {
-        let mut rt = simple_runtime(1000, parallelism);
+        let mut rt = simple_runtime(1000, parallelism, tasks);
         g.throughput(Throughput::Elements(1000));
         g.bench_function(BenchmarkId::new("simple-1000-agents-1kHz-step", name), |b| {
             b.iter(|| black_box(rt.step().is_ok()))

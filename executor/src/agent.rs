@@ -154,8 +154,8 @@ pub(crate) trait Steppable: Send {
     fn inbox(&mut self) -> &mut Vec<Envelope>;
     fn outbox(&mut self) -> &mut Vec<Envelope>;
     /// One iteration of eq. (10); a specification error leaves a safe-halt command executed and
-    /// the error stored.
-    fn step(&mut self, world: &World, step: u64, dt: f64);
+    /// the error stored. Returns whether there is an error or an outgoing message to collect.
+    fn step(&mut self, world: &World, step: u64, dt: f64) -> bool;
     fn take_error(&mut self) -> Option<ExecutorError>;
     /// Sense and execute a safe halt without consulting the behaviour.
     fn halt_step(&mut self, world: &World, step: u64, dt: f64);
@@ -193,41 +193,9 @@ impl<C: Send> Agent<C> {
         }
     }
 
-    fn execute_halt(&mut self, dt: f64) {
-        if let Some(e) = &mut self.effector {
-            SafeHalt::command_into(e.q(), e.qd(), e.limits(), dt, &mut self.halt_command);
-            e.execute(&self.halt_command, dt);
-        }
-    }
-}
-
-impl<C: Send> Steppable for Agent<C> {
-    fn name(&self) -> &str {
-        &self.name
-    }
-    fn prepare(&mut self, id: AgentId, dt: f64, seed: u64) {
-        let limits = self.effector.as_ref().map(|e| e.limits().to_vec()).unwrap_or_default();
-        let dof = limits.len();
-        let n = self.sensors.len();
-        self.control.inputs = InputImages::new(id, limits, n, dt);
-        for (k, (_, config)) in self.sensors.iter().enumerate() {
-            self.control.inputs.sensors[k] = SensorImage { reading: Default::default(), config: *config };
-        }
-        self.countdown = vec![1; n];
-        self.control.outputs = OutputImages::new(id, dof, n);
-        self.receptors.rng = Rng::new(seed);
-        self.halt_command = JointCommand::hold(&vec![0.0; dof]);
-        if let Some(e) = &self.effector {
-            self.control.inputs.q.copy_from_slice(e.q());
-        }
-    }
-    fn inbox(&mut self) -> &mut Vec<Envelope> {
-        &mut self.control.inputs.inbox
-    }
-    fn outbox(&mut self) -> &mut Vec<Envelope> {
-        &mut self.control.outputs.outbox
-    }
-    fn step(&mut self, world: &World, step: u64, dt: f64) {
+    /// One iteration of eq. (10): read the images, choose and compute `c^{i+1}`, hand
+    /// `c^{i+1}_V` to the virtual sensors and `c^{i+1}_e` to the effector.
+    fn step_once(&mut self, world: &World, step: u64, dt: f64) {
         self.read_images(world, step);
         let ctl = &mut self.control;
         ctl.outputs.clear();
@@ -264,6 +232,44 @@ impl<C: Send> Steppable for Agent<C> {
             self.execute_halt(dt);
         }
     }
+    fn execute_halt(&mut self, dt: f64) {
+        if let Some(e) = &mut self.effector {
+            SafeHalt::command_into(e.q(), e.qd(), e.limits(), dt, &mut self.halt_command);
+            e.execute(&self.halt_command, dt);
+        }
+    }
+}
+
+impl<C: Send> Steppable for Agent<C> {
+    fn name(&self) -> &str {
+        &self.name
+    }
+    fn prepare(&mut self, id: AgentId, dt: f64, seed: u64) {
+        let limits = self.effector.as_ref().map(|e| e.limits().to_vec()).unwrap_or_default();
+        let dof = limits.len();
+        let n = self.sensors.len();
+        self.control.inputs = InputImages::new(id, limits, n, dt);
+        for (k, (_, config)) in self.sensors.iter().enumerate() {
+            self.control.inputs.sensors[k] = SensorImage { reading: Default::default(), config: *config };
+        }
+        self.countdown = vec![1; n];
+        self.control.outputs = OutputImages::new(id, dof, n);
+        self.receptors.rng = Rng::new(seed);
+        self.halt_command = JointCommand::hold(&vec![0.0; dof]);
+        if let Some(e) = &self.effector {
+            self.control.inputs.q.copy_from_slice(e.q());
+        }
+    }
+    fn inbox(&mut self) -> &mut Vec<Envelope> {
+        &mut self.control.inputs.inbox
+    }
+    fn outbox(&mut self) -> &mut Vec<Envelope> {
+        &mut self.control.outputs.outbox
+    }
+    fn step(&mut self, world: &World, step: u64, dt: f64) -> bool {
+        self.step_once(world, step, dt);
+        self.error.is_some() || !self.control.outputs.outbox.is_empty()
+    }
     fn take_error(&mut self) -> Option<ExecutorError> {
         self.error.take()
     }
@@ -277,7 +283,8 @@ impl<C: Send> Steppable for Agent<C> {
         self.effector.as_ref().is_none_or(|e| e.qd().iter().all(|v| *v == 0.0))
     }
     fn record(&self, rec: &mut AgentRecord) {
-        if rec.agent != self.name {
+        // A record slot belongs to one agent for the runtime's life: name it once.
+        if rec.agent.is_empty() {
             rec.agent.clone_from(&self.name);
         }
         rec.q.clear();

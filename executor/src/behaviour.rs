@@ -260,16 +260,14 @@ impl<C> Reactive<C> {
             }
             _ => {
                 // Only rules of higher priority than the running one are consulted: they may
-                // suppress it; otherwise it runs on.
+                // suppress it; otherwise it runs on. With nothing running every rule is
+                // consulted (each predicate once), then the main reaction.
                 let limit = self.active.unwrap_or(n);
                 match self.rules[..limit].iter().position(|r| r.predicate.holds(cc, inputs)) {
                     Some(k) => Ok(k),
                     None if self.active.is_some() => Ok(limit),
-                    None => match self.rules.iter().position(|r| r.predicate.holds(cc, inputs)) {
-                        Some(k) => Ok(k),
-                        None if self.main.is_some() => Ok(n),
-                        None => Err(self.violation(Vec::new())),
-                    },
+                    None if self.main.is_some() => Ok(n),
+                    None => Err(self.violation(Vec::new())),
                 }
             }
         }

@@ -24,6 +24,13 @@ pub trait Effector: Send {
     fn qd(&self) -> &[f64];
     /// Execute `command` for one control period `dt`.
     fn execute(&mut self, command: &JointCommand, dt: f64);
+    /// Execute a command that a [`SafetyLimiter`] has already made feasible for the current
+    /// measured state: the consistent one-step command `q + v dt` with feed-forward velocity `v`
+    /// inside the [`velocity_window`]. The default is [`Effector::execute`]; an effector may
+    /// skip recomputing what the limiter guarantees, but must still never exceed its limits.
+    fn execute_limited(&mut self, command: &JointCommand, dt: f64) {
+        self.execute(command, dt)
+    }
 }
 
 impl Effector for Box<dyn Effector> {
@@ -38,6 +45,9 @@ impl Effector for Box<dyn Effector> {
     }
     fn execute(&mut self, command: &JointCommand, dt: f64) {
         (**self).execute(command, dt)
+    }
+    fn execute_limited(&mut self, command: &JointCommand, dt: f64) {
+        (**self).execute_limited(command, dt)
     }
 }
 
@@ -64,6 +74,7 @@ pub fn validate_limits(limits: &[JointLimits]) -> Result<(), ExecutorError> {
 /// before a position bound decelerating at `max_acceleration` (so that bounds are never
 /// crossed). From a state that already violates the last condition the window is the hardest
 /// allowed braking.
+#[inline]
 pub fn velocity_window(q: f64, v: f64, lim: &JointLimits, dt: f64) -> (f64, f64) {
     let a = lim.max_acceleration;
     let mut lo = (-lim.max_velocity).max(v - a * dt);
@@ -71,10 +82,17 @@ pub fn velocity_window(q: f64, v: f64, lim: &JointLimits, dt: f64) -> (f64, f64)
     // Stopping distance after one step at v' with semi-implicit integration is at most
     // v' dt + v'^2 / (2a); keep it within the remaining room d.
     let bound = |d: f64| -a * dt + (a * a * dt * dt + 2.0 * a * d.max(0.0)).sqrt();
-    if lim.upper.is_finite() {
+    // Far from a bound the square root is skipped: if `x + 2 a dt <= 0` or `(x + 2 a dt)^2 <
+    // 2 a d`, then `bound(d) > x + a dt > x` (a margin of `a dt`, far above rounding), so
+    // `min(x, bound(d)) = x` exactly.
+    let far = |x: f64, d: f64| {
+        let s = x + 2.0 * a * dt;
+        s <= 0.0 || s * s < 2.0 * a * d
+    };
+    if lim.upper.is_finite() && !far(hi, lim.upper - q) {
         hi = hi.min(bound(lim.upper - q));
     }
-    if lim.lower.is_finite() {
+    if lim.lower.is_finite() && !far(-lo, q - lim.lower) {
         lo = lo.max(-bound(q - lim.lower));
     }
     if lo > hi {
@@ -146,18 +164,53 @@ impl Effector for ServoModel {
             self.q[i] = lim.clamp(q + v_next * dt);
         }
     }
+    /// The limiter already tracked the target and clamped the velocity into the window of this
+    /// very state, so the tracking law would reproduce its feed-forward velocity; the servo only
+    /// re-checks (without square roots) the hard bounds: velocity, acceleration and position.
+    fn execute_limited(&mut self, command: &JointCommand, dt: f64) {
+        let n = self.limits.len().min(command.qd.len());
+        let joints = self.limits.iter().zip(self.q.iter_mut()).zip(self.qd.iter_mut()).zip(&command.qd);
+        for (((lim, q), v), &wanted) in joints {
+            let dv = lim.max_acceleration * dt;
+            // max/min rather than clamp: no panic whatever `dt` a caller passes.
+            let v_next = finite_or(wanted, 0.0).max(*v - dv).min(*v + dv).max(-lim.max_velocity).min(lim.max_velocity);
+            *v = v_next;
+            *q = lim.clamp(*q + v_next * dt);
+        }
+        // A short command (never produced by the limiter) brakes the remaining joints.
+        for i in n..self.limits.len() {
+            let lim = &self.limits[i];
+            let (q, v) = (self.q[i], self.qd[i]);
+            let (lo, hi) = velocity_window(q, v, lim, dt);
+            let v_next = 0.0_f64.max(lo).min(hi);
+            self.qd[i] = v_next;
+            self.q[i] = lim.clamp(q + v_next * dt);
+        }
+    }
 }
 
 /// The velocity joint `i` at `q` should take to follow `command` (see [`ServoModel`]); zero for
 /// non-finite targets.
+#[inline]
 pub fn tracking_velocity(command: &JointCommand, i: usize, q: f64, lim: &JointLimits, gain: f64, dt: f64) -> f64 {
-    let ff = finite_or(command.qd.get(i).copied().unwrap_or(0.0), 0.0);
-    match command.mode {
+    track(command.mode, command.q.get(i).copied(), command.qd.get(i).copied(), q, lim, gain.min(1.0 / dt), dt)
+}
+
+/// [`tracking_velocity`] for one joint with the loop gain `k = min(gain, 1/dt)` given.
+#[inline(always)]
+fn track(mode: CommandMode, target: Option<f64>, ff: Option<f64>, q: f64, lim: &JointLimits, k: f64, dt: f64) -> f64 {
+    let ff = finite_or(ff.unwrap_or(0.0), 0.0);
+    match mode {
         CommandMode::Velocity => ff,
-        CommandMode::Position => match command.q.get(i).copied().filter(|t| t.is_finite()) {
+        CommandMode::Position => match target.filter(|t| t.is_finite()) {
             Some(target) => {
                 let e = lim.clamp(target) - (q + ff * dt);
-                let correction = (gain.min(1.0 / dt) * e.abs()).min((2.0 * lim.max_acceleration * e.abs()).sqrt());
+                let linear = k * e.abs();
+                let braking_sq = 2.0 * lim.max_acceleration * e.abs();
+                // min(linear, sqrt(braking_sq)), skipping the square root when `linear` is
+                // clearly the smaller (the margin covers rounding, so the result is the same).
+                let correction =
+                    if linear * linear * (1.0 + 1e-9) < braking_sq { linear } else { linear.min(braking_sq.sqrt()) };
                 ff + correction.copysign(e)
             }
             None => 0.0,
@@ -202,11 +255,14 @@ impl<E: Effector> SafetyLimiter<E> {
     pub fn limit_into(&self, command: &JointCommand, dt: f64, out: &mut JointCommand) {
         let (q, v, limits) = (self.inner.q(), self.inner.qd(), self.inner.limits());
         out.mode = CommandMode::Position;
-        for i in 0..limits.len().min(out.q.len()) {
-            let (lo, hi) = velocity_window(q[i], v[i], &limits[i], dt);
-            let v_next = tracking_velocity(command, i, q[i], &limits[i], self.gain, dt).clamp(lo, hi);
-            out.qd[i] = v_next;
-            out.q[i] = limits[i].clamp(q[i] + v_next * dt);
+        let k = self.gain.min(1.0 / dt);
+        let joints = limits.iter().zip(q).zip(v).zip(out.q.iter_mut().zip(out.qd.iter_mut()));
+        for (i, (((lim, &q), &v), (out_q, out_qd))) in joints.enumerate() {
+            let (lo, hi) = velocity_window(q, v, lim, dt);
+            let wanted = track(command.mode, command.q.get(i).copied(), command.qd.get(i).copied(), q, lim, k, dt);
+            let v_next = wanted.clamp(lo, hi);
+            *out_qd = v_next;
+            *out_q = lim.clamp(q + v_next * dt);
         }
     }
 }
@@ -227,7 +283,7 @@ impl<E: Effector> Effector for SafetyLimiter<E> {
             JointCommand { mode: CommandMode::Position, q: Vec::new(), qd: Vec::new() },
         );
         self.limit_into(command, dt, &mut limited);
-        self.inner.execute(&limited, dt);
+        self.inner.execute_limited(&limited, dt);
         self.limited = limited;
     }
 }

@@ -105,4 +105,4 @@ pub use runtime::{AgentRecord, Parallelism, Runtime, RuntimeConfig, StepRecord};
 pub use sensor::{Contact, JointState, NearestObstacle, VirtualSensor};
 pub use transition::{Predicate, TransitionFunction, idle};
 pub use transmitter::{ChannelStats, Link, Transmitter};
-pub use world::{Obstacle, ObstacleEcho, ReceptorReadings, ReceptorSpec, World};
+pub use world::{Obstacle, ObstacleEcho, ReceptorReadings, ReceptorSpec, World, receptor_noise};

@@ -41,11 +41,26 @@ pub struct RuntimeConfig {
     pub parallelism: Parallelism,
     /// Fill the per-step [`StepRecord`] (off saves a little time in benchmarks).
     pub record: bool,
+    /// With [`Parallelism::Rayon`]: tasks per thread in one step (default 1, i.e. one contiguous
+    /// chunk of agents per thread and a single fork-join). More tasks let an idle thread take
+    /// over work from one the OS has descheduled, at the price of more hand-overs.
+    #[serde(default = "one_task")]
+    pub tasks_per_thread: usize,
+}
+
+fn one_task() -> usize {
+    1
 }
 
 impl Default for RuntimeConfig {
     fn default() -> Self {
-        Self { dt: 0.001, seed: 0, parallelism: Parallelism::Rayon { min_agents: 256 }, record: true }
+        Self {
+            dt: 0.001,
+            seed: 0,
+            parallelism: Parallelism::Rayon { min_agents: 256 },
+            record: true,
+            tasks_per_thread: 1,
+        }
     }
 }
 
@@ -82,6 +97,8 @@ pub struct Runtime {
     step: u64,
     record: StepRecord,
     failure: Option<ExecutorError>,
+    /// Agents whose inbox received messages in the last delivery (cleared at the next one).
+    filled_inboxes: Vec<usize>,
 }
 
 impl Runtime {
@@ -95,6 +112,7 @@ impl Runtime {
             step: 0,
             record: StepRecord::default(),
             failure: None,
+            filled_inboxes: Vec::new(),
         }
     }
 
@@ -180,16 +198,51 @@ impl Runtime {
         }
     }
 
+    /// `c_T ≻ c^i_T`: empty last step's inboxes (only those that received anything) and deliver
+    /// the messages due now.
     fn deliver(&mut self) {
-        for a in &mut self.agents {
-            a.inbox().clear();
+        for &k in &self.filled_inboxes {
+            if let Some(a) = self.agents.get_mut(k) {
+                a.inbox().clear();
+            }
         }
-        let agents = &mut self.agents;
+        self.filled_inboxes.clear();
+        let (agents, filled) = (&mut self.agents, &mut self.filled_inboxes);
         self.transmitter.deliver(self.step, |to, env| {
             if let Some(a) = agents.get_mut(to.0) {
                 a.inbox().push(env);
+                filled.push(to.0);
             }
         });
+    }
+
+    /// Phase 2 of a step for every agent, each followed by its log record when recording (in
+    /// the same pass, while the agent is in cache). Returns whether any agent has an error or
+    /// outgoing messages to collect. In parallel the agents are cut into contiguous chunks,
+    /// [`RuntimeConfig::tasks_per_thread`] per thread (by default one: a single fork-join).
+    fn step_agents(&mut self) -> bool {
+        let (world, step, dt, record) = (&self.world, self.step, self.config.dt, self.config.record);
+        let one = |a: &mut Box<dyn Steppable>, rec: &mut AgentRecord| {
+            let pending = a.step(world, step, dt);
+            if record {
+                a.record(rec);
+            }
+            pending
+        };
+        let chunk = |agents: &mut [Box<dyn Steppable>], recs: &mut [AgentRecord]| {
+            agents.iter_mut().zip(recs.iter_mut()).fold(false, |any, (a, r)| one(a, r) | any)
+        };
+        if self.parallel() {
+            let tasks = rayon::current_num_threads().saturating_mul(self.config.tasks_per_thread.max(1));
+            let size = self.agents.len().div_ceil(tasks).max(1);
+            self.agents
+                .par_chunks_mut(size)
+                .zip(self.record.agents.par_chunks_mut(size))
+                .map(|(agents, recs)| chunk(agents, recs))
+                .reduce(|| false, |a, b| a | b)
+        } else {
+            chunk(&mut self.agents, &mut self.record.agents)
+        }
     }
 
     /// Run one control step. On a specification error the failing agent has already begun a
@@ -200,35 +253,30 @@ impl Runtime {
             return Err(f.clone());
         }
         self.deliver();
-        let (world, step, dt) = (&self.world, self.step, self.config.dt);
-        if self.parallel() {
-            let chunk = self.agents.len().div_ceil(rayon::current_num_threads());
-            self.agents.par_iter_mut().with_min_len(chunk.max(1)).for_each(|a| a.step(world, step, dt));
-        } else {
-            for a in &mut self.agents {
-                a.step(world, step, dt);
-            }
-        }
+        let step = self.step;
+        let pending = self.step_agents();
         let mut failure = None;
-        for a in &mut self.agents {
-            if let Some(e) = a.take_error() {
-                failure.get_or_insert(e);
-            }
-        }
-        for agent in &mut self.agents {
-            let mut unconnected = None;
-            for env in agent.outbox().iter() {
-                if !self.transmitter.send(*env, step) {
-                    unconnected.get_or_insert(env.to.0);
+        if pending {
+            for a in &mut self.agents {
+                if let Some(e) = a.take_error() {
+                    failure.get_or_insert(e);
                 }
             }
-            if let Some(to) = unconnected
-                && failure.is_none()
-            {
-                failure = Some(ExecutorError::NoChannel { agent: agent.name().to_string(), step, to });
+            for agent in &mut self.agents {
+                let mut unconnected = None;
+                for env in agent.outbox().iter() {
+                    if !self.transmitter.send(*env, step) {
+                        unconnected.get_or_insert(env.to.0);
+                    }
+                }
+                if let Some(to) = unconnected
+                    && failure.is_none()
+                {
+                    failure = Some(ExecutorError::NoChannel { agent: agent.name().to_string(), step, to });
+                }
             }
         }
-        self.finish_step();
+        self.finish_step(true);
         match failure {
             Some(e) => {
                 self.failure = Some(e.clone());
@@ -238,13 +286,17 @@ impl Runtime {
         }
     }
 
-    fn finish_step(&mut self) {
+    /// Advance the world and close the step's record (`agents_recorded`: the agents' lines are
+    /// already written).
+    fn finish_step(&mut self, agents_recorded: bool) {
         self.world.advance(self.config.dt);
         if self.config.record {
             self.record.step = self.step;
             self.record.time = (self.step + 1) as f64 * self.config.dt;
-            for (a, rec) in self.agents.iter().zip(&mut self.record.agents) {
-                a.record(rec);
+            if !agents_recorded {
+                for (a, rec) in self.agents.iter().zip(&mut self.record.agents) {
+                    a.record(rec);
+                }
             }
         }
         self.step += 1;
@@ -257,7 +309,7 @@ impl Runtime {
         for a in &mut self.agents {
             a.halt_step(world, step, dt);
         }
-        self.finish_step();
+        self.finish_step(false);
         &self.record
     }
 

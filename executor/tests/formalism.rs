@@ -540,8 +540,9 @@ fn safe_halt_stops_on_the_path_within_acceleration_limits() {
 #[test]
 fn runs_are_deterministic_and_independent_of_threads() {
     let robot = std::sync::Arc::new(embodied_models::builtin("irp6-postument").expect("robot"));
-    let build = |parallelism: Parallelism| {
-        let mut rt = Runtime::new(RuntimeConfig { seed: 42, parallelism, ..RuntimeConfig::default() });
+    let build = |parallelism: Parallelism, tasks_per_thread: usize| {
+        let mut rt =
+            Runtime::new(RuntimeConfig { seed: 42, parallelism, tasks_per_thread, ..RuntimeConfig::default() });
         rt.world_mut()
             .add_obstacle(Obstacle { velocity: [0.0, 0.1, 0.0], ..Obstacle::fixed("ball", [0.8, 0.0, 1.2], 0.2) });
         for k in 0..6 {
@@ -586,8 +587,8 @@ fn runs_are_deterministic_and_independent_of_threads() {
         }
         rt
     };
-    let log = |parallelism| {
-        let mut rt = build(parallelism);
+    let log = |parallelism, tasks_per_thread| {
+        let mut rt = build(parallelism, tasks_per_thread);
         let mut bytes = Vec::new();
         rt.run(400, |r| {
             serde_json::to_writer(&mut bytes, r).expect("serialise");
@@ -596,12 +597,14 @@ fn runs_are_deterministic_and_independent_of_threads() {
         .expect("runs");
         bytes
     };
-    let a = log(Parallelism::Sequential);
-    let b = log(Parallelism::Sequential);
-    let c = log(Parallelism::Rayon { min_agents: 2 });
+    let a = log(Parallelism::Sequential, 1);
+    let b = log(Parallelism::Sequential, 1);
+    let c = log(Parallelism::Rayon { min_agents: 2 }, 1);
+    let d = log(Parallelism::Rayon { min_agents: 2 }, 3);
     assert!(a.len() > 10_000);
     assert_eq!(a, b, "same seed, same bytes");
     assert_eq!(a, c, "threads do not change the log");
+    assert_eq!(a, d, "nor does the number of parallel tasks");
     let text = String::from_utf8(a).expect("utf-8");
     assert!(text.contains("\"avoid\""), "the moving obstacle triggered the reflex somewhere");
 }

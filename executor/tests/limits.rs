@@ -75,4 +75,40 @@ proptest! {
             prop_assert!(out.q[i] >= limits[i].lower && out.q[i] <= limits[i].upper);
         }
     }
+
+    /// The limiter-fed shortcut of the servo (`execute_limited`) moves the joints exactly as the
+    /// full tracking law would for the same limited command.
+    #[test]
+    fn the_servo_shortcut_matches_the_full_tracking_law(
+        robot_name in prop::sample::select(vec!["rnt", "polycrank", "irp6-postument"]),
+        seed in any::<u64>(),
+        warm_up in command(8),
+        cmd in command(8),
+    ) {
+        let robot = embodied_models::builtin(robot_name).expect("built-in");
+        let (limits, dof) = (robot.limits(), robot.dof());
+        let mut rng = embodied_models::Rng::new(seed);
+        let q0 = robot.random_configuration(&mut rng);
+        let mut warm_up = warm_up;
+        warm_up.q.truncate(dof);
+        warm_up.qd.truncate(dof);
+        let mut cmd = cmd;
+        cmd.q.truncate(dof);
+        cmd.qd.truncate(dof);
+        let dt = 0.001;
+        // Bring the servo to a moving state first.
+        let mut limiter = SafetyLimiter::new(ServoModel::new(limits.clone(), &q0).expect("servo"));
+        for _ in 0..20 {
+            limiter.execute(&warm_up, dt);
+        }
+        let mut limited = JointCommand::hold(limiter.q());
+        limiter.limit_into(&cmd, dt, &mut limited);
+        let (mut full, mut short) = (limiter.inner().clone(), limiter.inner().clone());
+        full.execute(&limited, dt);
+        short.execute_limited(&limited, dt);
+        for i in 0..dof {
+            prop_assert!((full.q()[i] - short.q()[i]).abs() <= 1e-12, "joint {i}: q {} vs {}", full.q()[i], short.q()[i]);
+            prop_assert!((full.qd()[i] - short.qd()[i]).abs() <= 1e-9, "joint {i}: qd {} vs {}", full.qd()[i], short.qd()[i]);
+        }
+    }
 }
