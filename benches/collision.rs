@@ -210,12 +210,37 @@ fn ur5_table_pick(c: &mut Criterion) {
             black_box(model.collides_with(black_box(&free[i]), &mut scratch))
         })
     });
+    let general = model.clone().general_path_only();
+    bench_cycle(c, "collides/ur5-table-pick/free/general-path", &free, |q| general.collides(q));
     bench_cycle(c, "distance/ur5-table-pick/free", &free, |q| model.distance(q).distance > 0.0);
     let mut k = 0;
     c.bench_function("motion_is_free/ur5-table-pick/free-pairs-0.05rad", |b| {
         b.iter(|| {
             k = (k + 1) % (free.len() - 1);
             black_box(model.motion_is_free(&free[k], &free[k + 1], 0.05))
+        })
+    });
+    // Short motions (0.1 of the way between two free configurations), as a planner's edges.
+    let space = robot.config_space();
+    let short: Vec<(Vec<f64>, Vec<f64>)> = free
+        .windows(2)
+        .map(|w| (w[0].clone(), space.interpolate(&w[0], &w[1], 0.1)))
+        .filter(|(_, b)| !model.collides(b))
+        .collect();
+    let certified = short.iter().filter(|(a, b)| model.motion_is_certified_free(a, b, 1e-4)).count();
+    eprintln!("ur5: {certified}/{} short motions certified free", short.len());
+    let mut k = 0;
+    c.bench_function("motion_is_certified_free/ur5-table-pick/short-motions", |b| {
+        b.iter(|| {
+            k = (k + 1) % short.len();
+            black_box(model.motion_is_certified_free(&short[k].0, &short[k].1, 1e-4))
+        })
+    });
+    let mut k = 0;
+    c.bench_function("motion_is_free/ur5-table-pick/short-motions-0.005rad", |b| {
+        b.iter(|| {
+            k = (k + 1) % short.len();
+            black_box(model.motion_is_free(&short[k].0, &short[k].1, 0.005))
         })
     });
 }

@@ -721,7 +721,7 @@ impl CollisionModel {
                 let arms = &g.pair_lever[p * g.dof..(p + 1) * g.dof];
                 let grow = arms.iter().zip(step).map(|(a, d)| a * d).sum::<f64>() + 1e-12;
                 self.pose_bodies(q, s);
-                match self.pair_hits(a as usize, b as usize, grow, s) {
+                match self.pair_hits::<true>(a as usize, b as usize, grow, s) {
                     Err(()) => Check::Hit,
                     Ok(true) => Check::Near,
                     Ok(false) => Check::Free,
@@ -734,7 +734,7 @@ impl CollisionModel {
     fn check(&self, q: &[f64], inflation: Option<Inflation<'_>>, s: &mut CollisionScratch) -> Check {
         match &self.fast {
             Some(fast) => fast.check(q, &self.obstacles, &self.solids, inflation, &mut s.spheres),
-            None => match self.scan(q, inflation, s) {
+            None => match self.scan_grown(q, inflation, s) {
                 Err(_) => Check::Hit,
                 Ok(true) => Check::Near,
                 Ok(false) => Check::Free,
@@ -826,7 +826,14 @@ impl CollisionModel {
 
     /// Whether link `slot` (grown by `e`) touches obstacle `o`: `Err(())` for an exact contact,
     /// `Ok(true)` when only the grown shapes touch.
-    fn link_hits_obstacle(&self, slot: usize, o: &ObstacleGeom, e: f64, s: &mut CollisionScratch) -> Result<bool, ()> {
+    #[inline]
+    fn link_hits_obstacle<const GROW: bool>(
+        &self,
+        slot: usize,
+        o: &ObstacleGeom,
+        e: f64,
+        s: &mut CollisionScratch,
+    ) -> Result<bool, ()> {
         let l = &self.geom.links[slot];
         if !sphere_hits_aabb(&s.link_c[slot], l.r + e, o) {
             return Ok(false);
@@ -842,13 +849,14 @@ impl CollisionModel {
             if narrow::intersects(&kv, &ov) {
                 return Err(());
             }
-            near = near || (e > 0.0 && narrow::separation(&kv, &ov).distance <= e);
+            near = near || (GROW && e > 0.0 && narrow::separation(&kv, &ov).distance <= e);
         }
         Ok(near)
     }
 
     /// Self-collision pair `a`-`b`, grown by `ea` and `eb`; answers as [`Self::link_hits_obstacle`].
-    fn pair_hits(&self, a: usize, b: usize, grow: f64, s: &mut CollisionScratch) -> Result<bool, ()> {
+    #[inline]
+    fn pair_hits<const GROW: bool>(&self, a: usize, b: usize, grow: f64, s: &mut CollisionScratch) -> Result<bool, ()> {
         let g = &*self.geom;
         let (la, lb) = (&g.links[a], &g.links[b]);
         let rr = la.r + lb.r + grow;
@@ -868,7 +876,7 @@ impl CollisionModel {
                 if narrow::intersects(&vi, &vj) {
                     return Err(());
                 }
-                near = near || (grow > 0.0 && narrow::separation(&vi, &vj).distance <= grow);
+                near = near || (GROW && grow > 0.0 && narrow::separation(&vi, &vj).distance <= grow);
             }
         }
         Ok(near)
@@ -876,15 +884,30 @@ impl CollisionModel {
 
     /// The first colliding pair; `q` has the right length.
     fn find_hit(&self, q: &[f64], s: &mut CollisionScratch) -> Option<Hit> {
-        self.scan(q, None, s).err()
+        self.scan::<false>(q, None, s).err()
     }
 
     /// The general path: `Err(hit)` at the first exact contact, else `Ok(near)` where `near`
     /// says that some shapes grown by `inflation` touch.
-    fn scan(&self, q: &[f64], inflation: Option<Inflation<'_>>, s: &mut CollisionScratch) -> Result<bool, Hit> {
+    fn scan_grown(&self, q: &[f64], inflation: Option<Inflation<'_>>, s: &mut CollisionScratch) -> Result<bool, Hit> {
+        match inflation {
+            Some(_) => self.scan::<true>(q, inflation, s),
+            None => self.scan::<false>(q, None, s),
+        }
+    }
+
+    /// [`Self::scan_grown`], compiled separately for exact queries (`GROW` = false) so the
+    /// hot path carries none of the margin work.
+    #[inline]
+    fn scan<const GROW: bool>(
+        &self,
+        q: &[f64],
+        inflation: Option<Inflation<'_>>,
+        s: &mut CollisionScratch,
+    ) -> Result<bool, Hit> {
         self.pose_bodies(q, s);
         let g = &*self.geom;
-        let grow = |slot: usize| inflation.map_or(0.0, |e| e.link[slot]);
+        let grow = |slot: usize| if GROW { inflation.map_or(0.0, |e| e.link[slot]) } else { 0.0 };
         let mut near = false;
         if !self.obstacles.is_empty() && !g.links.is_empty() {
             // Obstacles near the robot at all: against the box around every link sphere.
@@ -912,7 +935,7 @@ impl CollisionModel {
                 let oi = s.candidates[ci] as usize;
                 let o = &self.obstacles[oi];
                 for slot in 0..g.links.len() {
-                    match self.link_hits_obstacle(slot, o, grow(slot), s) {
+                    match self.link_hits_obstacle::<GROW>(slot, o, grow(slot), s) {
                         Err(()) => return Err(Hit::Env { slot, obstacle: oi }),
                         Ok(n) => near |= n,
                     }
@@ -921,7 +944,7 @@ impl CollisionModel {
         }
         for (p, &(a, b)) in g.self_pairs.iter().enumerate() {
             let (a, b) = (a as usize, b as usize);
-            match self.pair_hits(a, b, inflation.map_or(0.0, |e| e.pair[p]), s) {
+            match self.pair_hits::<GROW>(a, b, if GROW { inflation.map_or(0.0, |e| e.pair[p]) } else { 0.0 }, s) {
                 Err(()) => return Err(Hit::Pair { a, b }),
                 Ok(n) => near |= n,
             }
@@ -1235,7 +1258,7 @@ pub fn disable_always_colliding(robot: &mut Robot, samples: usize, seed: u64) ->
         robot.random_configuration_into(&mut rng, &mut q);
         model.pose_bodies(&q, &mut s);
         for (p, &(a, b)) in g.self_pairs.iter().enumerate() {
-            if model.pair_hits(a as usize, b as usize, 0.0, &mut s).is_err() {
+            if model.pair_hits::<false>(a as usize, b as usize, 0.0, &mut s).is_err() {
                 counts[p] += 1;
             }
         }

@@ -409,10 +409,26 @@ impl SphereGeom {
         inflation: Option<Inflation<'_>>,
         s: &mut SphereScratch,
     ) -> Check {
+        match inflation {
+            Some(_) => self.check_impl::<true>(q, obstacles, solids, inflation, s),
+            None => self.check_impl::<false>(q, obstacles, solids, None, s),
+        }
+    }
+
+    /// [`Self::check`], compiled separately for exact queries (`GROW` = false).
+    #[inline]
+    fn check_impl<const GROW: bool>(
+        &self,
+        q: &[f64],
+        obstacles: &[ObstacleGeom],
+        solids: &[Solid],
+        inflation: Option<Inflation<'_>>,
+        s: &mut SphereScratch,
+    ) -> Check {
         self.pose(q, s);
         // Once some grown shapes touch, the answer is at least `Near`: from then on only an
         // exact contact matters, so the rest of the query runs without margins.
-        let mut inf = inflation;
+        let mut inf = if GROW { inflation } else { None };
         let mut near = false;
         // The box around every (grown) link sphere: obstacles outside it are skipped whole.
         let mut lo = Vector3::repeat(f64::INFINITY);
