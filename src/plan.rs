@@ -8,6 +8,7 @@ use std::time::Duration;
 
 use embodied_models::Robot;
 use embodied_models::collision::{CollisionModel, Environment, Obstacle};
+use embodied_planner::carry::ClosedChainSpan;
 use embodied_planner::deadline::Deadline;
 use embodied_planner::motion::{CERTIFY_TOLERANCE, EdgeCheck, Goal, MotionSettings, MotionStats, plan_motion};
 use embodied_planner::trajectory::{Trajectory, time_parameterize};
@@ -35,6 +36,9 @@ pub struct AgentPlan {
     pub path: Vec<Vec<f64>>,
     pub trajectory: Trajectory,
     pub stats: serde_json::Value,
+    /// Spans where two end effectors hold one object (two-arm plans); empty otherwise.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub closed_chain: Vec<ClosedChainSpan>,
 }
 
 /// A plan file.
@@ -165,6 +169,7 @@ pub fn plan_scenario(scenario: &Scenario, deadline_ms: Option<f64>) -> Result<Pl
             path: plan.path.clone(),
             trajectory,
             stats: serde_json::to_value(stats).map_err(|e| AppError::Failed(e.to_string()))?,
+            closed_chain: Vec::new(),
         });
     }
     if plans.is_empty() {

@@ -339,6 +339,14 @@ impl Robot {
     pub fn disabled_pairs(&self) -> &HashSet<(usize, usize)> {
         &self.disabled_pairs
     }
+    /// Add collision shapes (in the link frame) to a link, e.g. an object the link holds.
+    /// Out-of-range link indices are ignored.
+    pub fn attach_shapes(&mut self, link: usize, shapes: impl IntoIterator<Item = PlacedShape>) {
+        if let Some(l) = self.links.get_mut(link) {
+            l.shapes.extend(shapes);
+        }
+    }
+
     /// Disable self-collision checks between two links (by index).
     pub fn disable_pair(&mut self, a: usize, b: usize) {
         self.disabled_pairs.insert((a.min(b), a.max(b)));

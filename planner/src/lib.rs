@@ -6,6 +6,7 @@
 //! ([`deadline::Deadline`]). Task-level deliberation over production rules lives in [`task`].
 #![forbid(unsafe_code)]
 
+pub mod carry;
 pub mod deadline;
 pub mod error;
 pub mod motion;
