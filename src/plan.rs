@@ -8,7 +8,7 @@ use std::time::Duration;
 
 use embodied_models::Robot;
 use embodied_models::collision::{CollisionModel, Environment, Obstacle};
-use embodied_planner::carry::ClosedChainSpan;
+use embodied_planner::carry::{ClosedChainSpan, plan_carry};
 use embodied_planner::deadline::Deadline;
 use embodied_planner::motion::{CERTIFY_TOLERANCE, EdgeCheck, Goal, MotionSettings, MotionStats, plan_motion};
 use embodied_planner::trajectory::{Trajectory, time_parameterize};
@@ -170,6 +170,21 @@ pub fn plan_scenario(scenario: &Scenario, deadline_ms: Option<f64>) -> Result<Pl
             trajectory,
             stats: serde_json::to_value(stats).map_err(|e| AppError::Failed(e.to_string()))?,
             closed_chain: Vec::new(),
+        });
+    }
+    if let (Some(task), Some(carry)) = (scenario.carry_task(), &scenario.carry) {
+        let agent = &scenario.agents[carry.agent];
+        let plan = plan_carry(&task, &scenario.carry_settings()).map_err(|e| {
+            AppError::Failed(format!("scenario `{}`: agent `{}`: carry: {e}", scenario.name, agent.name))
+        })?;
+        plans.push(AgentPlan {
+            agent: agent.name.clone(),
+            robot: NamedHash { name: agent.robot.name().to_string(), hash: robot_hash(&agent.robot) },
+            joint_names: agent.robot.joint_names(),
+            path: plan.waypoints.clone(),
+            trajectory: plan.trajectory.clone(),
+            stats: serde_json::to_value(&plan.stats).map_err(|e| AppError::Failed(e.to_string()))?,
+            closed_chain: vec![plan.span.clone()],
         });
     }
     if plans.is_empty() {

@@ -23,6 +23,7 @@ pub const BUILTIN_SCENARIOS: &[(&str, &str)] = &[
     ("polycrank-intruder", include_str!("../scenarios/polycrank-intruder.toml")),
     ("irp6-late-plan", include_str!("../scenarios/irp6-late-plan.toml")),
     ("two-irp6-together", include_str!("../scenarios/two-irp6-together.toml")),
+    ("two-irp6-carry", include_str!("../scenarios/two-irp6-carry.toml")),
 ];
 
 /// The scenario `embodied run` uses when given none.
@@ -43,6 +44,26 @@ struct RawScenario {
     planner: RawPlanner,
     #[serde(default)]
     run: RawRun,
+    #[serde(default)]
+    carry: Option<Spanned<RawCarry>>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawCarry {
+    agent: Spanned<String>,
+    object: String,
+    size: Spanned<[f64; 3]>,
+    start_xyz: [f64; 3],
+    goal_xyz: [f64; 3],
+    #[serde(default)]
+    rpy: Option<[f64; 3]>,
+    #[serde(default)]
+    end_effectors: Option<Spanned<[String; 2]>>,
+    #[serde(default)]
+    grasp_roll: Option<[f64; 2]>,
+    #[serde(default)]
+    lattice_step: Option<Spanned<f64>>,
 }
 
 #[derive(Debug, Deserialize, Default)]
@@ -221,6 +242,24 @@ pub struct RunSpec {
     pub coordination: Coordination,
 }
 
+/// A two-handed carry (`[carry]`): agent `agent` (a robot with two end effectors) grasps a box
+/// at both ends of its x axis, carries it from `object_start` to `object_goal` and puts it down.
+#[derive(Debug, Clone)]
+pub struct CarrySpec {
+    pub agent: usize,
+    pub object: String,
+    /// Full box sizes, m.
+    pub size: [f64; 3],
+    pub object_start: Isometry3<f64>,
+    pub object_goal: Isometry3<f64>,
+    /// `[holder, other]` end-effector indices.
+    pub end_effectors: [usize; 2],
+    /// Tool frames in the object frame: the tools approach the object's end faces along its x
+    /// axis, turned by `grasp_roll` about their approach axes.
+    pub grasps: [Isometry3<f64>; 2],
+    pub lattice_step: f64,
+}
+
 /// A loaded, checked scenario.
 #[derive(Debug, Clone)]
 pub struct Scenario {
@@ -234,9 +273,37 @@ pub struct Scenario {
     pub obstacles: Vec<ObstacleSpec>,
     pub planner: PlannerSpec,
     pub run: RunSpec,
+    pub carry: Option<CarrySpec>,
 }
 
 impl Scenario {
+    /// The carry task of a scenario with a `[carry]` table.
+    pub fn carry_task(&self) -> Option<embodied_planner::carry::CarryTask> {
+        let c = self.carry.as_ref()?;
+        let agent = self.agents.get(c.agent)?;
+        Some(embodied_planner::carry::CarryTask {
+            robot: agent.robot.clone(),
+            environment: self.initial_environment(),
+            start: agent.start.clone(),
+            object_name: c.object.clone(),
+            object_size: c.size,
+            object_start: c.object_start,
+            object_goal: c.object_goal,
+            end_effectors: c.end_effectors,
+            grasps: c.grasps,
+        })
+    }
+
+    /// Carry settings of the scenario (its lattice step, the plan's control step).
+    pub fn carry_settings(&self) -> embodied_planner::carry::CarrySettings {
+        let mut settings = embodied_planner::carry::CarrySettings::default();
+        if let Some(c) = &self.carry {
+            settings.lattice_step = c.lattice_step;
+        }
+        settings.motion.seed = self.planner.seed;
+        settings
+    }
+
     /// The obstacles present at time zero.
     pub fn initial_environment(&self) -> Environment {
         let mut env = Environment::new();
@@ -537,6 +604,10 @@ pub fn parse_scenario(text: &str, file: &Path, dir: &Path) -> Result<Scenario, A
             return Err(ctx.err(d.span(), format!("duration: expected a positive time in s, got {}", d.get_ref())));
         }
     };
+    let carry = match &raw.carry {
+        None => None,
+        Some(c) => Some(parse_carry(&ctx, c, &agents)?),
+    };
     Ok(Scenario {
         name: raw.name,
         description: raw.description,
@@ -547,5 +618,90 @@ pub fn parse_scenario(text: &str, file: &Path, dir: &Path) -> Result<Scenario, A
         obstacles,
         planner,
         run: RunSpec { duration, coordination },
+        carry,
+    })
+}
+
+fn parse_carry(ctx: &Ctx, spanned: &Spanned<RawCarry>, agents: &[AgentSpec]) -> Result<CarrySpec, AppError> {
+    use std::f64::consts::FRAC_PI_2;
+    let c = spanned.get_ref();
+    let agent = agents.iter().position(|a| a.name == *c.agent.get_ref()).ok_or_else(|| {
+        let names: Vec<&str> = agents.iter().map(|a| a.name.as_str()).collect();
+        ctx.err(c.agent.span(), format!("carry: no agent `{}`; expected one of {names:?}", c.agent.get_ref()))
+    })?;
+    let robot = &agents[agent].robot;
+    if agents[agent].goal.is_some() {
+        return Err(ctx.err(
+            c.agent.span(),
+            format!("carry: agent `{}` has a goal; the carry decides its motion, remove the goal", c.agent.get_ref()),
+        ));
+    }
+    let size = *c.size.get_ref();
+    if !size.iter().all(|v| v.is_finite() && *v > 0.0) {
+        return Err(ctx.err(c.size.span(), format!("carry: size: expected three positive lengths in m, got {size:?}")));
+    }
+    let names: Vec<&str> = robot.end_effectors().iter().map(|e| e.name.as_str()).collect();
+    let end_effectors = match &c.end_effectors {
+        None if names.len() >= 2 => [0, 1],
+        None => {
+            return Err(ctx.err(
+                c.agent.span(),
+                format!("carry: robot `{}` has {} end effector(s); a carry needs two", robot.name(), names.len()),
+            ));
+        }
+        Some(e) => {
+            let find = |name: &String| {
+                names.iter().position(|n| n == name).ok_or_else(|| {
+                    ctx.err(e.span(), format!("carry: no end effector `{name}`; expected one of {names:?}"))
+                })
+            };
+            let pair = [find(&e.get_ref()[0])?, find(&e.get_ref()[1])?];
+            if pair[0] == pair[1] {
+                return Err(ctx.err(e.span(), "carry: end_effectors: expected two different end effectors"));
+            }
+            pair
+        }
+    };
+    let lattice_step = match &c.lattice_step {
+        None => 0.05,
+        Some(s) if s.get_ref().is_finite() && (0.005..=0.5).contains(s.get_ref()) => *s.get_ref(),
+        Some(s) => {
+            return Err(ctx.err(s.span(), format!("carry: lattice_step: expected 0.005..0.5 m, got {}", s.get_ref())));
+        }
+    };
+    let finite = |v: &[f64], what: &str| -> Result<(), AppError> {
+        if v.iter().all(|x| x.is_finite()) {
+            Ok(())
+        } else {
+            Err(ctx.err(spanned.span(), format!("carry: {what}: expected finite numbers, got {v:?}")))
+        }
+    };
+    finite(&c.start_xyz, "start_xyz")?;
+    finite(&c.goal_xyz, "goal_xyz")?;
+    finite(&c.rpy.unwrap_or([0.0; 3]), "rpy")?;
+    let roll = c.grasp_roll.unwrap_or([FRAC_PI_2, FRAC_PI_2]);
+    finite(&roll, "grasp_roll")?;
+    let half = size[0] / 2.0;
+    let grasps = [
+        Isometry3::from_parts(
+            Translation3::new(-half, 0.0, 0.0),
+            UnitQuaternion::from_axis_angle(&Vector3::y_axis(), FRAC_PI_2)
+                * UnitQuaternion::from_axis_angle(&Vector3::z_axis(), roll[0]),
+        ),
+        Isometry3::from_parts(
+            Translation3::new(half, 0.0, 0.0),
+            UnitQuaternion::from_axis_angle(&Vector3::y_axis(), -FRAC_PI_2)
+                * UnitQuaternion::from_axis_angle(&Vector3::z_axis(), roll[1]),
+        ),
+    ];
+    Ok(CarrySpec {
+        agent,
+        object: c.object.clone(),
+        size,
+        object_start: pose(c.start_xyz, c.rpy),
+        object_goal: pose(c.goal_xyz, c.rpy),
+        end_effectors,
+        grasps,
+        lattice_step,
     })
 }

@@ -1,0 +1,148 @@
+//! The two-handed carry plan: closure, limits, collisions, the obstacle, bad input.
+#![allow(clippy::unwrap_used)]
+
+use std::path::Path;
+
+use embodied::scenario::{load_scenario, parse_scenario};
+use embodied_models::collision::CollisionModel;
+use embodied_models::{Obstacle, Shape};
+use embodied_planner::carry::{plan_carry, pose_difference, relative_tool_pose};
+
+#[test]
+fn carry_plan_keeps_the_grasp_stays_in_limits_and_goes_over_the_wall() {
+    let scenario = load_scenario("two-irp6-carry").unwrap();
+    let task = scenario.carry_task().unwrap();
+    let plan = plan_carry(&task, &scenario.carry_settings()).unwrap();
+    let traj = &plan.trajectory;
+    let robot = &task.robot;
+    let span = &plan.span;
+    assert!(span.from_s > 0.5 && span.to_s > span.from_s + 0.3, "{span:?}");
+
+    // Closure: the relative tool pose stays what it is at the grasp.
+    let inside: Vec<usize> =
+        (0..traj.t.len()).filter(|&k| traj.t[k] >= span.from_s && traj.t[k] <= span.to_s).collect();
+    assert!(inside.len() > 300);
+    let reference = relative_tool_pose(robot, &traj.q[inside[0]], task.end_effectors);
+    let mut worst = (0.0f64, 0.0f64);
+    for &k in &inside {
+        let (m, r) = pose_difference(&reference, &relative_tool_pose(robot, &traj.q[k], task.end_effectors));
+        worst = (worst.0.max(m), worst.1.max(r));
+    }
+    assert!(worst.0 < 1e-6 && worst.1 < 1e-6, "closure drift {worst:?}");
+    // Outside the span the tools do move relative to each other (approach, retreat).
+    let (m0, _) = pose_difference(&reference, &relative_tool_pose(robot, &traj.q[0], task.end_effectors));
+    assert!(m0 > 0.05, "{m0}");
+
+    // Velocity and acceleration limits, as finite differences of the samples.
+    let limits = robot.limits();
+    for k in 1..traj.t.len() {
+        let dt = traj.t[k] - traj.t[k - 1];
+        assert!(dt > 0.0);
+        for (j, l) in limits.iter().enumerate() {
+            assert!(traj.qd[k][j].abs() <= l.max_velocity * (1.0 + 1e-6), "qd at {k} joint {j}");
+            assert!(traj.q[k][j] >= l.lower - 1e-9 && traj.q[k][j] <= l.upper + 1e-9);
+            if dt > 1e-4 {
+                let a = (traj.qd[k][j] - traj.qd[k - 1][j]) / dt;
+                assert!(a.abs() <= l.max_acceleration * (1.0 + 1e-6), "accel {a} at t={} joint {j}", traj.t[k]);
+                let v = (traj.q[k][j] - traj.q[k - 1][j]) / dt;
+                assert!(v.abs() <= l.max_velocity * (1.0 + 1e-3), "position step {v} at {k} joint {j}");
+            }
+        }
+    }
+
+    // The object goes over the wall (its top at 1.0 m) and ends at its goal.
+    let object = span.object.clone().unwrap();
+    let in_tool = object.pose_in_tool().unwrap();
+    let tool = |k: usize| robot.end_effector_poses(&traj.q[k], task.end_effectors[0]).1;
+    let top = inside.iter().map(|&k| (tool(k) * in_tool).translation.z).fold(f64::MIN, f64::max);
+    assert!(top > 1.0 + object.size[2] / 2.0, "highest object centre {top}");
+    let end = tool(*inside.last().unwrap()) * in_tool;
+    assert!((end.translation.vector - task.object_goal.translation.vector).norm() < 1e-6);
+
+    // Collision-free: the arms with the object while it is held, among the obstacles and the
+    // object where it stands otherwise.
+    let other = robot.end_effectors()[task.end_effectors[1]].link;
+    let held =
+        CollisionModel::new(&object.attach(robot, task.end_effectors[0], &[other]).unwrap(), task.environment.clone());
+    let box_at = |pose| {
+        let s = task.object_size;
+        Obstacle::new("bar", pose, Shape::cuboid(s[0] / 2.0, s[1] / 2.0, s[2] / 2.0))
+    };
+    let mut env_start = task.environment.clone();
+    env_start.add(box_at(task.object_start));
+    let mut env_goal = task.environment.clone();
+    env_goal.add(box_at(task.object_goal));
+    let (before, after) = (CollisionModel::new(robot, env_start), CollisionModel::new(robot, env_goal));
+    for k in (0..traj.t.len()).step_by(7) {
+        let t = traj.t[k];
+        let model = if t < span.from_s {
+            &before
+        } else if t <= span.to_s {
+            &held
+        } else {
+            &after
+        };
+        assert!(
+            model.first_collision(&traj.q[k]).is_none(),
+            "collision at t = {t}: {:?}",
+            model.first_collision(&traj.q[k])
+        );
+    }
+    assert!(plan.stats.object_segments >= 2, "{:?}", plan.stats);
+}
+
+#[test]
+fn without_the_wall_the_object_path_is_straight_and_low() {
+    let mut scenario = load_scenario("two-irp6-carry").unwrap();
+    scenario.obstacles.retain(|o| o.obstacle.name != "wall");
+    let task = scenario.carry_task().unwrap();
+    let plan = plan_carry(&task, &scenario.carry_settings()).unwrap();
+    assert_eq!(plan.stats.object_segments, 1, "{:?}", plan.stats);
+    let straight = (task.object_goal.translation.vector - task.object_start.translation.vector).norm();
+    assert!((plan.stats.object_path_m - straight).abs() < 1e-9);
+}
+
+#[test]
+fn an_unreachable_goal_is_an_error_not_a_panic() {
+    let mut scenario = load_scenario("two-irp6-carry").unwrap();
+    let c = scenario.carry.as_mut().unwrap();
+    c.object_goal.translation.vector.x = 2.5;
+    let e = plan_carry(&scenario.carry_task().unwrap(), &scenario.carry_settings()).unwrap_err().to_string();
+    assert!(e.contains("no path for the object"), "{e}");
+}
+
+fn carry_scenario(carry: &str) -> String {
+    format!("name = \"c\"\ndescription = \"d\"\n[[agents]]\nname = \"pair\"\nrobot = \"two-irp6\"\n[carry]\n{carry}\n")
+}
+
+fn err_of(text: &str) -> String {
+    match parse_scenario(text, Path::new("bad.toml"), Path::new(".")) {
+        Ok(_) => panic!("expected an error for:\n{text}"),
+        Err(e) => e.to_string(),
+    }
+}
+
+#[test]
+fn bad_carry_tables_name_the_place() {
+    let ok =
+        "object = \"bar\"\nsize = [0.8, 0.04, 0.04]\nstart_xyz = [0.55, 1.05, 0.95]\ngoal_xyz = [0.78, 1.05, 0.95]";
+    assert!(
+        parse_scenario(&carry_scenario(&format!("agent = \"pair\"\n{ok}")), Path::new("a"), Path::new(".")).is_ok()
+    );
+    let e = err_of(&carry_scenario(&format!("agent = \"nobody\"\n{ok}")));
+    assert!(e.starts_with("bad.toml:7:") && e.contains("no agent `nobody`"), "{e}");
+    let e = err_of(&carry_scenario(&format!("agent = \"pair\"\n{}", ok.replace("0.8, 0.04", "-0.8, 0.04"))));
+    assert!(e.contains("size: expected three positive lengths"), "{e}");
+    let e = err_of(&carry_scenario(&format!("agent = \"pair\"\nend_effectors = [\"irp6p\", \"irp6p\"]\n{ok}")));
+    assert!(e.contains("two different end effectors"), "{e}");
+    let e = err_of(&carry_scenario(&format!("agent = \"pair\"\nend_effectors = [\"irp6p\", \"hand\"]\n{ok}")));
+    assert!(e.contains("no end effector `hand`"), "{e}");
+    let e = err_of(&carry_scenario(&format!("agent = \"pair\"\nlattice_step = 0\n{ok}")));
+    assert!(e.contains("lattice_step"), "{e}");
+    let e = err_of(&carry_scenario(&format!("agent = \"pair\"\ncolour = 3\n{ok}")));
+    assert!(e.contains("colour"), "{e}");
+    let one_arm =
+        "name = \"c\"\ndescription = \"d\"\n[[agents]]\nname = \"arm\"\nrobot = \"irp6-postument\"\n[carry]\n";
+    let e = err_of(&format!("{one_arm}agent = \"arm\"\n{ok}"));
+    assert!(e.contains("a carry needs two"), "{e}");
+}
