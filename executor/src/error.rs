@@ -32,6 +32,15 @@ pub enum ExecutorError {
     /// The closed-chain QP could not be solved.
     #[error("closed-chain QP failed: {0}")]
     Qp(String),
+    /// The closed-chain QP has no solution: its bounds and inequality rows contradict each other.
+    #[error("closed-chain QP infeasible: {0}")]
+    QpInfeasible(String),
+    /// An input holds NaN or an infinity where a finite number is needed.
+    #[error("{what} is not finite")]
+    NotFinite { what: String },
+    /// A parameter outside its valid range.
+    #[error("invalid {what}: {reason}")]
+    InvalidParameter { what: String, reason: String },
 }
 
 fn describe_held(held: &[String]) -> String {

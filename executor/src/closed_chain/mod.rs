@@ -1,21 +1,36 @@
 //! Two arms holding one rigid object: the velocity-level QP solved each control step
-//! (robots/README.md section 6), with clarabel.
+//! (robots/README.md section 6).
 //!
 //! ```text
-//! min_qd  ||J_a qd - v_a*||^2 + lambda ||qd||^2
-//! s.t.    J_R qd = 0                         (closure: no relative motion of the grasps)
-//!         lo <= qd <= hi                     (velocity and position bounds)
+//! min_qd  ||J_a qd - v_a*||^2 + lambda ||qd||^2 (+ mu ||qd - qd_prev||^2)
+//! s.t.    J_R qd = -k_r e_r                  (closure: no relative motion of the grasps)
+//!         lo <= qd <= hi                     (velocity, position and acceleration bounds)
+//!         a_iᵀ qd <= b_i                     (collision velocity dampers)
 //! ```
 //! `J_a = (J_1 + J_2) / 2` (absolute, cooperative task space) and
 //! `J_R = [-R̄_1ᵀ Γ(p_2 - p_1) J_1, R̄_1ᵀ J_2]` (relative Jacobian, expressed in the first
 //! end-effector frame, with the Γ term of Jamisola & Roberts). For one robot model holding both
 //! arms (e.g. `two-irp6`), `J_1` and `J_2` are full-width Jacobians with zero columns for the
 //! other arm's joints, and the two block columns add up.
+//!
+//! [`ClosedChainController`] is the per-step form: made once, it solves each step with a dense
+//! dual active-set solver (warm-started, no allocation) and keeps clarabel, with one solver object
+//! updated in place, as fallback and cross-check ([`ClosedChainController::compare`]).
+//! [`ClosedChainQp`] is the older one-shot form (a fresh clarabel solver per call).
+
+mod controller;
+mod dense;
+mod reference;
+
+pub use controller::{
+    ClosedChainConfig, ClosedChainController, ClosedChainSolution, ClosureMode, DamperParams, QpBackend, QpComparison,
+    StepInput, VelocityDamper, step_bounds,
+};
 
 use clarabel::algebra::CscMatrix;
 use clarabel::solver::{DefaultSettingsBuilder, DefaultSolver, IPSolver, SolverStatus, SupportedConeT};
-use embodied_models::JointLimits;
-use embodied_models::nalgebra::{DMatrix, DVector, Isometry3, Matrix3, Matrix6xX, Vector3};
+use embodied_models::nalgebra::{DMatrix, DVector, Isometry3, Matrix3, Matrix6xX, UnitQuaternion, Vector3, Vector6};
+use embodied_models::{JointLimits, Robot};
 
 use crate::error::ExecutorError;
 
@@ -153,5 +168,91 @@ impl ClosedChainQp {
             SolverStatus::Solved | SolverStatus::AlmostSolved => Ok(DVector::from_vec(solver.solution.x.clone())),
             status => Err(ExecutorError::Qp(format!("{status:?}"))),
         }
+    }
+}
+
+/// Pose of tool 2 in tool 1's frame: `T_1⁻¹ T_2`.
+pub fn relative_pose(pose1: &Isometry3<f64>, pose2: &Isometry3<f64>) -> Isometry3<f64> {
+    pose1.inverse() * pose2
+}
+
+/// Closure error `e_r` of the relative pose `T_1⁻¹ T_2` against `reference` (its value at grasp
+/// time), in tool 1's frame and in the units of `J_R qd`: `[p_r - p_ref; log(R_r R_refᵀ)]`
+/// (position, then rotation vector). `J_R qd = -k_r e_r` makes it decay at rate `k_r`.
+pub fn relative_pose_error(pose1: &Isometry3<f64>, pose2: &Isometry3<f64>, reference: &Isometry3<f64>) -> Vector6<f64> {
+    let rel = relative_pose(pose1, pose2);
+    let dp = rel.translation.vector - reference.translation.vector;
+    let dr = (rel.rotation * reference.rotation.inverse()).scaled_axis();
+    Vector6::new(dp.x, dp.y, dp.z, dr.x, dr.y, dr.z)
+}
+
+/// Absolute (cooperative) pose of the two tools: the midpoint of the tool origins, oriented half
+/// way along the relative rotation from tool 1 to tool 2 (`R_a = R_1 Rot(k_12, θ_12 / 2)`).
+pub fn absolute_pose(pose1: &Isometry3<f64>, pose2: &Isometry3<f64>) -> Isometry3<f64> {
+    let p = (pose1.translation.vector + pose2.translation.vector) * 0.5;
+    let half = (pose1.rotation.inverse() * pose2.rotation).powf(0.5);
+    Isometry3::from_parts(p.into(), pose1.rotation * half)
+}
+
+/// World-frame error of `actual` against `desired`, `[p* - p; log(R* Rᵀ)]`: the twist that
+/// closes the gap in unit time. Feedback for the absolute task: `v_a = v_a* + K_a e_a`.
+pub fn pose_error(desired: &Isometry3<f64>, actual: &Isometry3<f64>) -> Vector6<f64> {
+    let dp = desired.translation.vector - actual.translation.vector;
+    let dr = (desired.rotation * actual.rotation.inverse()).scaled_axis();
+    Vector6::new(dp.x, dp.y, dp.z, dr.x, dr.y, dr.z)
+}
+
+/// Rotate a pose by a constant world-frame twist `v` for time `t` (rotation about its own origin).
+pub fn integrate_pose(pose: &Isometry3<f64>, v: &Vector6<f64>, t: f64) -> Isometry3<f64> {
+    let lin = Vector3::new(v[0], v[1], v[2]) * t;
+    let rot = UnitQuaternion::from_scaled_axis(Vector3::new(v[3], v[4], v[5]) * t);
+    Isometry3::from_parts((pose.translation.vector + lin).into(), rot * pose.rotation)
+}
+
+/// The two-arm kinematic quantities one step needs, for end effectors 0 and 1 of a robot.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ChainKinematics {
+    /// Absolute Jacobian (6 x n).
+    pub j_a: DMatrix<f64>,
+    /// Relative Jacobian (6 x n).
+    pub j_r: DMatrix<f64>,
+    /// Tool poses of end effectors 0 and 1.
+    pub tool1: Isometry3<f64>,
+    pub tool2: Isometry3<f64>,
+}
+
+impl ChainKinematics {
+    /// Jacobians and tool poses at `q` (one forward-kinematics pass).
+    pub fn new(robot: &Robot, q: &[f64]) -> Result<Self, ExecutorError> {
+        if q.len() != robot.dof() {
+            return Err(ExecutorError::DimensionMismatch { what: "q".into(), expected: robot.dof(), got: q.len() });
+        }
+        if robot.end_effectors().len() < 2 {
+            return Err(ExecutorError::DimensionMismatch {
+                what: format!("end effectors of {}", robot.name()),
+                expected: 2,
+                got: robot.end_effectors().len(),
+            });
+        }
+        if q.iter().any(|v| !v.is_finite()) {
+            return Err(ExecutorError::NotFinite { what: "q".into() });
+        }
+        let poses = robot.forward_kinematics(q);
+        let (e1, e2) = (&robot.end_effectors()[0], &robot.end_effectors()[1]);
+        let j1 = robot.jacobian_with_poses(&poses, e1.link, &e1.tool);
+        let j2 = robot.jacobian_with_poses(&poses, e2.link, &e2.tool);
+        let tool1 = poses[e1.link] * e1.tool;
+        let tool2 = poses[e2.link] * e2.tool;
+        Ok(Self { j_a: absolute_jacobian(&j1, &j2), j_r: relative_jacobian(&j1, &j2, &tool1, &tool2), tool1, tool2 })
+    }
+
+    /// [`absolute_pose`] of the two tools.
+    pub fn absolute_pose(&self) -> Isometry3<f64> {
+        absolute_pose(&self.tool1, &self.tool2)
+    }
+
+    /// [`relative_pose`] of the two tools.
+    pub fn relative_pose(&self) -> Isometry3<f64> {
+        relative_pose(&self.tool1, &self.tool2)
     }
 }
