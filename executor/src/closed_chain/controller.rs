@@ -410,9 +410,9 @@ impl ClosedChainController {
         finite("J_R", input.j_r.iter().all(|v| v.is_finite()))?;
         finite("v_a", input.v_a.iter().all(|v| v.is_finite()))?;
         finite("e_r", input.e_r.iter().all(|v| v.is_finite()))?;
-        for (k, d) in input.dampers.iter().enumerate() {
+        for d in input.dampers {
             dims("velocity damper row", n, d.a.len())?;
-            finite(&format!("velocity damper {k}"), d.a.iter().all(|v| v.is_finite()) && !d.b.is_nan())?;
+            finite("velocity damper row", d.a.iter().all(|v| v.is_finite()) && !d.b.is_nan())?;
         }
 
         let c = &self.config;
@@ -425,7 +425,7 @@ impl ClosedChainController {
         }
         data.g_hard.gemv_tr(-2.0, input.j_a, &input.v_a, 0.0);
         data.g_hard.axpy(-2.0 * c.smoothness, &self.qd_prev, 1.0);
-        data.eq_t.copy_from(&input.j_r.transpose());
+        data.eq_t.tr_copy_from(input.j_r);
         for k in 0..6 {
             data.eq_rhs[k] = -c.closure_gain * input.e_r[k];
         }
