@@ -18,12 +18,14 @@ use std::time::Instant;
 
 use embodied_executor::closed_chain::{
     ChainKinematics, ClosedChainConfig, ClosedChainController, ClosureMode, DamperParams, StepInput, VelocityDamper,
-    pose_error, relative_pose_error,
+    pose_error, relative_pose_error, step_bounds,
 };
-use embodied_executor::{Agent, InputImages, OutputImages, Predicate, Primitive, Reactive, SafeHalt, TransitionFunction};
-use embodied_models::collision::{Body, CollisionModel};
-use embodied_models::nalgebra::{DVector, Isometry3, Vector6};
+use embodied_executor::{
+    Agent, InputImages, OutputImages, Predicate, Primitive, Reactive, SafeHalt, TransitionFunction,
+};
 use embodied_models::Robot;
+use embodied_models::collision::{Body, CollisionModel};
+use embodied_models::nalgebra::{DMatrix, DVector, Isometry3, Vector6};
 use embodied_planner::carry::{CarryPlan, plan_carry, pose_difference};
 use serde::Serialize;
 
@@ -59,6 +61,8 @@ pub struct ClosedChainSummary {
     pub max_tracking_error_m: f64,
     pub closest_obstacle_m: f64,
     pub damper_steps: usize,
+    /// Steps where a damper asked for more deceleration than the limits allow in one step.
+    pub damper_relaxed_steps: usize,
     pub halts: usize,
     pub halt_reason: Option<String>,
     /// Where the object was put down, against the scenario's goal, m.
@@ -76,9 +80,13 @@ pub struct CarryRecord {
 /// `c_c` of the carrying agent.
 pub struct CarryAgent {
     robot: Arc<Robot>,
-    held: CollisionModel,
+    /// The arms (with the object) against the environment, self pairs off.
+    against_environment: CollisionModel,
+    /// One arm (with the object) against the other, no environment.
+    arm_against_arm: CollisionModel,
     plan: CarryPlan,
     controller: ClosedChainController,
+    limits: Vec<embodied_models::JointLimits>,
     damper: DamperParams,
     /// Relative pose of tool 2 in tool 1 at the grasp.
     reference: Option<Isometry3<f64>>,
@@ -179,35 +187,60 @@ impl CarryAgent {
             Ok(k) => k,
             Err(e) => return self.halt(e.to_string(), i, o),
         };
-        let qd_plan_v = DVector::from_column_slice(&qd_plan);
-        let feedforward: Vector6<f64> = {
-            let v = &planned.j_a * &qd_plan_v;
-            Vector6::from_iterator(v.iter().copied())
-        };
-        let v_a = feedforward + pose_error(&planned.absolute_pose(), &kin.absolute_pose()) * OBJECT_GAIN;
+        // The object's task: its frame rigidly attached to tool 1 (the symmetric "absolute" frame
+        // of the two tools is ill-defined when they face each other, as here).
+        let holder = &self.robot.end_effectors()[0];
+        let frame = holder.tool * self.object_in_tool;
+        let j_object = self.robot.jacobian(q, holder.link, &frame);
+        let j_object = DMatrix::from_column_slice(6, q.len(), j_object.as_slice());
+        let j_planned = self.robot.jacobian(&q_plan, holder.link, &frame);
+        let feedforward: Vector6<f64> = j_planned * DVector::from_column_slice(&qd_plan);
+        let object = kin.tool1 * self.object_in_tool;
+        let planned_object = planned.tool1 * self.object_in_tool;
+        let v_a = feedforward + pose_error(&planned_object, &object) * OBJECT_GAIN;
         let e_r = relative_pose_error(&kin.tool1, &kin.tool2, &reference);
         let posture: Vec<f64> =
             qd_plan.iter().zip(q_plan.iter().zip(q)).map(|(v, (p, a))| v + POSTURE_GAIN * (p - a)).collect();
-        // The nearest pair (arm-arm, arm-object, arm/object-environment) as a velocity damper.
-        let report = self.held.distance(q);
+        // Velocity dampers: the nearest pair between the arms (the object with the holder) and
+        // the nearest pair between the arms (with the object) and the environment.
         let mut dampers = Vec::new();
-        if report.distance < self.damper.influence && report.distance > 0.0 {
+        let mut nearest = f64::INFINITY;
+        let mut relaxed = false;
+        let (mut lo, mut hi) = (vec![0.0; q.len()], vec![0.0; q.len()]);
+        let reports = [self.arm_against_arm.distance(q), self.against_environment.distance(q)];
+        if let Some(r) = reports.iter().find(|r| r.distance <= 0.0) {
+            let reason = format!("contact: {} and {}", r.a.name(), r.b.name());
+            return self.halt(reason, i, o);
+        }
+        for report in &reports {
+            nearest = nearest.min(report.distance);
+            if report.distance >= self.damper.influence {
+                continue;
+            }
             let normal = (report.point_a - report.point_b) / report.distance;
             let jac = |body: &Body, p: &embodied_models::nalgebra::Point3<f64>| match body {
                 Body::Link { link, .. } => {
                     let local = self.robot.link_pose(q, *link).inverse_transform_point(p);
-                    Some(self.robot.jacobian(q, *link, &Isometry3::translation(local.x, local.y, local.z)))
+                    self.robot.jacobian(q, *link, &Isometry3::translation(local.x, local.y, local.z))
                 }
-                Body::Obstacle { .. } => None,
+                Body::Obstacle { .. } => embodied_models::nalgebra::Matrix6xX::zeros(q.len()),
             };
-            let zero = embodied_models::nalgebra::Matrix6xX::zeros(q.len());
-            let ja = jac(&report.a, &report.point_a).unwrap_or_else(|| zero.clone());
-            let jb = jac(&report.b, &report.point_b).unwrap_or(zero);
-            dampers.extend(VelocityDamper::from_witness(&normal, &ja, &jb, report.distance, &self.damper));
-        } else if report.distance <= 0.0 {
-            return self.halt(format!("contact: {} and {}", report.a.name(), report.b.name()), i, o);
+            let (ja, jb) = (jac(&report.a, &report.point_a), jac(&report.b, &report.point_b));
+            if let Some(mut row) = VelocityDamper::from_witness(&normal, &ja, &jb, report.distance, &self.damper) {
+                // Within one step the joints can only decelerate so much: a row asking for more
+                // than the acceleration limits allow becomes "approach as slowly as possible".
+                step_bounds(q, self.controller.previous_velocity().as_slice(), &self.limits, i.dt(), &mut lo, &mut hi);
+                let best: f64 =
+                    row.a.iter().enumerate().map(|(j, a)| if *a > 0.0 { a * lo[j] } else { a * hi[j] }).sum();
+                if best > row.b {
+                    row.b = best + 1e-9 * (1.0 + best.abs());
+                    relaxed = true;
+                }
+                dampers.push(row);
+            }
         }
-        let input = StepInput { q, j_a: &kin.j_a, j_r: &kin.j_r, v_a, e_r, dampers: &dampers, posture: &posture };
+        let input =
+            StepInput { q, j_a: &j_object, j_r: &kin.j_r, v_a, e_r, dampers: &dampers, reference: Some(&posture) };
         let started = Instant::now();
         let solution = self.controller.step(&input);
         let ns = started.elapsed().as_nanos() as u64;
@@ -215,8 +248,6 @@ impl CarryAgent {
         match solution {
             Ok(s) => {
                 let (closure_m, closure_rad) = pose_difference(&reference, &kin.relative_pose());
-                let object = kin.tool1 * self.object_in_tool;
-                let planned_object = planned.tool1 * self.object_in_tool;
                 let tracking = (object.translation.vector - planned_object.translation.vector).norm();
                 let qd: Vec<f64> = s.qd.iter().copied().collect();
                 self.with_record(|r| {
@@ -230,8 +261,9 @@ impl CarryAgent {
                     m.max_closure_error_m = m.max_closure_error_m.max(closure_m);
                     m.max_closure_error_rad = m.max_closure_error_rad.max(closure_rad);
                     m.max_tracking_error_m = m.max_tracking_error_m.max(tracking);
-                    m.closest_obstacle_m = m.closest_obstacle_m.min(report.distance);
+                    m.closest_obstacle_m = m.closest_obstacle_m.min(nearest);
                     m.damper_steps += usize::from(!dampers.is_empty());
+                    m.damper_relaxed_steps += usize::from(relaxed);
                 });
                 o.set_velocity_target(&qd);
             }
@@ -291,7 +323,7 @@ pub fn carry_agent(
     let held_robot = object
         .attach(&agent.robot, ee[0], &[other_link])
         .ok_or_else(|| AppError::Failed("carry: cannot attach the object".into()))?;
-    let held = CollisionModel::new(&held_robot, scenario.initial_environment());
+    let (against_environment, arm_against_arm) = damper_models(&held_robot, ee, scenario);
     let controller = ClosedChainController::new(agent.robot.limits(), ClosedChainConfig { dt, ..Default::default() })
         .map_err(|e| AppError::Failed(format!("carry: closed-chain controller: {e}")))?;
     let record = Arc::new(Mutex::new(CarryRecord {
@@ -320,10 +352,12 @@ pub fn carry_agent(
     let start = plan.trajectory.q.first().cloned().unwrap_or_else(|| agent.start.clone());
     let state = CarryAgent {
         robot: Arc::new(agent.robot.clone()),
-        held,
+        against_environment,
+        arm_against_arm,
         plan,
         controller,
-        damper: DamperParams::default(),
+        limits: agent.robot.limits(),
+        damper: DamperParams { xi: 1.0, safety: 0.003, influence: 0.03 },
         reference: None,
         object_in_tool,
         goal: spec.object_goal,
@@ -336,6 +370,39 @@ pub fn carry_agent(
     let a = Agent::embodied(agent.name.clone(), Arc::new(agent.robot.clone()), Some(&start), state, program())
         .map_err(|e| AppError::Failed(format!("agent `{}`: {e}", agent.name)))?;
     Ok((a, record, header))
+}
+
+/// The two collision models of the dampers: the robot without self pairs among the
+/// environment, and each arm's links (the chain to its end effector) against the other arm's,
+/// with no environment.
+fn damper_models(robot: &Robot, ee: [usize; 2], scenario: &Scenario) -> (CollisionModel, CollisionModel) {
+    let n = robot.links().len();
+    let mut alone = robot.clone();
+    for a in 0..n {
+        for b in a + 1..n {
+            alone.disable_pair(a, b);
+        }
+    }
+    let arm = |k: usize| -> Vec<usize> {
+        let link = robot.end_effectors()[ee[k]].link;
+        let mut links: Vec<usize> = robot.chain_to(link).iter().map(|&j| robot.joints()[j].child_link).collect();
+        links.retain(|&l| l != 0);
+        links
+    };
+    let (first, second) = (arm(0), arm(1));
+    let mut arms = robot.clone();
+    for a in 0..n {
+        for b in a + 1..n {
+            let across = (first.contains(&a) && second.contains(&b)) || (first.contains(&b) && second.contains(&a));
+            if !across {
+                arms.disable_pair(a, b);
+            }
+        }
+    }
+    (
+        CollisionModel::new(&alone, scenario.initial_environment()),
+        CollisionModel::new(&arms, embodied_models::collision::Environment::new()),
+    )
 }
 
 /// Percentiles of the QP times into the summary.

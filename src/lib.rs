@@ -6,6 +6,7 @@
 //! URDF path, the `model` report, scenario files and reports.
 #![forbid(unsafe_code)]
 
+pub mod carry_run;
 pub mod deadlines;
 pub mod error;
 pub mod mbm;

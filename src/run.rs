@@ -78,6 +78,9 @@ pub struct RunSummary {
     pub behaviour_switches: Vec<(f64, String, String)>,
     pub failure: Option<String>,
     pub log_lines: usize,
+    /// The two-handed carry, when the scenario has one.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub closed_chain: Option<crate::carry_run::ClosedChainSummary>,
 }
 
 #[derive(Debug, Serialize, Default)]
@@ -495,8 +498,15 @@ pub fn run_scenario(args: &RunArgs) -> Result<RunSummary, AppError> {
     if sensing {
         settings.obstacle_sensing = Some(f64::INFINITY);
     }
+    let mut carry = None;
     for (k, agent) in scenario.agents.iter().enumerate() {
         let robot = Arc::new(agent.robot.clone());
+        if scenario.carry.as_ref().is_some_and(|c| c.agent == k) {
+            let (a, record, header) = crate::carry_run::carry_agent(&scenario, dt, clock)?;
+            runtime.add_agent(a);
+            carry = Some((record, header));
+            continue;
+        }
         let Some(goal) = &agent.goal else {
             // No goal: it holds where it stands.
             let hold = Primitive::new("hold", 1, |_: &mut (), i: &InputImages, o: &mut OutputImages| {
@@ -588,6 +598,7 @@ pub fn run_scenario(args: &RunArgs) -> Result<RunSummary, AppError> {
     log.line(&json!({"header": {
         "scenario": scenario.name, "scenario_hash": scenario.hash, "seed": seed, "step_s": dt,
         "duration_s": duration, "planning_clock": clock_name(clock), "agents": header_agents,
+        "closed_chain": carry.as_ref().map(|(_, h)| h),
     }}))?;
 
     let steps = (duration / dt).round() as u64;
@@ -677,6 +688,7 @@ pub fn run_scenario(args: &RunArgs) -> Result<RunSummary, AppError> {
         behaviour_switches: switches,
         failure,
         log_lines: 0,
+        closed_chain: carry.as_ref().and_then(|(r, _)| crate::carry_run::finish(r)),
     };
     log.line(&json!({"summary": &summary}))?;
     summary.log_lines = log.lines();
@@ -738,6 +750,31 @@ pub fn render_summary(s: &RunSummary) -> String {
             a.replans,
             if a.goal_reached { "reached" } else { "not reached" },
             a.max_speed_ratio
+        );
+    }
+    if let Some(c) = &s.closed_chain {
+        let _ = writeln!(
+            out,
+            "  closed chain ({}): plan {:.1} ms, {:.2} s of motion; held {} steps; QP p50 {:.1} us, p99 {:.1} us, max {:.1} us ({} late, {} fallbacks, {} slacked); largest closure error {:.2e} m / {:.2e} rad (residual {:.1e}); object tracking {:.2e} m; nearest obstacle {:.3} m ({} damped steps); halts {}{}; object put down {} from its goal",
+            c.agent,
+            c.planning_ms,
+            c.plan_duration_s,
+            c.qp_steps,
+            c.qp_p50_us,
+            c.qp_p99_us,
+            c.qp_max_us,
+            c.qp_late_steps,
+            c.qp_fallbacks,
+            c.slacked_steps,
+            c.max_closure_error_m,
+            c.max_closure_error_rad,
+            c.max_closure_residual,
+            c.max_tracking_error_m,
+            c.closest_obstacle_m,
+            c.damper_steps,
+            c.halts,
+            c.halt_reason.as_ref().map_or(String::new(), |r| format!(" ({r})")),
+            c.object_goal_error_m.map_or("-".to_string(), |e| format!("{e:.4} m")),
         );
     }
     let _ = writeln!(out, "behaviour switches:");

@@ -27,7 +27,7 @@ pub const BUILTIN_SCENARIOS: &[(&str, &str)] = &[
 ];
 
 /// The scenario `embodied run` uses when given none.
-pub const DEFAULT_SCENARIO: &str = "two-irp6-cell";
+pub const DEFAULT_SCENARIO: &str = "two-irp6-carry";
 
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]

@@ -79,7 +79,15 @@ fn braking(d: f64, a: f64, dt: f64) -> f64 {
 }
 
 fn input<'a>(r: &'a Random) -> StepInput<'a> {
-    StepInput { q: &r.q, j_a: &r.kin.j_a, j_r: &r.kin.j_r, v_a: r.v_a, e_r: r.e_r, dampers: &r.dampers }
+    StepInput {
+        q: &r.q,
+        j_a: &r.kin.j_a,
+        j_r: &r.kin.j_r,
+        v_a: r.v_a,
+        e_r: r.e_r,
+        dampers: &r.dampers,
+        reference: None,
+    }
 }
 
 /// The commanded velocity respects the model's limits: speed, acceleration from `qd_prev` and the
@@ -197,8 +205,15 @@ fn bad_inputs_are_errors() {
     let q = robot.home().to_vec();
     let kin = ChainKinematics::new(&robot, &q).unwrap();
     let mut ctl = ClosedChainController::new(robot.limits(), ClosedChainConfig::default()).unwrap();
-    let ok =
-        StepInput { q: &q, j_a: &kin.j_a, j_r: &kin.j_r, v_a: Vector6::zeros(), e_r: Vector6::zeros(), dampers: &[] };
+    let ok = StepInput {
+        q: &q,
+        j_a: &kin.j_a,
+        j_r: &kin.j_r,
+        v_a: Vector6::zeros(),
+        e_r: Vector6::zeros(),
+        dampers: &[],
+        reference: None,
+    };
     assert!(ctl.step(&ok).is_ok());
     let mut v = Vector6::zeros();
     v[2] = f64::NAN;
@@ -250,7 +265,7 @@ fn drift_correction_keeps_the_grasp_and_the_bar_follows_the_twist() {
             worst_late =
                 (worst_late.0.max(e_r.fixed_rows::<3>(0).norm()), worst_late.1.max(e_r.fixed_rows::<3>(3).norm()));
         }
-        let input = StepInput { q: &q, j_a: &kin.j_a, j_r: &kin.j_r, v_a, e_r, dampers: &[] };
+        let input = StepInput { q: &q, j_a: &kin.j_a, j_r: &kin.j_r, v_a, e_r, dampers: &[], reference: None };
         let sol = ctl.step(&input).unwrap();
         // Starting from rest, the acceleration bound may not allow the full correction at once.
         if sol.closure == ClosureMode::Slacked {
@@ -303,7 +318,7 @@ fn closed_grasp_stays_closed_while_carrying() {
         let kin = ChainKinematics::new(&robot, &q).unwrap();
         let e_r = relative_pose_error(&kin.tool1, &kin.tool2, &reference);
         worst = worst.max(e_r.amax());
-        let input = StepInput { q: &q, j_a: &kin.j_a, j_r: &kin.j_r, v_a: twist, e_r, dampers: &[] };
+        let input = StepInput { q: &q, j_a: &kin.j_a, j_r: &kin.j_r, v_a: twist, e_r, dampers: &[], reference: None };
         let sol = ctl.step(&input).unwrap();
         for (qi, v) in q.iter_mut().zip(sol.qd.iter()) {
             *qi += v * dt;

@@ -133,6 +133,11 @@ pub struct CarrySettings {
     pub tolerance_rad: f64,
     /// The free approach motion (joint space).
     pub motion: MotionSettings,
+    /// Clearance the object's path keeps from obstacles where it can, m: closer lattice poses
+    /// cost more (weight `clearance_weight`), and a shortcut may not come closer than the
+    /// lattice path it replaces.
+    pub clearance: f64,
+    pub clearance_weight: f64,
     /// Lazy search rounds (an edge found in collision is removed and the search repeated).
     pub max_rounds: usize,
     /// Expansion budget of one search round.
@@ -152,6 +157,8 @@ impl Default for CarrySettings {
             tolerance_m: 1e-3,
             tolerance_rad: 2e-3,
             motion: MotionSettings::default(),
+            clearance: 0.04,
+            clearance_weight: 3.0,
             max_rounds: 40,
             max_expansions: 200_000,
         }
@@ -368,6 +375,9 @@ struct ObjectLattice<'a> {
     hi: [i32; 3],
     goal: [i32; 3],
     configurations: RefCell<HashMap<[i32; 3], Option<Vec<f64>>>>,
+    /// The arms with the object against the environment only (clearances).
+    clear: &'a CollisionModel,
+    clearances: RefCell<HashMap<[i32; 3], f64>>,
     blocked: HashSet<([i32; 3], [i32; 3])>,
     ik_failures: RefCell<usize>,
     checks: RefCell<u64>,
@@ -390,6 +400,17 @@ impl ObjectLattice<'_> {
         [object * self.task.grasps[0], object * self.task.grasps[1]]
     }
 
+    /// Clearance of a lattice pose from the environment (infinite when unknown).
+    fn clearance(&self, cell: [i32; 3]) -> f64 {
+        self.clearances.borrow().get(&cell).copied().unwrap_or(f64::INFINITY)
+    }
+
+    /// 0 at the wanted clearance or more, 1 in contact.
+    fn penalty(&self, cell: [i32; 3]) -> f64 {
+        let c = self.settings.clearance;
+        if c > 0.0 { ((c - self.clearance(cell)) / c).clamp(0.0, 1.0) } else { 0.0 }
+    }
+
     /// Joint values holding the object at `cell`, solved from `from` on first visit.
     fn configuration(&self, cell: [i32; 3], from: &[f64]) -> Option<Vec<f64>> {
         if let Some(known) = self.configurations.borrow().get(&cell) {
@@ -400,8 +421,11 @@ impl ObjectLattice<'_> {
             *self.checks.borrow_mut() += 1;
             largest_jump(from, q) <= self.settings.max_joint_jump && !self.held.collides(q)
         });
-        if q.is_none() {
-            *self.ik_failures.borrow_mut() += 1;
+        match &q {
+            None => *self.ik_failures.borrow_mut() += 1,
+            Some(q) => {
+                self.clearances.borrow_mut().insert(cell, self.clear.distance(q).distance);
+            }
         }
         self.configurations.borrow_mut().insert(cell, q.clone());
         q
@@ -439,7 +463,8 @@ impl SearchProblem for ObjectLattice<'_> {
                         f64::from(dz) * self.step.z,
                     )
                     .norm();
-                    if let Ok(cost) = Cost::new(d) {
+                    let penalty = (self.penalty(*state) + self.penalty(next)) / 2.0;
+                    if let Ok(cost) = Cost::new(d * (1.0 + self.settings.clearance_weight * penalty)) {
                         out.push(Successor { operator: (), state: next, cost });
                     }
                 }
@@ -484,6 +509,14 @@ pub fn plan_carry(task: &CarryTask, settings: &CarrySettings) -> Result<CarryPla
     };
     let held_robot = object.attach(robot, ee[0], &[other_link]).ok_or_else(|| failed("cannot attach the object"))?;
     let held = CollisionModel::new(&held_robot, task.environment.clone());
+    let mut alone = held_robot.clone();
+    let links = alone.links().len();
+    for a in 0..links {
+        for b in a + 1..links {
+            alone.disable_pair(a, b);
+        }
+    }
+    let clear = CollisionModel::new(&alone, task.environment.clone());
     let object_at = |pose: &Isometry3<f64>| {
         let (hx, hy, hz) = (task.object_size[0] / 2.0, task.object_size[1] / 2.0, task.object_size[2] / 2.0);
         Obstacle::new(task.object_name.clone(), *pose, embodied_models::Shape::cuboid(hx, hy, hz))
@@ -574,6 +607,8 @@ pub fn plan_carry(task: &CarryTask, settings: &CarrySettings) -> Result<CarryPla
         goal,
         configurations: RefCell::new(HashMap::from([([0, 0, 0], Some(q_grasp.clone()))])),
         blocked: HashSet::new(),
+        clear: &clear,
+        clearances: RefCell::new(HashMap::from([([0, 0, 0], clear.distance(&q_grasp).distance)])),
         ik_failures: RefCell::new(0),
         checks: RefCell::new(0),
     };
@@ -638,9 +673,13 @@ pub fn plan_carry(task: &CarryTask, settings: &CarrySettings) -> Result<CarryPla
             let length = (pb.translation.vector - pa.translation.vector).norm();
             let n = (length / 0.01).ceil().max(1.0) as usize;
             let targets = |s: f64| grasp_at(&interpolate_pose(&pa, &pb, s));
+            let wanted = cells[at..=j].iter().map(|c| lattice.clearance(*c)).fold(settings.clearance, f64::min);
             if let Ok(p) = follow(robot, &held, ee, &targets, &q_at, n, settings.max_joint_jump, &mut checks) {
-                chosen = (j, p.last().cloned());
-                break;
+                checks += p.len() as u64;
+                if p.iter().all(|q| clear.distance(q).distance >= wanted - 1e-9) {
+                    chosen = (j, p.last().cloned());
+                    break;
+                }
             }
         }
         let (j, q_end) = chosen;

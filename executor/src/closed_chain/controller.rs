@@ -47,6 +47,10 @@ pub struct ClosedChainConfig {
     pub closure_slack_weight: f64,
     /// Most velocity-damper rows one step may carry.
     pub max_dampers: usize,
+    /// Weight `nu` of `||qd - qd_ref||²` for a step that gives a reference velocity
+    /// ([`StepInput::reference`], e.g. a planned posture with feedback): it resolves the
+    /// redundancy left by the object task and the closure.
+    pub reference_weight: f64,
     /// Solver used by [`ClosedChainController::step`].
     pub backend: QpBackend,
 }
@@ -60,6 +64,7 @@ impl Default for ClosedChainConfig {
             closure_gain: 20.0,
             closure_slack_weight: 1e5,
             max_dampers: 16,
+            reference_weight: 1e-2,
             backend: QpBackend::Dense,
         }
     }
@@ -131,6 +136,8 @@ pub struct StepInput<'a> {
     pub e_r: Vector6<f64>,
     /// Velocity-damper rows, at most [`ClosedChainConfig::max_dampers`].
     pub dampers: &'a [VelocityDamper],
+    /// Reference joint velocities `qd_ref` (cost `nu ||qd - qd_ref||²`), or none.
+    pub reference: Option<&'a [f64]>,
 }
 
 /// The answer of one step.
@@ -222,7 +229,7 @@ const CLIP_TOLERANCE: f64 = 1e-6;
 /// [`ClosedChainController::step`] each control period:
 ///
 /// ```text
-/// min_qd  ||J_a qd - v_a||² + lambda ||qd||² + mu ||qd - qd_prev||²
+/// min_qd  ||J_a qd - v_a||² + lambda ||qd||² + mu ||qd - qd_prev||² (+ nu ||qd - qd_ref||²)
 /// s.t.    J_R qd = -k_r e_r                       (closure with drift correction)
 ///         lo <= qd <= hi                          (velocity, position-with-braking, acceleration)
 ///         a_iᵀ qd <= b_i                          (velocity dampers)
@@ -410,6 +417,10 @@ impl ClosedChainController {
         finite("J_R", input.j_r.iter().all(|v| v.is_finite()))?;
         finite("v_a", input.v_a.iter().all(|v| v.is_finite()))?;
         finite("e_r", input.e_r.iter().all(|v| v.is_finite()))?;
+        if let Some(r) = input.reference {
+            dims("reference velocity", n, r.len())?;
+            finite("reference velocity", r.iter().all(|v| v.is_finite()))?;
+        }
         for d in input.dampers {
             dims("velocity damper row", n, d.a.len())?;
             finite("velocity damper row", d.a.iter().all(|v| v.is_finite()) && !d.b.is_nan())?;
@@ -425,6 +436,12 @@ impl ClosedChainController {
         }
         data.g_hard.gemv_tr(-2.0, input.j_a, &input.v_a, 0.0);
         data.g_hard.axpy(-2.0 * c.smoothness, &self.qd_prev, 1.0);
+        if let Some(r) = input.reference {
+            for i in 0..n {
+                data.h_hard[(i, i)] += 2.0 * c.reference_weight;
+                data.g_hard[i] -= 2.0 * c.reference_weight * r[i];
+            }
+        }
         data.eq_t.tr_copy_from(input.j_r);
         for k in 0..6 {
             data.eq_rhs[k] = -c.closure_gain * input.e_r[k];
@@ -546,6 +563,9 @@ impl ClosedChainController {
         let closure_residual = closure_residual(input.j_r, &qd, &data.eq_rhs);
         let mut objective =
             task_residual.powi(2) + c.lambda * qd.norm_squared() + c.smoothness * (&qd - &self.qd_prev).norm_squared();
+        if let Some(r) = input.reference {
+            objective += c.reference_weight * qd.iter().zip(r).map(|(a, b)| (a - b) * (a - b)).sum::<f64>();
+        }
         if cand.mode == ClosureMode::Slacked {
             objective += c.closure_slack_weight * closure_residual.powi(2);
         }
