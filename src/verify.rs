@@ -386,7 +386,12 @@ pub fn verify_log(scenario: &Scenario, file: &Path, settings: &CheckSettings) ->
     let mut warnings = Vec::new();
     let name = header.get("scenario").and_then(Value::as_str).unwrap_or("");
     if name != scenario.name {
-        return Err(parse_err(file, 1, 1, format!("header.scenario: the log is for `{name}`, not `{}`", scenario.name)));
+        return Err(parse_err(
+            file,
+            1,
+            1,
+            format!("header.scenario: the log is for `{name}`, not `{}`", scenario.name),
+        ));
     }
     if header.get("scenario_hash").and_then(Value::as_str).is_some_and(|h| h != scenario.hash) {
         warnings.push(format!("scenario `{}` changed since the run: checked against it as it is now", scenario.name));
@@ -401,13 +406,16 @@ pub fn verify_log(scenario: &Scenario, file: &Path, settings: &CheckSettings) ->
     let mut agents: Vec<AgentState> = Vec::new();
     for (a, spec) in header_agents {
         let Some(agent) = scenario.agents.iter().find(|s| s.name == *a) else {
-            return Err(parse_err(file, 1, 1, format!("header.agents: scenario `{}` has no agent `{a}`", scenario.name)));
+            return Err(parse_err(
+                file,
+                1,
+                1,
+                format!("header.agents: scenario `{}` has no agent `{a}`", scenario.name),
+            ));
         };
         let names = agent.robot.joint_names();
-        let logged: Vec<String> = spec
-            .get("joint_names")
-            .and_then(|v| serde_json::from_value(v.clone()).ok())
-            .unwrap_or_default();
+        let logged: Vec<String> =
+            spec.get("joint_names").and_then(|v| serde_json::from_value(v.clone()).ok()).unwrap_or_default();
         if logged != names {
             return Err(parse_err(
                 file,
@@ -463,7 +471,12 @@ pub fn verify_log(scenario: &Scenario, file: &Path, settings: &CheckSettings) ->
     let mut chain_tol = (0.0, 0.0);
     if let Some(c) = &chain {
         let Some(st) = agents.iter_mut().find(|s| s.name == c.agent) else {
-            return Err(parse_err(file, 1, 1, format!("header.closed_chain.agent: no agent `{}` in the header", c.agent)));
+            return Err(parse_err(
+                file,
+                1,
+                1,
+                format!("header.closed_chain.agent: no agent `{}` in the header", c.agent),
+            ));
         };
         let ees = st.robot.end_effectors();
         let find = |n: &str| ees.iter().position(|e| e.name == n);
@@ -542,10 +555,8 @@ pub fn verify_log(scenario: &Scenario, file: &Path, settings: &CheckSettings) ->
             let (q, qd) = (vec("q")?, vec("qd")?);
             st.out.steps += 1;
             check_log_step(st, step, t, step_s, &q, &qd, settings);
-            let events: Vec<String> = a
-                .get("events")
-                .and_then(|v| serde_json::from_value::<Vec<String>>(v.clone()).ok())
-                .unwrap_or_default();
+            let events: Vec<String> =
+                a.get("events").and_then(|v| serde_json::from_value::<Vec<String>>(v.clone()).ok()).unwrap_or_default();
             if let Some((e0, e1)) = st.closure {
                 let first_word = |e: &String| e.split_whitespace().next().unwrap_or("").to_string();
                 let rel = {
@@ -611,7 +622,14 @@ fn check_log_step(st: &mut AgentState, step: u64, t: f64, step_s: f64, q: &[f64]
         let joint = st.names[i].clone();
         let excess = (l.lower - q[i]).max(q[i] - l.upper);
         if excess > s.position_tolerance {
-            found.push(Finding::Position { t, joint: joint.clone(), value: q[i], lower: l.lower, upper: l.upper, excess });
+            found.push(Finding::Position {
+                t,
+                joint: joint.clone(),
+                value: q[i],
+                lower: l.lower,
+                upper: l.upper,
+                excess,
+            });
         }
         st.out.max_velocity_ratio = st.out.max_velocity_ratio.max(qd[i].abs() / l.max_velocity);
         if qd[i].abs() > l.max_velocity * rel + 1e-12 {

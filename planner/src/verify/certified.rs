@@ -125,15 +125,12 @@ impl std::fmt::Display for Finding {
                 f,
                 "t = {t:.4} s: joint `{joint}` velocity {value:.6} ({source}) exceeds {limit:.6} by {excess:.3e}"
             ),
-            Finding::Acceleration { t, joint, value, limit, excess } => write!(
-                f,
-                "t = {t:.4} s: joint `{joint}` acceleration {value:.6} exceeds {limit:.6} by {excess:.3e}"
-            ),
-            Finding::Collision { t, q, a, b, penetration_m } => write!(
-                f,
-                "t = {t:.4} s: {a} and {b} collide (penetration {penetration_m:.3e} m) at q = {}",
-                fmt_q(q)
-            ),
+            Finding::Acceleration { t, joint, value, limit, excess } => {
+                write!(f, "t = {t:.4} s: joint `{joint}` acceleration {value:.6} exceeds {limit:.6} by {excess:.3e}")
+            }
+            Finding::Collision { t, q, a, b, penetration_m } => {
+                write!(f, "t = {t:.4} s: {a} and {b} collide (penetration {penetration_m:.3e} m) at q = {}", fmt_q(q))
+            }
             Finding::NotCertified { t_from, t_to, q_from, a, b, clearance_m, reason, .. } => write!(
                 f,
                 "t = {t_from:.4}..{t_to:.4} s: not certified ({reason}); closest pair {a} and {b}, \
