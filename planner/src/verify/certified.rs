@@ -546,16 +546,16 @@ impl Walk<'_> {
         e
     }
 
-    fn collision(&self, t: f64, q: &[f64], e: &Eval) -> Option<Finding> {
+    fn collision(&self, t: f64, q: &[f64], e: &Eval) -> Option<Box<Finding>> {
         if e.min > 0.0 {
             return None;
         }
         let (a, b) = self.pairs.names(e.nearest);
-        Some(Finding::Collision { t, q: q.to_vec(), a, b, penetration_m: -e.min })
+        Some(Box::new(Finding::Collision { t, q: q.to_vec(), a, b, penetration_m: -e.min }))
     }
 
     /// Certify samples `i0..=i1` of the trajectory (one model throughout).
-    fn run(&mut self, t: &[f64], q: &[Vec<f64>], i0: usize, i1: usize) -> Result<(), Finding> {
+    fn run(&mut self, t: &[f64], q: &[Vec<f64>], i0: usize, i1: usize) -> Result<(), Box<Finding>> {
         let links = self.pairs.links;
         let mut anchor = i0;
         let mut da = self.eval(&q[i0]);
@@ -619,7 +619,7 @@ impl Walk<'_> {
         (tb, qb, db): (f64, &[f64], &Eval),
         depth: u32,
         budget: &mut usize,
-    ) -> Result<(), Finding> {
+    ) -> Result<(), Box<Finding>> {
         self.report.max_depth = self.report.max_depth.max(depth);
         let mut travel = std::mem::take(&mut self.scratch);
         travel.resize(self.pairs.links, 0.0);
@@ -648,7 +648,7 @@ impl Walk<'_> {
             } else {
                 format!("evaluation cap {} reached", self.settings.max_evaluations_per_segment)
             };
-            return Err(Finding::NotCertified {
+            return Err(Box::new(Finding::NotCertified {
                 t_from: ta,
                 t_to: tb,
                 q_from: qa.to_vec(),
@@ -657,7 +657,7 @@ impl Walk<'_> {
                 b,
                 clearance_m: e.min,
                 reason,
-            });
+            }));
         }
         *budget -= 1;
         self.report.subdivisions += 1;
@@ -772,7 +772,7 @@ pub fn check_collisions(
     }
     if let Err(f) = result {
         report.ok = false;
-        report.violation = Some(f);
+        report.violation = Some(*f);
     }
     report.time_s = start.elapsed().as_secs_f64();
     report
