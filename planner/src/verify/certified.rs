@@ -397,9 +397,15 @@ struct Side {
 /// The pairs of a model, prepared once.
 struct Pairs {
     sides: Vec<Side>,
-    /// (side a, side b, link index of a, link index of b if b moves).
-    pairs: Vec<(usize, usize, usize, Option<usize>)>,
+    /// (side a, side b, link index of a, link index of b if b moves, offset of the pair's
+    /// travel bounds in a travel vector).
+    pairs: Vec<(usize, usize, usize, Option<usize>, usize)>,
     links: usize,
+    /// For self-collision pairs: the DOFs that drive only joints carrying *both* links (their
+    /// common ancestors). Those move the pair rigidly together, so they cannot bring it closer:
+    /// the pair's travel bound leaves them out. A travel vector holds the links' world travel
+    /// bounds, then one block of `links` bounds per mask (the motion without its frozen DOFs).
+    masks: Vec<Vec<bool>>,
     space: ConfigSpace,
 }
 
@@ -445,20 +451,37 @@ impl Pairs {
                 shapes: vec![(o.pose, o.shape.clone(), c, r)],
             });
             for &m in &moving {
-                pairs.push((m, side, sides[m].link.unwrap_or(0), None));
+                pairs.push((m, side, sides[m].link.unwrap_or(0), None, 0));
             }
         }
+        let links = robot.links().len();
+        let mut masks: Vec<Vec<bool>> = Vec::new();
+        // With mimic joints a DOF may drive joints off the common chain: freeze nothing then.
+        let mimic = robot.joints().iter().any(|j| j.mimic.is_some());
         for (a, b) in model.self_collision_pairs() {
             let (sa, sb) = (link_side[a], link_side[b]);
-            if sa != usize::MAX && sb != usize::MAX {
-                pairs.push((sa, sb, a, Some(b)));
+            if sa == usize::MAX || sb == usize::MAX {
+                continue;
             }
+            let (ca, cb) = (robot.chain_to(a), robot.chain_to(b));
+            let mask: Vec<bool> =
+                robot.dof_joints().iter().map(|j| !mimic && ca.contains(j) && cb.contains(j)).collect();
+            let offset = if mask.iter().any(|&f| f) {
+                let m = masks.iter().position(|x| *x == mask).unwrap_or_else(|| {
+                    masks.push(mask);
+                    masks.len() - 1
+                });
+                (m + 1) * links
+            } else {
+                0
+            };
+            pairs.push((sa, sb, a, Some(b), offset));
         }
-        Pairs { sides, pairs, links: robot.links().len(), space: robot.config_space() }
+        Pairs { sides, pairs, links, masks, space: robot.config_space() }
     }
 
     fn names(&self, p: usize) -> (String, String) {
-        let (a, b, _, _) = self.pairs[p];
+        let (a, b, _, _, _) = self.pairs[p];
         (self.sides[a].name.clone(), self.sides[b].name.clone())
     }
 
@@ -486,7 +509,7 @@ impl Pairs {
         let posed = self.pose(robot, q);
         let mut d = Vec::with_capacity(self.pairs.len());
         let (mut nearest, mut min) = (0, f64::INFINITY);
-        for (p, &(a, b, _, _)) in self.pairs.iter().enumerate() {
+        for (p, &(a, b, _, _, _)) in self.pairs.iter().enumerate() {
             let mut best = f64::INFINITY;
             for (i, (_, sa, _, ra)) in self.sides[a].shapes.iter().enumerate() {
                 for (j, (_, sb, _, rb)) in self.sides[b].shapes.iter().enumerate() {
@@ -506,18 +529,33 @@ impl Pairs {
         Eval { d, nearest, min }
     }
 
-    /// Per-link travel bounds of `qa -> qb`, indexed by link.
-    fn travel(&self, model: &CollisionModel, qa: &[f64], qb: &[f64], out: &mut [f64]) {
-        out.iter_mut().for_each(|x| *x = 0.0);
+    /// Length of a travel vector.
+    fn width(&self) -> usize {
+        self.links * (1 + self.masks.len())
+    }
+
+    /// Travel bounds of `qa -> qb` (see [`Pairs::masks`]), indexed by offset + link.
+    fn travel(&self, model: &CollisionModel, qa: &[f64], qb: &[f64], out: &mut Vec<f64>) {
+        out.clear();
+        out.resize(self.width(), 0.0);
         for (l, t) in model.travel_bounds(qa, qb) {
             out[l] = t;
         }
-        debug_assert_eq!(out.len(), self.links);
+        for (m, mask) in self.masks.iter().enumerate() {
+            // The same motion with the frozen DOFs held: only the others count.
+            let held: Vec<f64> = qb.iter().zip(qa).zip(mask).map(|((b, a), &f)| if f { *a } else { *b }).collect();
+            for (l, t) in model.travel_bounds(qa, &held) {
+                out[(m + 1) * self.links + l] = t;
+            }
+        }
     }
 
     fn pair_travel(&self, p: usize, travel: &[f64]) -> f64 {
-        let (_, _, la, lb) = self.pairs[p];
-        travel[la] + lb.map_or(0.0, |b| travel[b])
+        let (_, _, la, lb, offset) = self.pairs[p];
+        match lb {
+            Some(b) => travel[offset + la] + travel[offset + b],
+            None => travel[la],
+        }
     }
 }
 
@@ -556,14 +594,13 @@ impl Walk<'_> {
 
     /// Certify samples `i0..=i1` of the trajectory (one model throughout).
     fn run(&mut self, t: &[f64], q: &[Vec<f64>], i0: usize, i1: usize) -> Result<(), Box<Finding>> {
-        let links = self.pairs.links;
         let mut anchor = i0;
         let mut da = self.eval(&q[i0]);
         if let Some(f) = self.collision(t[i0], &q[i0], &da) {
             return Err(f);
         }
-        let mut acc = vec![0.0; links];
-        let mut seg = vec![0.0; links];
+        let mut acc = vec![0.0; self.pairs.width()];
+        let mut seg = Vec::new();
         let mut k = i0;
         while k < i1 {
             self.pairs.travel(self.model, &q[k], &q[k + 1], &mut seg);
@@ -622,7 +659,6 @@ impl Walk<'_> {
     ) -> Result<(), Box<Finding>> {
         self.report.max_depth = self.report.max_depth.max(depth);
         let mut travel = std::mem::take(&mut self.scratch);
-        travel.resize(self.pairs.links, 0.0);
         self.pairs.travel(self.model, qa, qb, &mut travel);
         let mut lowest = f64::INFINITY;
         let mut ok = true;
@@ -865,4 +901,64 @@ pub fn check_closure(robot: &Robot, traj: &Trajectory, spans: &[ClosedChainSpan]
     report.violation = first;
     report.time_s = start.elapsed().as_secs_f64();
     report
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+
+    use embodied_models::collision::{Environment, Obstacle};
+    use embodied_models::{Rng, Shape, builtin};
+
+    use super::*;
+
+    fn two_samples(robot: &Robot, qa: Vec<f64>, qb: Vec<f64>) -> Trajectory {
+        Trajectory { joint_names: robot.joint_names(), t: vec![0.0, 1.0], q: vec![qa, qb], qd: vec![] }
+    }
+
+    /// Whatever the certificate says is checked against the model's own sampled queries: a
+    /// certified segment has no colliding sample, a reported collision is one.
+    #[test]
+    fn certificate_agrees_with_dense_sampling() {
+        for name in ["irp6-postument", "polycrank", "two-irp6"] {
+            let robot = builtin(name).unwrap();
+            let env = Environment::new()
+                .with(Obstacle::new("pillar", Isometry3::translation(0.6, 0.4, 0.5), Shape::cuboid(0.08, 0.08, 0.5)))
+                .with(Obstacle::new("ball", Isometry3::translation(-0.5, 0.3, 1.0), Shape::sphere(0.15)));
+            let model = CollisionModel::new(&robot, env);
+            let space = robot.config_space();
+            let mut rng = Rng::new(7);
+            let mut random = || robot.random_configuration(&mut rng);
+            let (mut certified, mut collisions) = (0, 0);
+            for _ in 0..60 {
+                let qa = random();
+                let dir = random();
+                // Short and long segments.
+                let qb = space.interpolate(&qa, &dir, 0.3);
+                let r = check_collisions(
+                    &model,
+                    &two_samples(&robot, qa.clone(), qb.clone()),
+                    &[],
+                    &CheckSettings::default(),
+                );
+                match &r.violation {
+                    None => {
+                        certified += 1;
+                        for k in 0..=400 {
+                            let q = space.interpolate(&qa, &qb, k as f64 / 400.0);
+                            assert!(!model.collides(&q), "{name}: certified segment collides at {}", k as f64 / 400.0);
+                        }
+                        assert!(r.certified_clearance_m > 0.0);
+                    }
+                    Some(Finding::Collision { q, penetration_m, .. }) => {
+                        collisions += 1;
+                        assert!(model.collides(q), "{name}: reported collision is free");
+                        assert!(*penetration_m >= 0.0);
+                    }
+                    Some(f) => panic!("{name}: {f}"),
+                }
+            }
+            assert!(certified > 5 && collisions > 5, "{name}: {certified} certified, {collisions} collisions");
+        }
+    }
 }
