@@ -31,6 +31,12 @@
 //!   collision (reported with its time, joint values, pair and penetration depth), or the depth
 //!   or evaluation cap is hit (reported as *not certified*, with where).
 //!
+//! A collision found at a bisection midpoint is reported at the time interpolated linearly
+//! between the segment's sample times (exact to within one sample interval).
+//!
+//! Self-collision pairs leave out the DOFs that drive only their common ancestors: those move
+//! both links rigidly together and cannot change the pair's distance.
+//!
 //! Touching counts as collision (`D <= 0`). The certified clearance reported is the smallest
 //! lower bound on the distance these inequalities give over the whole path.
 
