@@ -15,5 +15,6 @@ pub mod plan;
 pub mod run;
 pub mod runlog;
 pub mod scenario;
+pub mod verify;
 
 pub use error::AppError;

@@ -87,6 +87,22 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
+    /// Check a plan (and/or a run log) against a scenario, independently of the planner: limits,
+    /// collisions certified over the whole continuous path, closed-chain spans, timing.
+    /// Exit status: 0 certified, 1 a violation or not certified, 2 bad input.
+    Verify {
+        /// A built-in scenario name or a scenario TOML file.
+        scenario: String,
+        /// The plan file (`embodied plan -o PLAN.json`); optional when --log is given.
+        #[arg(required_unless_present = "log")]
+        plan: Option<PathBuf>,
+        /// Check a run log (`embodied run --log FILE.jsonl`): limits and grasp..release closure.
+        #[arg(long)]
+        log: Option<PathBuf>,
+        /// Print the report as one JSON object.
+        #[arg(long)]
+        json: bool,
+    },
     /// Benchmarks: MotionBenchMaker problems, planning deadlines.
     #[command(subcommand)]
     Bench(BenchCommand),
@@ -248,6 +264,16 @@ fn run(cli: Cli) -> Result<(), AppError> {
                     }
                 }
                 None => println!("{text}"),
+            }
+            Ok(())
+        }
+        Command::Verify { scenario, plan, log, json } => {
+            let certified = embodied::verify::verify_cli(&scenario, plan.as_deref(), log.as_deref(), json)?;
+            if !certified {
+                // Checked and not certified: a status of its own (2 is bad input).
+                use std::io::Write;
+                let _ = std::io::stdout().flush();
+                std::process::exit(i32::from(embodied::verify::EXIT_NOT_CERTIFIED));
             }
             Ok(())
         }

@@ -49,7 +49,8 @@ pub struct PlanFile {
     pub plans: Vec<AgentPlan>,
 }
 
-fn robot_hash(robot: &embodied_models::Robot) -> String {
+/// SHA-256 of a robot's kinematic description (names, kinds, limits, frames, base).
+pub fn robot_hash(robot: &embodied_models::Robot) -> String {
     use sha2::Digest;
     // The robot's kinematic description as the model prints it: names, kinds, limits, frames.
     let mut text = String::new();

@@ -3,6 +3,11 @@
 //! It shares nothing with the planner's validity checks but the model's geometric queries:
 //! waypoints are checked with `first_collision` (to name the pair), segments with the model's
 //! own `motion_is_free` at the caller's resolution, then walked in order to say where.
+//!
+//! [`certified`] is the certified checker behind `embodied verify`: continuous collision
+//! freedom with a distance certificate, limits, the closed-chain constraint and timing.
+
+pub mod certified;
 
 use embodied_models::ConfigSpace;
 use embodied_models::collision::CollisionModel;

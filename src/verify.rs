@@ -1,0 +1,752 @@
+//! `embodied verify`: check a plan file (and/or a run log) against a scenario, independently of
+//! the planner and the executor.
+//!
+//! **Plans.** The plan must name the scenario (a different name is an error; a different
+//! SHA-256 of the scenario text is a *warning*: the plan is then checked against the scenario as
+//! it is now, which is what certification means). Every agent plan must name an agent of the
+//! scenario, its robot, and the robot's joint names in order (else an error naming the place).
+//! Each trajectory is checked by [`embodied_planner::verify::certified::check_trajectory`]
+//! (limits, continuous collisions with a certificate, closed-chain spans) plus the timing and
+//! endpoints here: it starts at `t = 0` at rest at the scenario's start configuration and ends
+//! at rest.
+//!
+//! **Other agents.** Plans in a file run one after another in file order (this is how
+//! `embodied plan` makes them): while agent `k` moves, every agent whose plan comes earlier in
+//! the file stands where its plan ends, every other agent stands at its start configuration.
+//! Obstacles are those present at time zero (scripted obstacles that appear later are the run's
+//! business, not the plan's).
+//!
+//! **Logs.** `--log FILE.jsonl` checks a run log line by line: joint positions against the
+//! scenario robot's limits, the logged `qd` against the velocity limits, the finite difference
+//! of the logged `qd` over the header's `step_s` against the acceleration limits, and when the
+//! header names a `closed_chain`, the relative tool pose between each `grasp` event of that
+//! agent and the next `release` (the release step itself is not checked). A log whose last line
+//! is incomplete, or that has no summary line, is checked up to its last complete line and the
+//! report says so (`complete: false`).
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use embodied_models::Robot;
+use embodied_models::nalgebra::Isometry3;
+use embodied_planner::verify::certified::{CheckSettings, Finding, TrajectoryReport, check_trajectory, pose_error};
+use serde::Serialize;
+use serde_json::Value;
+
+use crate::AppError;
+use crate::plan::{PlanFile, agent_problem, read_plan};
+use crate::scenario::{GoalSpec, Scenario, load_scenario};
+
+/// Exit status of `embodied verify` when the input was read but is not certified.
+pub const EXIT_NOT_CERTIFIED: u8 = 1;
+
+/// One agent's plan, checked.
+#[derive(Debug, Clone, Serialize)]
+pub struct AgentVerification {
+    pub agent: String,
+    pub robot: String,
+    /// Where the other agents stood while this one moved.
+    pub others: Vec<String>,
+    pub certified: bool,
+    /// Timing and endpoints: problems found (empty: fine).
+    pub timing: Vec<String>,
+    #[serde(flatten)]
+    pub report: TrajectoryReport,
+}
+
+/// A plan file checked against a scenario.
+#[derive(Debug, Clone, Serialize)]
+pub struct PlanVerification {
+    pub plan_file: PathBuf,
+    pub scenario: String,
+    pub certified: bool,
+    pub warnings: Vec<String>,
+    pub agents: Vec<AgentVerification>,
+    pub settings: CheckSettings,
+    pub time_s: f64,
+}
+
+fn usage(file: &Path, message: String) -> AppError {
+    AppError::Usage(format!("{}: {message}", file.display()))
+}
+
+/// Check that `plan` fits `scenario` (names, robots, joint names, DOF); returns the warnings
+/// and, per plan, the scenario's agent index.
+fn match_plan(scenario: &Scenario, plan: &PlanFile, file: &Path) -> Result<(Vec<String>, Vec<usize>), AppError> {
+    let mut warnings = Vec::new();
+    if plan.scenario.name != scenario.name {
+        return Err(usage(
+            file,
+            format!("scenario: the plan is for scenario `{}`, not `{}`", plan.scenario.name, scenario.name),
+        ));
+    }
+    if plan.scenario.hash != scenario.hash {
+        warnings.push(format!(
+            "scenario `{}` changed since the plan was made (SHA-256 {} in the plan, {} now): checked against it as it is now",
+            scenario.name, plan.scenario.hash, scenario.hash
+        ));
+    }
+    if plan.plans.is_empty() {
+        return Err(usage(file, "plans: empty, nothing to verify".into()));
+    }
+    let mut index = Vec::new();
+    for (j, p) in plan.plans.iter().enumerate() {
+        let place = format!("plans[{j}] (agent `{}`)", p.agent);
+        let Some(k) = scenario.agents.iter().position(|a| a.name == p.agent) else {
+            let names: Vec<&str> = scenario.agents.iter().map(|a| a.name.as_str()).collect();
+            return Err(usage(
+                file,
+                format!("{place}: scenario `{}` has no such agent (it has: {})", scenario.name, names.join(", ")),
+            ));
+        };
+        if index.contains(&k) {
+            return Err(usage(file, format!("{place}: a second plan for the same agent")));
+        }
+        let robot = &scenario.agents[k].robot;
+        if p.robot.name != robot.name() {
+            return Err(usage(
+                file,
+                format!("{place}.robot: `{}`, but the scenario's agent is a `{}`", p.robot.name, robot.name()),
+            ));
+        }
+        if p.robot.hash != crate::plan::robot_hash(robot) {
+            warnings.push(format!(
+                "{place}: the kinematic model of `{}` changed since the plan was made: checked against it as it is now",
+                robot.name()
+            ));
+        }
+        let names = robot.joint_names();
+        for (what, got) in [("joint_names", &p.joint_names), ("trajectory.joint_names", &p.trajectory.joint_names)] {
+            if *got != names {
+                return Err(usage(
+                    file,
+                    format!("{place}.{what}: {got:?}, but robot `{}` has joints {names:?}", robot.name()),
+                ));
+            }
+        }
+        let dof = robot.dof();
+        let rows = [("path", &p.path), ("trajectory.q", &p.trajectory.q), ("trajectory.qd", &p.trajectory.qd)];
+        for (what, rows) in rows {
+            if let Some((i, row)) = rows.iter().enumerate().find(|(_, r)| r.len() != dof) {
+                return Err(usage(
+                    file,
+                    format!("{place}.{what}[{i}]: {} values, robot `{}` has {dof} joints", row.len(), robot.name()),
+                ));
+            }
+        }
+        let n = p.trajectory.t.len();
+        if n == 0 || p.trajectory.q.len() != n || p.trajectory.qd.len() != n {
+            return Err(usage(
+                file,
+                format!(
+                    "{place}.trajectory: {n} times, {} positions, {} velocities (must be equal and non-zero)",
+                    p.trajectory.q.len(),
+                    p.trajectory.qd.len()
+                ),
+            ));
+        }
+        index.push(k);
+    }
+    Ok((warnings, index))
+}
+
+/// Start at t = 0 at rest at the scenario's start, end at rest (and at the goal, for
+/// configuration goals).
+fn timing(scenario: &Scenario, k: usize, plan: &crate::plan::AgentPlan) -> Vec<String> {
+    let agent = &scenario.agents[k];
+    let space = agent.robot.config_space();
+    let traj = &plan.trajectory;
+    let mut out = Vec::new();
+    let close = |a: &[f64], b: &[f64]| (0..a.len()).all(|i| space.delta(i, a[i], b[i]).abs() <= 1e-6);
+    let at_rest = |qd: &[f64]| qd.iter().all(|v| v.abs() <= 1e-9);
+    if traj.t[0].abs() > 1e-12 {
+        out.push(format!("the trajectory starts at t = {} s, not 0", traj.t[0]));
+    }
+    if !close(&traj.q[0], &agent.start) {
+        out.push(format!("the trajectory starts at {:?}, not at the scenario's start {:?}", traj.q[0], agent.start));
+    }
+    if !at_rest(&traj.qd[0]) {
+        out.push(format!("the trajectory does not start at rest (qd = {:?})", traj.qd[0]));
+    }
+    let (last_q, last_qd) = (&traj.q[traj.q.len() - 1], &traj.qd[traj.qd.len() - 1]);
+    if !at_rest(last_qd) {
+        out.push(format!("the trajectory does not end at rest (qd = {last_qd:?})"));
+    }
+    let goals = match &agent.goal {
+        Some(GoalSpec::Configuration(q)) => vec![q.clone()],
+        Some(GoalSpec::AnyOf(qs)) => qs.clone(),
+        _ => Vec::new(),
+    };
+    if !goals.is_empty() && !goals.iter().any(|g| g.len() == last_q.len() && close(last_q, g)) {
+        out.push(format!("the trajectory ends at {last_q:?}, not at the scenario's goal"));
+    }
+    out
+}
+
+/// Check every agent plan of `plan` against `scenario`.
+pub fn verify_plan(
+    scenario: &Scenario,
+    plan: &PlanFile,
+    file: &Path,
+    settings: &CheckSettings,
+) -> Result<PlanVerification, AppError> {
+    let start = Instant::now();
+    let (warnings, index) = match_plan(scenario, plan, file)?;
+    let mut agents = Vec::new();
+    for (j, (p, &k)) in plan.plans.iter().zip(&index).enumerate() {
+        let mut occupied = Vec::new();
+        let mut others = Vec::new();
+        for (m, a) in scenario.agents.iter().enumerate() {
+            let earlier = plan.plans[..j].iter().zip(&index).find(|(_, mi)| **mi == m);
+            match earlier.and_then(|(ep, _)| ep.trajectory.q.last()) {
+                Some(end) => {
+                    occupied.push(vec![end.clone()]);
+                    if m != k {
+                        others.push(format!("{}: where its plan ends", a.name));
+                    }
+                }
+                None => {
+                    occupied.push(vec![a.start.clone()]);
+                    if m != k {
+                        others.push(format!("{}: at its start", a.name));
+                    }
+                }
+            }
+        }
+        let model = agent_problem(scenario, k, &occupied);
+        let report = check_trajectory(&model, &p.trajectory, &p.closed_chain, settings);
+        let timing = timing(scenario, k, p);
+        agents.push(AgentVerification {
+            agent: p.agent.clone(),
+            robot: p.robot.name.clone(),
+            others,
+            certified: report.certified && timing.is_empty(),
+            timing,
+            report,
+        });
+    }
+    Ok(PlanVerification {
+        plan_file: file.to_path_buf(),
+        scenario: scenario.name.clone(),
+        certified: agents.iter().all(|a| a.certified),
+        warnings,
+        agents,
+        settings: *settings,
+        time_s: start.elapsed().as_secs_f64(),
+    })
+}
+
+fn ok_word(ok: bool) -> &'static str {
+    if ok { "ok" } else { "VIOLATION" }
+}
+
+/// The plan report as text: one block per agent, the first violation of each check.
+pub fn render_plan(v: &PlanVerification) -> String {
+    let mut s = format!("plan {} against scenario `{}`\n", v.plan_file.display(), v.scenario);
+    for w in &v.warnings {
+        s.push_str(&format!("warning: {w}\n"));
+    }
+    for a in &v.agents {
+        let r = &a.report;
+        s.push_str(&format!(
+            "{}: {} ({:.3} s, {} samples)\n",
+            a.agent,
+            if a.certified { "CERTIFIED" } else { "NOT CERTIFIED" },
+            r.duration_s,
+            r.samples
+        ));
+        let l = &r.limits;
+        s.push_str(&format!(
+            "  limits:    {} (peak velocity {:.3}, acceleration {:.3} of limit) [{:.1} ms]\n",
+            ok_word(l.ok),
+            l.max_velocity_ratio,
+            l.max_acceleration_ratio,
+            l.time_s * 1e3
+        ));
+        let c = &r.collision;
+        s.push_str(&format!(
+            "  collision: {} ({}/{} segments certified, {} pairs, {} distance evaluations, {} subdivisions, depth {}; \
+             clearance >= {:.4} m certified, {:.4} m smallest measured{}) [{:.1} ms]\n",
+            ok_word(c.ok),
+            c.certified_segments,
+            c.segments,
+            c.pairs,
+            c.distance_evaluations,
+            c.subdivisions,
+            c.max_depth,
+            c.certified_clearance_m,
+            c.min_clearance_m,
+            c.closest_pair.as_ref().map(|[a, b]| format!(" between {a} and {b}")).unwrap_or_default(),
+            c.time_s * 1e3
+        ));
+        let z = &r.closure;
+        s.push_str(&format!(
+            "  closure:   {} ({} spans, {} samples, largest error {:.2e} m, {:.2e} rad) [{:.1} ms]\n",
+            ok_word(z.ok),
+            z.spans,
+            z.samples,
+            z.max_position_error_m,
+            z.max_angle_error_rad,
+            z.time_s * 1e3
+        ));
+        s.push_str(&format!("  timing:    {}\n", ok_word(a.timing.is_empty())));
+        for f in r.findings() {
+            s.push_str(&format!("  first violation: {f}\n"));
+        }
+        for t in &a.timing {
+            s.push_str(&format!("  timing: {t}\n"));
+        }
+        s.push_str(&format!("  others: {}\n", a.others.join("; ")));
+    }
+    s.push_str(&format!("certified: {} [{:.1} ms]\n", if v.certified { "yes" } else { "no" }, v.time_s * 1e3));
+    s
+}
+
+// ---------------------------------------------------------------------------------------------
+// Run logs.
+
+/// The closed-chain declaration of a log header.
+#[derive(Debug, Clone, Serialize, serde::Deserialize)]
+pub struct LogClosedChain {
+    pub agent: String,
+    pub end_effectors: [String; 2],
+    pub tolerance_m: f64,
+    pub tolerance_rad: f64,
+}
+
+/// Closure between grasp and release events of one agent.
+#[derive(Debug, Clone, Serialize)]
+pub struct LogClosure {
+    pub ok: bool,
+    pub violation: Option<Finding>,
+    pub grasps: usize,
+    /// Steps checked while holding.
+    pub samples: usize,
+    pub max_position_error_m: f64,
+    pub max_angle_error_rad: f64,
+}
+
+/// One agent of a run log, checked.
+#[derive(Debug, Clone, Serialize)]
+pub struct LogAgent {
+    pub agent: String,
+    pub certified: bool,
+    pub steps: usize,
+    pub violation: Option<Finding>,
+    pub violations: usize,
+    pub max_velocity_ratio: f64,
+    pub max_acceleration_ratio: f64,
+    pub closure: Option<LogClosure>,
+}
+
+/// A run log checked against a scenario.
+#[derive(Debug, Clone, Serialize)]
+pub struct LogVerification {
+    pub log_file: PathBuf,
+    pub scenario: String,
+    pub certified: bool,
+    /// Whether the log ends with its summary line; `note` says where a truncated log stops.
+    pub complete: bool,
+    pub note: Option<String>,
+    pub steps: usize,
+    pub step_s: f64,
+    pub warnings: Vec<String>,
+    pub agents: Vec<LogAgent>,
+    pub time_s: f64,
+}
+
+struct AgentState<'a> {
+    name: String,
+    robot: &'a Robot,
+    limits: Vec<embodied_models::JointLimits>,
+    names: Vec<String>,
+    prev: Option<(u64, Vec<f64>)>,
+    out: LogAgent,
+    closure: Option<(usize, usize)>,
+    holding: Option<Isometry3<f64>>,
+}
+
+fn parse_err(file: &Path, line: usize, column: usize, message: String) -> AppError {
+    AppError::Parse { file: file.to_path_buf(), line, column, message }
+}
+
+/// Check a run log against `scenario` (see the module documentation).
+pub fn verify_log(scenario: &Scenario, file: &Path, settings: &CheckSettings) -> Result<LogVerification, AppError> {
+    let start = Instant::now();
+    let bytes = std::fs::read(file).map_err(|e| AppError::io(file, e))?;
+    let text = String::from_utf8_lossy(&bytes);
+    let lines: Vec<&str> = text.split('\n').collect();
+    let last_nonempty = lines.iter().rposition(|l| !l.trim().is_empty());
+    let header_line = lines.first().copied().unwrap_or("");
+    let header: Value = serde_json::from_str(header_line)
+        .map_err(|e| parse_err(file, 1, e.column(), format!("not a run log header: {e}")))?;
+    let Some(header) = header.get("header") else {
+        return Err(parse_err(file, 1, 1, "the first line is not {\"header\": ...}".into()));
+    };
+    let mut warnings = Vec::new();
+    let name = header.get("scenario").and_then(Value::as_str).unwrap_or("");
+    if name != scenario.name {
+        return Err(parse_err(
+            file,
+            1,
+            1,
+            format!("header.scenario: the log is for `{name}`, not `{}`", scenario.name),
+        ));
+    }
+    if header.get("scenario_hash").and_then(Value::as_str).is_some_and(|h| h != scenario.hash) {
+        warnings.push(format!("scenario `{}` changed since the run: checked against it as it is now", scenario.name));
+    }
+    let step_s = header.get("step_s").and_then(Value::as_f64).unwrap_or(f64::NAN);
+    if !(step_s.is_finite() && step_s > 0.0) {
+        return Err(parse_err(file, 1, 1, "header.step_s: missing or not a positive number".into()));
+    }
+    let Some(header_agents) = header.get("agents").and_then(Value::as_object) else {
+        return Err(parse_err(file, 1, 1, "header.agents: missing or not an object".into()));
+    };
+    let mut agents: Vec<AgentState> = Vec::new();
+    for (a, spec) in header_agents {
+        let Some(agent) = scenario.agents.iter().find(|s| s.name == *a) else {
+            return Err(parse_err(
+                file,
+                1,
+                1,
+                format!("header.agents: scenario `{}` has no agent `{a}`", scenario.name),
+            ));
+        };
+        let names = agent.robot.joint_names();
+        let logged: Vec<String> =
+            spec.get("joint_names").and_then(|v| serde_json::from_value(v.clone()).ok()).unwrap_or_default();
+        if logged != names {
+            return Err(parse_err(
+                file,
+                1,
+                1,
+                format!("header.agents.{a}.joint_names: {logged:?}, but robot `{}` has {names:?}", agent.robot.name()),
+            ));
+        }
+        let limits = agent.robot.limits();
+        if let Some(logged) = spec.get("limits").and_then(Value::as_array) {
+            let differs = logged.len() != limits.len()
+                || logged.iter().zip(&limits).any(|(v, l)| {
+                    let get = |k: &str, inf: f64| match v.get(k) {
+                        Some(Value::Null) | None => inf,
+                        Some(x) => x.as_f64().unwrap_or(f64::NAN),
+                    };
+                    get("lower", f64::NEG_INFINITY) != l.lower
+                        || get("upper", f64::INFINITY) != l.upper
+                        || get("max_velocity", f64::NAN) != l.max_velocity
+                        || get("max_acceleration", f64::NAN) != l.max_acceleration
+                });
+            if differs {
+                warnings.push(format!("header.agents.{a}.limits differ from the model's: the model's are checked"));
+            }
+        }
+        agents.push(AgentState {
+            name: a.clone(),
+            robot: &agent.robot,
+            limits,
+            names,
+            prev: None,
+            out: LogAgent {
+                agent: a.clone(),
+                certified: true,
+                steps: 0,
+                violation: None,
+                violations: 0,
+                max_velocity_ratio: 0.0,
+                max_acceleration_ratio: 0.0,
+                closure: None,
+            },
+            closure: None,
+            holding: None,
+        });
+    }
+    let chain: Option<LogClosedChain> = match header.get("closed_chain") {
+        None | Some(Value::Null) => None,
+        Some(v) => Some(
+            serde_json::from_value(v.clone())
+                .map_err(|e| parse_err(file, 1, 1, format!("header.closed_chain: {e}")))?,
+        ),
+    };
+    let mut chain_tol = (0.0, 0.0);
+    if let Some(c) = &chain {
+        let Some(st) = agents.iter_mut().find(|s| s.name == c.agent) else {
+            return Err(parse_err(
+                file,
+                1,
+                1,
+                format!("header.closed_chain.agent: no agent `{}` in the header", c.agent),
+            ));
+        };
+        let ees = st.robot.end_effectors();
+        let find = |n: &str| ees.iter().position(|e| e.name == n);
+        let (Some(e0), Some(e1)) = (find(&c.end_effectors[0]), find(&c.end_effectors[1])) else {
+            let have: Vec<&str> = ees.iter().map(|e| e.name.as_str()).collect();
+            return Err(parse_err(
+                file,
+                1,
+                1,
+                format!(
+                    "header.closed_chain.end_effectors: {:?}, but robot `{}` has {have:?}",
+                    c.end_effectors,
+                    st.robot.name()
+                ),
+            ));
+        };
+        st.closure = Some((e0, e1));
+        st.out.closure = Some(LogClosure {
+            ok: true,
+            violation: None,
+            grasps: 0,
+            samples: 0,
+            max_position_error_m: 0.0,
+            max_angle_error_rad: 0.0,
+        });
+        chain_tol = (c.tolerance_m, c.tolerance_rad);
+    }
+
+    let mut complete = false;
+    let mut note = None;
+    let mut steps = 0;
+    for (i, line) in lines.iter().enumerate().skip(1) {
+        if line.trim().is_empty() {
+            continue;
+        }
+        let number = i + 1;
+        let value: Value = match serde_json::from_str(line) {
+            Ok(v) => v,
+            Err(e) if Some(i) == last_nonempty => {
+                note = Some(format!(
+                    "the last line ({number}) is incomplete ({e}): the run stopped there; checked up to line {}",
+                    number - 1
+                ));
+                break;
+            }
+            Err(e) => return Err(parse_err(file, number, e.column(), format!("not a log line: {e}"))),
+        };
+        if value.get("summary").is_some() {
+            complete = true;
+            break;
+        }
+        let Some(step) = value.get("step").and_then(Value::as_u64) else {
+            return Err(parse_err(file, number, 1, "neither a step line nor the summary".into()));
+        };
+        let t = value.get("t").and_then(Value::as_f64).unwrap_or(step as f64 * step_s);
+        steps += 1;
+        let Some(step_agents) = value.get("agents").and_then(Value::as_object) else {
+            return Err(parse_err(file, number, 1, "agents: missing".into()));
+        };
+        for st in &mut agents {
+            let Some(a) = step_agents.get(&st.name) else { continue };
+            let vec = |k: &str| -> Result<Vec<f64>, AppError> {
+                let v: Vec<f64> = a.get(k).and_then(|v| serde_json::from_value(v.clone()).ok()).ok_or_else(|| {
+                    parse_err(file, number, 1, format!("agents.{}.{k}: missing or not an array of numbers", st.name))
+                })?;
+                if v.len() != st.names.len() {
+                    return Err(parse_err(
+                        file,
+                        number,
+                        1,
+                        format!("agents.{}.{k}: {} values, the robot has {} joints", st.name, v.len(), st.names.len()),
+                    ));
+                }
+                Ok(v)
+            };
+            let (q, qd) = (vec("q")?, vec("qd")?);
+            st.out.steps += 1;
+            check_log_step(st, step, t, step_s, &q, &qd, settings);
+            let events: Vec<String> =
+                a.get("events").and_then(|v| serde_json::from_value::<Vec<String>>(v.clone()).ok()).unwrap_or_default();
+            if let Some((e0, e1)) = st.closure {
+                let first_word = |e: &String| e.split_whitespace().next().unwrap_or("").to_string();
+                let rel = {
+                    let (_, t0) = st.robot.end_effector_poses(&q, e0);
+                    let (_, t1) = st.robot.end_effector_poses(&q, e1);
+                    t0.inverse() * t1
+                };
+                let Some(c) = st.out.closure.as_mut() else { continue };
+                if events.iter().any(|e| first_word(e) == "release") {
+                    st.holding = None;
+                } else if events.iter().any(|e| first_word(e) == "grasp") {
+                    c.grasps += 1;
+                    st.holding = Some(rel);
+                } else if let Some(reference) = &st.holding {
+                    c.samples += 1;
+                    let (dp, da) = pose_error(reference, &rel);
+                    c.max_position_error_m = c.max_position_error_m.max(dp);
+                    c.max_angle_error_rad = c.max_angle_error_rad.max(da);
+                    if c.violation.is_none() && (dp > chain_tol.0 || da > chain_tol.1) {
+                        c.ok = false;
+                        c.violation = Some(Finding::ClosureDrift {
+                            t,
+                            span: c.grasps.saturating_sub(1),
+                            position_error_m: dp,
+                            angle_error_rad: da,
+                            tolerance_m: chain_tol.0,
+                            tolerance_rad: chain_tol.1,
+                        });
+                    }
+                }
+            }
+        }
+    }
+    if !complete && note.is_none() {
+        note = Some(format!("no summary line: the run did not finish; checked its {steps} steps"));
+    }
+    let agents: Vec<LogAgent> = agents
+        .into_iter()
+        .map(|st| {
+            let mut a = st.out;
+            a.certified = a.violation.is_none() && a.closure.as_ref().is_none_or(|c| c.ok);
+            a
+        })
+        .collect();
+    Ok(LogVerification {
+        log_file: file.to_path_buf(),
+        scenario: scenario.name.clone(),
+        certified: agents.iter().all(|a| a.certified),
+        complete,
+        note,
+        steps,
+        step_s,
+        warnings,
+        agents,
+        time_s: start.elapsed().as_secs_f64(),
+    })
+}
+
+fn check_log_step(st: &mut AgentState, step: u64, t: f64, step_s: f64, q: &[f64], qd: &[f64], s: &CheckSettings) {
+    let rel = 1.0 + s.limit_tolerance;
+    let mut found: Vec<Finding> = Vec::new();
+    for (i, l) in st.limits.iter().enumerate() {
+        let joint = st.names[i].clone();
+        let excess = (l.lower - q[i]).max(q[i] - l.upper);
+        if excess > s.position_tolerance {
+            found.push(Finding::Position {
+                t,
+                joint: joint.clone(),
+                value: q[i],
+                lower: l.lower,
+                upper: l.upper,
+                excess,
+            });
+        }
+        st.out.max_velocity_ratio = st.out.max_velocity_ratio.max(qd[i].abs() / l.max_velocity);
+        if qd[i].abs() > l.max_velocity * rel + 1e-12 {
+            found.push(Finding::Velocity {
+                t,
+                joint: joint.clone(),
+                value: qd[i],
+                limit: l.max_velocity,
+                excess: qd[i].abs() - l.max_velocity,
+                source: "logged qd".into(),
+            });
+        }
+        if let Some((prev_step, prev)) = &st.prev {
+            let h = step.saturating_sub(*prev_step).max(1) as f64 * step_s;
+            let a = (qd[i] - prev[i]) / h;
+            st.out.max_acceleration_ratio = st.out.max_acceleration_ratio.max(a.abs() / l.max_acceleration);
+            if a.abs() > l.max_acceleration * rel + 1e-12 {
+                found.push(Finding::Acceleration {
+                    t,
+                    joint,
+                    value: a,
+                    limit: l.max_acceleration,
+                    excess: a.abs() - l.max_acceleration,
+                });
+            }
+        }
+    }
+    st.out.violations += found.len();
+    if st.out.violation.is_none() {
+        st.out.violation = found.into_iter().next();
+    }
+    st.prev = Some((step, qd.to_vec()));
+}
+
+/// The log report as text.
+pub fn render_log(v: &LogVerification) -> String {
+    let mut s = format!(
+        "log {} against scenario `{}`: {} steps of {} s{}\n",
+        v.log_file.display(),
+        v.scenario,
+        v.steps,
+        v.step_s,
+        if v.complete { "" } else { " (truncated)" }
+    );
+    if let Some(n) = &v.note {
+        s.push_str(&format!("note: {n}\n"));
+    }
+    for w in &v.warnings {
+        s.push_str(&format!("warning: {w}\n"));
+    }
+    for a in &v.agents {
+        s.push_str(&format!(
+            "{}: {} ({} steps; limits {}: {} violations, peak velocity {:.3}, acceleration {:.3} of limit)\n",
+            a.agent,
+            if a.certified { "CERTIFIED" } else { "NOT CERTIFIED" },
+            a.steps,
+            ok_word(a.violation.is_none()),
+            a.violations,
+            a.max_velocity_ratio,
+            a.max_acceleration_ratio
+        ));
+        if let Some(f) = &a.violation {
+            s.push_str(&format!("  first violation: {f}\n"));
+        }
+        if let Some(c) = &a.closure {
+            s.push_str(&format!(
+                "  closure: {} ({} grasps, {} steps held, largest error {:.2e} m, {:.2e} rad)\n",
+                ok_word(c.ok),
+                c.grasps,
+                c.samples,
+                c.max_position_error_m,
+                c.max_angle_error_rad
+            ));
+            if let Some(f) = &c.violation {
+                s.push_str(&format!("  first violation: {f}\n"));
+            }
+        }
+    }
+    s.push_str(&format!("certified: {} [{:.1} ms]\n", if v.certified { "yes" } else { "no" }, v.time_s * 1e3));
+    s
+}
+
+/// `embodied verify SCENARIO [PLAN.json] [--log FILE.jsonl] [--json]`: prints the reports and
+/// returns whether everything is certified.
+pub fn verify_cli(scenario: &str, plan: Option<&Path>, log: Option<&Path>, json: bool) -> Result<bool, AppError> {
+    if plan.is_none() && log.is_none() {
+        return Err(AppError::Usage("verify: give a plan file, --log FILE.jsonl, or both".into()));
+    }
+    let scenario = load_scenario(scenario)?;
+    let settings = CheckSettings::default();
+    let plan_report = match plan {
+        Some(p) => Some(verify_plan(&scenario, &read_plan(p)?, p, &settings)?),
+        None => None,
+    };
+    let log_report = match log {
+        Some(l) => Some(verify_log(&scenario, l, &settings)?),
+        None => None,
+    };
+    let certified = plan_report.as_ref().is_none_or(|r| r.certified) && log_report.as_ref().is_none_or(|r| r.certified);
+    if json {
+        let text = match (&plan_report, &log_report) {
+            (Some(p), None) => json_of(p)?,
+            (None, Some(l)) => json_of(l)?,
+            _ => json_of(&serde_json::json!({"certified": certified, "plan": plan_report, "log": log_report}))?,
+        };
+        println!("{text}");
+    } else {
+        if let Some(p) = &plan_report {
+            print!("{}", render_plan(p));
+        }
+        if let Some(l) = &log_report {
+            print!("{}", render_log(l));
+        }
+    }
+    Ok(certified)
+}
+
+fn json_of<T: Serialize>(value: &T) -> Result<String, AppError> {
+    serde_json::to_string(value).map_err(|e| AppError::Failed(e.to_string()))
+}
