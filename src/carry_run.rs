@@ -301,6 +301,7 @@ pub fn carry_agent(
     scenario: &Scenario,
     dt: f64,
     clock: ClockSpec,
+    config: Option<ClosedChainConfig>,
 ) -> Result<(Agent<CarryAgent>, Arc<Mutex<CarryRecord>>, serde_json::Value), AppError> {
     let (Some(task), Some(spec)) = (scenario.carry_task(), &scenario.carry) else {
         return Err(AppError::Failed(format!("scenario `{}` has no [carry] table", scenario.name)));
@@ -324,7 +325,8 @@ pub fn carry_agent(
         .attach(&agent.robot, ee[0], &[other_link])
         .ok_or_else(|| AppError::Failed("carry: cannot attach the object".into()))?;
     let (against_environment, arm_against_arm) = damper_models(&held_robot, ee, scenario);
-    let controller = ClosedChainController::new(agent.robot.limits(), ClosedChainConfig { dt, ..Default::default() })
+    let config = ClosedChainConfig { dt, ..config.unwrap_or_default() };
+    let controller = ClosedChainController::new(agent.robot.limits(), config)
         .map_err(|e| AppError::Failed(format!("carry: closed-chain controller: {e}")))?;
     let record = Arc::new(Mutex::new(CarryRecord {
         summary: ClosedChainSummary {

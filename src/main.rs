@@ -222,7 +222,7 @@ fn run(cli: Cli) -> Result<(), AppError> {
                 }
                 (None, None) => None,
             };
-            let args = embodied::run::RunArgs { scenario, duration, seed, log, plot, clock };
+            let args = embodied::run::RunArgs { scenario, duration, seed, log, plot, clock, closed_chain: None };
             let summary = embodied::run::run_scenario(&args)?;
             if json {
                 println!("{}", serde_json::to_string(&summary).map_err(|e| AppError::Failed(e.to_string()))?);
@@ -256,8 +256,11 @@ fn run(cli: Cli) -> Result<(), AppError> {
                                 p.path.len(),
                                 p.trajectory.duration(),
                                 p.stats["planner"].as_str().unwrap_or("?"),
-                                p.stats["elapsed"]["secs"].as_f64().unwrap_or(0.0) * 1e6
-                                    + p.stats["elapsed"]["nanos"].as_f64().unwrap_or(0.0) / 1e3
+                                p.stats["planning_ms"].as_f64().map_or(
+                                    p.stats["elapsed"]["secs"].as_f64().unwrap_or(0.0) * 1e6
+                                        + p.stats["elapsed"]["nanos"].as_f64().unwrap_or(0.0) / 1e3,
+                                    |ms| ms * 1e3
+                                )
                             );
                         }
                         println!("plan written to {}", path.display());

@@ -12,6 +12,7 @@ use embodied_planner::carry::{ClosedChainSpan, plan_carry};
 use embodied_planner::deadline::Deadline;
 use embodied_planner::motion::{CERTIFY_TOLERANCE, EdgeCheck, Goal, MotionSettings, MotionStats, plan_motion};
 use embodied_planner::trajectory::{Trajectory, time_parameterize};
+use embodied_planner::verify::certified::{CheckSettings, check_trajectory};
 use embodied_planner::verify::verify_trajectory;
 use serde::{Deserialize, Serialize};
 
@@ -178,6 +179,18 @@ pub fn plan_scenario(scenario: &Scenario, deadline_ms: Option<f64>) -> Result<Pl
         let plan = plan_carry(&task, &scenario.carry_settings()).map_err(|e| {
             AppError::Failed(format!("scenario `{}`: agent `{}`: carry: {e}", scenario.name, agent.name))
         })?;
+        // The certified checker, not the planner, says whether the plan may drive an effector.
+        let model = agent_problem(scenario, carry.agent, &resting);
+        let report =
+            check_trajectory(&model, &plan.trajectory, std::slice::from_ref(&plan.span), &CheckSettings::default());
+        if !report.certified {
+            return Err(AppError::Failed(format!(
+                "scenario `{}`: agent `{}`: carry plan rejected by the verifier: {:?}",
+                scenario.name,
+                agent.name,
+                report.findings()
+            )));
+        }
         plans.push(AgentPlan {
             agent: agent.name.clone(),
             robot: NamedHash { name: agent.robot.name().to_string(), hash: robot_hash(&agent.robot) },

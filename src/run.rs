@@ -60,6 +60,8 @@ pub struct RunArgs {
     pub plot: Option<PathBuf>,
     /// How planning time is counted (default: the scenario's `[planner] clock`).
     pub clock: Option<ClockSpec>,
+    /// Closed-chain controller settings for a carry (default: the controller's defaults).
+    pub closed_chain: Option<embodied_executor::closed_chain::ClosedChainConfig>,
 }
 
 /// The terminal/JSON summary of a run.
@@ -502,7 +504,7 @@ pub fn run_scenario(args: &RunArgs) -> Result<RunSummary, AppError> {
     for (k, agent) in scenario.agents.iter().enumerate() {
         let robot = Arc::new(agent.robot.clone());
         if scenario.carry.as_ref().is_some_and(|c| c.agent == k) {
-            let (a, record, header) = crate::carry_run::carry_agent(&scenario, dt, clock)?;
+            let (a, record, header) = crate::carry_run::carry_agent(&scenario, dt, clock, args.closed_chain.clone())?;
             runtime.add_agent(a);
             carry = Some((record, header));
             continue;

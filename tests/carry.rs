@@ -146,3 +146,100 @@ fn bad_carry_tables_name_the_place() {
     let e = err_of(&format!("{one_arm}agent = \"arm\"\n{ok}"));
     assert!(e.contains("a carry needs two"), "{e}");
 }
+
+fn tmp(name: &str) -> std::path::PathBuf {
+    let dir = std::env::temp_dir().join(format!("embodied-carry-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    dir.join(name)
+}
+
+fn log_lines(path: &Path) -> Vec<serde_json::Value> {
+    std::fs::read_to_string(path).unwrap().lines().map(|l| serde_json::from_str(l).unwrap()).collect()
+}
+
+/// The events of agent `agent` with their step times.
+fn events(lines: &[serde_json::Value], agent: &str) -> Vec<(f64, String)> {
+    let mut out = Vec::new();
+    for l in lines.iter().filter(|l| l.get("step").is_some()) {
+        for e in l["agents"][agent]["events"].as_array().cloned().unwrap_or_default() {
+            out.push((l["t"].as_f64().unwrap(), e.as_str().unwrap().to_string()));
+        }
+    }
+    out
+}
+
+#[test]
+fn the_default_run_carries_the_bar_with_the_chain_closed_and_its_log_verifies() {
+    use embodied::run::{RunArgs, run_scenario};
+    let log = tmp("carry.jsonl");
+    let args = RunArgs { scenario: "two-irp6-carry".into(), log: Some(log.clone()), ..RunArgs::default() };
+    let summary = run_scenario(&args).unwrap();
+    assert!(summary.failure.is_none(), "{:?}", summary.failure);
+    let c = summary.closed_chain.as_ref().unwrap();
+    assert!(c.completed && c.halts == 0, "{c:?}");
+    assert!(c.qp_steps > 1000, "{c:?}");
+    assert!(c.max_closure_error_m < 1e-4 && c.max_closure_error_rad < 1e-3, "{c:?}");
+    assert!(c.max_tracking_error_m < 2e-3, "{c:?}");
+    assert!(c.object_goal_error_m.unwrap() < 1e-3, "{c:?}");
+    assert!(c.qp_p50_us > 0.0 && c.qp_p99_us >= c.qp_p50_us, "{c:?}");
+    let lines = log_lines(&log);
+    assert!(lines[0]["header"]["closed_chain"]["agent"] == "pair");
+    let ev = events(&lines, "pair");
+    let grasp = ev.iter().find(|(_, e)| e == "grasp").unwrap().0;
+    let release = ev.iter().find(|(_, e)| e == "release").unwrap().0;
+    assert!(grasp > 1.0 && release > grasp + 0.5, "{grasp} {release}");
+    assert!(ev.iter().any(|(_, e)| e.starts_with("goal_reached")));
+    // Between grasp and release the closed-chain transition function drives the arms.
+    for l in lines.iter().filter(|l| l.get("step").is_some()) {
+        let t = l["t"].as_f64().unwrap();
+        let b = l["agents"]["pair"]["behaviour"].as_str().unwrap();
+        if t > grasp + 0.002 && t < release - 0.002 {
+            assert!(b.ends_with("closed_chain"), "t = {t}: {b}");
+        }
+    }
+    // The independent checker agrees: limits and closure within tolerance.
+    let scenario = load_scenario("two-irp6-carry").unwrap();
+    let settings = embodied_planner::verify::certified::CheckSettings::default();
+    let v = embodied::verify::verify_log(&scenario, &log, &settings).unwrap();
+    assert!(v.certified, "{}", embodied::verify::render_log(&v));
+}
+
+#[test]
+fn a_failing_closed_chain_qp_ends_in_a_safe_halt_within_the_limits() {
+    use embodied::run::{RunArgs, run_scenario};
+    use embodied_executor::closed_chain::ClosedChainConfig;
+    // No room for damper rows: the first step near an obstacle is a failed QP.
+    let log = tmp("halt.jsonl");
+    let args = RunArgs {
+        scenario: "two-irp6-carry".into(),
+        log: Some(log.clone()),
+        duration: Some(5.0),
+        closed_chain: Some(ClosedChainConfig { max_dampers: 0, ..ClosedChainConfig::default() }),
+        ..RunArgs::default()
+    };
+    let summary = run_scenario(&args).unwrap();
+    let c = summary.closed_chain.as_ref().unwrap();
+    assert_eq!(c.halts, 1, "{c:?}");
+    assert!(!c.completed);
+    assert!(c.halt_reason.as_deref().unwrap().contains("damper"), "{c:?}");
+    let lines = log_lines(&log);
+    let ev = events(&lines, "pair");
+    let halt = ev.iter().find(|(_, e)| e.starts_with("safe_halt_started reason=qp")).unwrap().0;
+    assert!(!ev.iter().any(|(_, e)| e == "release"));
+    // From the halt on: velocities only shrink, within the acceleration limits, to rest.
+    let robot = &load_scenario("two-irp6-carry").unwrap().agents[0].robot;
+    let limits = robot.limits();
+    let steps: Vec<&serde_json::Value> =
+        lines.iter().filter(|l| l.get("step").is_some() && l["t"].as_f64().unwrap() >= halt).collect();
+    let qd = |l: &serde_json::Value| -> Vec<f64> {
+        l["agents"]["pair"]["qd"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect()
+    };
+    for w in steps.windows(2) {
+        let (a, b) = (qd(w[0]), qd(w[1]));
+        for j in 0..a.len() {
+            assert!(b[j].abs() <= a[j].abs() + 1e-12, "joint {j} speeds up during the halt");
+            assert!((b[j] - a[j]).abs() <= limits[j].max_acceleration * 0.001 * (1.0 + 1e-9));
+        }
+    }
+    assert!(qd(steps.last().unwrap()).iter().all(|v| *v == 0.0), "not at rest");
+}

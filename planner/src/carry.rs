@@ -168,6 +168,8 @@ impl Default for CarrySettings {
 /// What planning a carry cost.
 #[derive(Debug, Clone, Default, serde::Serialize)]
 pub struct CarryStats {
+    /// What made the plan.
+    pub planner: String,
     pub planning_ms: f64,
     pub approach_ms: f64,
     pub search_rounds: usize,
@@ -494,7 +496,8 @@ pub fn plan_carry(task: &CarryTask, settings: &CarrySettings) -> Result<CarryPla
     let started = Instant::now();
     let robot = &task.robot;
     let ee = task.end_effectors;
-    let mut stats = CarryStats::default();
+    let mut stats =
+        CarryStats { planner: "carry: A* over object positions, closed-chain IK".into(), ..CarryStats::default() };
     if task.start.len() != robot.dof() {
         return Err(PlanError::InvalidInput {
             message: format!("start has {} joint values, the robot has {}", task.start.len(), robot.dof()),
