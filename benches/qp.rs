@@ -35,6 +35,7 @@ impl Step {
             v_a: self.v_a,
             e_r: self.e_r,
             dampers: &self.dampers,
+            reference: None,
         }
     }
 }

@@ -74,7 +74,13 @@ pub struct ClosedChainSummary {
 #[derive(Debug, Default)]
 pub struct CarryRecord {
     pub summary: ClosedChainSummary,
+    /// Per held step: the whole controller step (assembly and solve), ns.
     pub qp_ns: Vec<u64>,
+    /// With `compare`: each step's QP solved by the fast dense solver and by clarabel, ns.
+    pub fast_ns: Vec<u64>,
+    pub reference_ns: Vec<u64>,
+    pub max_qd_difference: f64,
+    pub max_objective_difference: f64,
 }
 
 /// `c_c` of the carrying agent.
@@ -95,6 +101,8 @@ pub struct CarryAgent {
     goal: Isometry3<f64>,
     /// Planning time as the run's clock counts it, ms.
     planning_ms: f64,
+    /// Solve every QP with clarabel too (timing and agreement).
+    compare: bool,
     released: bool,
     halted: bool,
     done: bool,
@@ -242,7 +250,20 @@ impl CarryAgent {
         let input =
             StepInput { q, j_a: &j_object, j_r: &kin.j_r, v_a, e_r, dampers: &dampers, reference: Some(&posture) };
         let started = Instant::now();
-        let solution = self.controller.step(&input);
+        let solution = if self.compare {
+            // Both solvers on this step's QP: the fast one drives, clarabel is timed and compared.
+            self.controller.compare(&input).map(|c| {
+                self.with_record(|r| {
+                    r.reference_ns.push(c.reference.solve_ns);
+                    r.fast_ns.push(c.fast.solve_ns);
+                    r.max_qd_difference = r.max_qd_difference.max(c.qd_difference);
+                    r.max_objective_difference = r.max_objective_difference.max(c.objective_difference);
+                });
+                c.fast
+            })
+        } else {
+            self.controller.step(&input)
+        };
         let ns = started.elapsed().as_nanos() as u64;
         let dt = i.dt();
         match solution {
@@ -296,13 +317,17 @@ fn program() -> Reactive<CarryAgent> {
         }))
 }
 
+/// The carrying agent, its shared measurements and the log header's `closed_chain` entry.
+pub type CarryParts = (Agent<CarryAgent>, Arc<Mutex<CarryRecord>>, serde_json::Value);
+
 /// The carrying agent of `scenario` (which has a `[carry]` table): the plan is made here.
 pub fn carry_agent(
     scenario: &Scenario,
     dt: f64,
     clock: ClockSpec,
     config: Option<ClosedChainConfig>,
-) -> Result<(Agent<CarryAgent>, Arc<Mutex<CarryRecord>>, serde_json::Value), AppError> {
+    compare: bool,
+) -> Result<CarryParts, AppError> {
     let (Some(task), Some(spec)) = (scenario.carry_task(), &scenario.carry) else {
         return Err(AppError::Failed(format!("scenario `{}` has no [carry] table", scenario.name)));
     };
@@ -336,7 +361,7 @@ pub fn carry_agent(
             closest_obstacle_m: f64::INFINITY,
             ..ClosedChainSummary::default()
         },
-        qp_ns: Vec::new(),
+        ..CarryRecord::default()
     }));
     // Planning time as the run counts it: simulated from the collision checks (the log stays
     // byte-identical for a seed) or the wall clock.
@@ -364,6 +389,7 @@ pub fn carry_agent(
         object_in_tool,
         goal: spec.object_goal,
         planning_ms,
+        compare,
         released: false,
         halted: false,
         done: false,
@@ -407,18 +433,101 @@ fn damper_models(robot: &Robot, ee: [usize; 2], scenario: &Scenario) -> (Collisi
     )
 }
 
+/// p50, p99 and max of times in ns, as µs.
+pub fn percentiles_us(ns: &[u64]) -> (f64, f64, f64) {
+    let mut ns = ns.to_vec();
+    ns.sort_unstable();
+    let pct = |p: f64| ns.get(((ns.len() as f64 - 1.0) * p).round() as usize).map_or(0.0, |v| *v as f64 / 1e3);
+    (pct(0.5), pct(0.99), ns.last().map_or(0.0, |v| *v as f64 / 1e3))
+}
+
 /// Percentiles of the QP times into the summary.
 pub fn finish(record: &Mutex<CarryRecord>) -> Option<ClosedChainSummary> {
     let r = record.lock().ok()?;
     let mut s = r.summary.clone();
-    let mut ns = r.qp_ns.clone();
-    ns.sort_unstable();
-    let pct = |p: f64| ns.get(((ns.len() as f64 - 1.0) * p).round() as usize).map_or(0.0, |v| *v as f64 / 1e3);
-    s.qp_p50_us = pct(0.5);
-    s.qp_p99_us = pct(0.99);
-    s.qp_max_us = ns.last().map_or(0.0, |v| *v as f64 / 1e3);
+    (s.qp_p50_us, s.qp_p99_us, s.qp_max_us) = percentiles_us(&r.qp_ns);
     if !s.closest_obstacle_m.is_finite() {
         s.closest_obstacle_m = 0.0;
     }
     Some(s)
+}
+
+/// `embodied bench qp`: the closed-chain QPs of one carry run, both solvers.
+#[derive(Debug, Clone, Serialize)]
+pub struct QpBenchReport {
+    pub scenario: String,
+    pub steps: usize,
+    /// Fast dense solver (Goldfarb–Idnani, warm-started): data assembly and solve, µs.
+    pub dense_p50_us: f64,
+    pub dense_p99_us: f64,
+    pub dense_max_us: f64,
+    /// Clarabel (one solver, data updated in place) on the same QPs, µs.
+    pub clarabel_p50_us: f64,
+    pub clarabel_p99_us: f64,
+    pub clarabel_max_us: f64,
+    /// Clarabel p50 / dense p50.
+    pub speedup_p50: f64,
+    /// Steps whose QP (dense) alone took longer than the 1 ms control step.
+    pub dense_late_steps: usize,
+    pub clarabel_late_steps: usize,
+    pub max_qd_difference: f64,
+    pub max_objective_difference: f64,
+    pub halts: usize,
+    pub max_closure_error_m: f64,
+}
+
+/// Run the carry of `scenario` with every QP solved by both solvers.
+pub fn bench_qp(scenario: &str) -> Result<QpBenchReport, AppError> {
+    let args = crate::run::RunArgs { scenario: scenario.to_string(), qp_compare: true, ..Default::default() };
+    let summary = crate::run::run_scenario(&args)?;
+    let (Some(c), Some(record)) = (&summary.closed_chain, &summary.closed_chain_record) else {
+        return Err(AppError::Usage(format!("scenario `{scenario}` has no [carry] table: no closed-chain QP to time")));
+    };
+    let r = record.lock().map_err(|_| AppError::Failed("carry record poisoned".into()))?;
+    let (dense_p50_us, dense_p99_us, dense_max_us) = percentiles_us(&r.fast_ns);
+    let (clarabel_p50_us, clarabel_p99_us, clarabel_max_us) = percentiles_us(&r.reference_ns);
+    let late = |ns: &[u64]| ns.iter().filter(|v| **v > 1_000_000).count();
+    Ok(QpBenchReport {
+        scenario: summary.scenario.clone(),
+        steps: r.fast_ns.len(),
+        dense_p50_us,
+        dense_p99_us,
+        dense_max_us,
+        clarabel_p50_us,
+        clarabel_p99_us,
+        clarabel_max_us,
+        speedup_p50: clarabel_p50_us / dense_p50_us.max(1e-9),
+        dense_late_steps: late(&r.fast_ns),
+        clarabel_late_steps: late(&r.reference_ns),
+        max_qd_difference: r.max_qd_difference,
+        max_objective_difference: r.max_objective_difference,
+        halts: c.halts,
+        max_closure_error_m: c.max_closure_error_m,
+    })
+}
+
+/// The report as text.
+pub fn render_bench_qp(r: &QpBenchReport) -> String {
+    format!(
+        "closed-chain QP of `{}`: {} held steps, each solved by both solvers\n\
+         \x20 dense (Goldfarb-Idnani, warm start): p50 {:.1} us, p99 {:.1} us, max {:.1} us, {} steps over 1 ms\n\
+         \x20 clarabel (data updated in place):   p50 {:.1} us, p99 {:.1} us, max {:.1} us, {} steps over 1 ms\n\
+         \x20 clarabel / dense at p50: {:.1}x; largest difference: qd {:.1e} (relative), objective {:.1e}\n\
+         \x20 halts {}, largest closure error {:.2e} m\n",
+        r.scenario,
+        r.steps,
+        r.dense_p50_us,
+        r.dense_p99_us,
+        r.dense_max_us,
+        r.dense_late_steps,
+        r.clarabel_p50_us,
+        r.clarabel_p99_us,
+        r.clarabel_max_us,
+        r.clarabel_late_steps,
+        r.speedup_p50,
+        r.max_qd_difference,
+        r.max_objective_difference,
+        r.halts,
+        r.max_closure_error_m,
+    )
 }

@@ -147,6 +147,15 @@ enum BenchCommand {
         #[arg(long)]
         shortcut_attempts: Option<usize>,
     },
+    /// The closed-chain QP of a two-handed carry, every held step solved by the fast dense
+    /// solver (which drives) and by clarabel: time percentiles, late steps, agreement.
+    Qp {
+        /// A scenario with a [carry] table.
+        #[arg(default_value = "two-irp6-carry")]
+        scenario: String,
+        #[arg(long)]
+        json: bool,
+    },
     /// Share of plans delivered in time, safe halts and overshoot for a set of deadlines.
     Deadlines {
         /// Deadlines in milliseconds, comma separated.
@@ -222,7 +231,7 @@ fn run(cli: Cli) -> Result<(), AppError> {
                 }
                 (None, None) => None,
             };
-            let args = embodied::run::RunArgs { scenario, duration, seed, log, plot, clock, closed_chain: None };
+            let args = embodied::run::RunArgs { scenario, duration, seed, log, plot, clock, ..Default::default() };
             let summary = embodied::run::run_scenario(&args)?;
             if json {
                 println!("{}", serde_json::to_string(&summary).map_err(|e| AppError::Failed(e.to_string()))?);
@@ -320,6 +329,15 @@ fn run(cli: Cli) -> Result<(), AppError> {
                 println!("{}", to_json(&report)?);
             } else {
                 print!("{}", embodied::mbm::render_table(&report));
+            }
+            Ok(())
+        }
+        Command::Bench(BenchCommand::Qp { scenario, json }) => {
+            let report = embodied::carry_run::bench_qp(&scenario)?;
+            if json {
+                println!("{}", to_json(&report)?);
+            } else {
+                print!("{}", embodied::carry_run::render_bench_qp(&report));
             }
             Ok(())
         }

@@ -62,6 +62,8 @@ pub struct RunArgs {
     pub clock: Option<ClockSpec>,
     /// Closed-chain controller settings for a carry (default: the controller's defaults).
     pub closed_chain: Option<embodied_executor::closed_chain::ClosedChainConfig>,
+    /// Solve every closed-chain QP with clarabel as well (`embodied bench qp`).
+    pub qp_compare: bool,
 }
 
 /// The terminal/JSON summary of a run.
@@ -83,6 +85,9 @@ pub struct RunSummary {
     /// The two-handed carry, when the scenario has one.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub closed_chain: Option<crate::carry_run::ClosedChainSummary>,
+    /// The carry's per-step measurements (not serialised).
+    #[serde(skip)]
+    pub closed_chain_record: Option<Arc<std::sync::Mutex<crate::carry_run::CarryRecord>>>,
 }
 
 #[derive(Debug, Serialize, Default)]
@@ -504,7 +509,8 @@ pub fn run_scenario(args: &RunArgs) -> Result<RunSummary, AppError> {
     for (k, agent) in scenario.agents.iter().enumerate() {
         let robot = Arc::new(agent.robot.clone());
         if scenario.carry.as_ref().is_some_and(|c| c.agent == k) {
-            let (a, record, header) = crate::carry_run::carry_agent(&scenario, dt, clock, args.closed_chain.clone())?;
+            let (a, record, header) =
+                crate::carry_run::carry_agent(&scenario, dt, clock, args.closed_chain.clone(), args.qp_compare)?;
             runtime.add_agent(a);
             carry = Some((record, header));
             continue;
@@ -691,6 +697,7 @@ pub fn run_scenario(args: &RunArgs) -> Result<RunSummary, AppError> {
         failure,
         log_lines: 0,
         closed_chain: carry.as_ref().and_then(|(r, _)| crate::carry_run::finish(r)),
+        closed_chain_record: carry.as_ref().map(|(r, _)| r.clone()),
     };
     log.line(&json!({"summary": &summary}))?;
     summary.log_lines = log.lines();

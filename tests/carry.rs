@@ -243,3 +243,14 @@ fn a_failing_closed_chain_qp_ends_in_a_safe_halt_within_the_limits() {
     }
     assert!(qd(steps.last().unwrap()).iter().all(|v| *v == 0.0), "not at rest");
 }
+
+#[test]
+fn bench_qp_solves_every_held_step_with_both_solvers_and_they_agree() {
+    let r = embodied::carry_run::bench_qp("two-irp6-carry").unwrap();
+    assert!(r.steps > 1000, "{r:?}");
+    assert_eq!(r.halts, 0);
+    assert!(r.max_qd_difference < 1e-3 && r.max_objective_difference < 1e-6, "{r:?}");
+    assert!(r.dense_p50_us > 0.0 && r.clarabel_p50_us > 0.0 && r.dense_p99_us >= r.dense_p50_us);
+    let e = embodied::carry_run::bench_qp("irp6-pick").unwrap_err().to_string();
+    assert!(e.contains("no [carry] table"), "{e}");
+}

@@ -192,6 +192,7 @@ fn contradicting_dampers_are_an_error_not_a_velocity() {
             v_a: Vector6::zeros(),
             e_r: Vector6::zeros(),
             dampers: &dampers,
+            reference: None,
         };
         let err = ctl.step_with(&input, backend).unwrap_err();
         assert!(matches!(err, ExecutorError::QpInfeasible(_)), "{backend:?}: {err}");

@@ -437,9 +437,9 @@ impl ClosedChainController {
         data.g_hard.gemv_tr(-2.0, input.j_a, &input.v_a, 0.0);
         data.g_hard.axpy(-2.0 * c.smoothness, &self.qd_prev, 1.0);
         if let Some(r) = input.reference {
-            for i in 0..n {
+            for (i, v) in r.iter().enumerate().take(n) {
                 data.h_hard[(i, i)] += 2.0 * c.reference_weight;
-                data.g_hard[i] -= 2.0 * c.reference_weight * r[i];
+                data.g_hard[i] -= 2.0 * c.reference_weight * v;
             }
         }
         data.eq_t.tr_copy_from(input.j_r);
