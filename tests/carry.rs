@@ -254,3 +254,25 @@ fn bench_qp_solves_every_held_step_with_both_solvers_and_they_agree() {
     let e = embodied::carry_run::bench_qp("irp6-pick").unwrap_err().to_string();
     assert!(e.contains("no [carry] table"), "{e}");
 }
+
+#[test]
+fn carry_runs_replay_bit_for_bit() {
+    use embodied::run::{RunArgs, run_scenario};
+    let logs: Vec<String> = (0..2)
+        .map(|k| {
+            let log = tmp(&format!("replay{k}.jsonl"));
+            let args = RunArgs {
+                scenario: "two-irp6-carry".into(),
+                log: Some(log.clone()),
+                duration: Some(4.5),
+                ..RunArgs::default()
+            };
+            run_scenario(&args).unwrap();
+            // Everything but the summary line (wall-clock times).
+            let text = std::fs::read_to_string(&log).unwrap();
+            text.lines().filter(|l| !l.starts_with("{\"summary\"")).collect::<Vec<_>>().join("\n")
+        })
+        .collect();
+    assert!(logs[0].lines().count() == 4501, "{}", logs[0].lines().count());
+    assert!(logs[0] == logs[1], "two runs with the same seed differ");
+}
