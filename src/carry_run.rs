@@ -405,12 +405,7 @@ pub fn carry_agent(
 /// with no environment.
 fn damper_models(robot: &Robot, ee: [usize; 2], scenario: &Scenario) -> (CollisionModel, CollisionModel) {
     let n = robot.links().len();
-    let mut alone = robot.clone();
-    for a in 0..n {
-        for b in a + 1..n {
-            alone.disable_pair(a, b);
-        }
-    }
+    let alone = robot.without_self_collisions();
     let arm = |k: usize| -> Vec<usize> {
         let link = robot.end_effectors()[ee[k]].link;
         let mut links: Vec<usize> = robot.chain_to(link).iter().map(|&j| robot.joints()[j].child_link).collect();

@@ -347,6 +347,18 @@ impl Robot {
         }
     }
 
+    /// A copy with every self-collision pair disabled: the robot against its environment only.
+    pub fn without_self_collisions(&self) -> Robot {
+        let mut out = self.clone();
+        let n = self.links.len();
+        for a in 0..n {
+            for b in a + 1..n {
+                out.disabled_pairs.insert((a, b));
+            }
+        }
+        out
+    }
+
     /// Disable self-collision checks between two links (by index).
     pub fn disable_pair(&mut self, a: usize, b: usize) {
         self.disabled_pairs.insert((a.min(b), a.max(b)));

@@ -512,14 +512,7 @@ pub fn plan_carry(task: &CarryTask, settings: &CarrySettings) -> Result<CarryPla
     };
     let held_robot = object.attach(robot, ee[0], &[other_link]).ok_or_else(|| failed("cannot attach the object"))?;
     let held = CollisionModel::new(&held_robot, task.environment.clone());
-    let mut alone = held_robot.clone();
-    let links = alone.links().len();
-    for a in 0..links {
-        for b in a + 1..links {
-            alone.disable_pair(a, b);
-        }
-    }
-    let clear = CollisionModel::new(&alone, task.environment.clone());
+    let clear = CollisionModel::new(&held_robot.without_self_collisions(), task.environment.clone());
     let object_at = |pose: &Isometry3<f64>| {
         let (hx, hy, hz) = (task.object_size[0] / 2.0, task.object_size[1] / 2.0, task.object_size[2] / 2.0);
         Obstacle::new(task.object_name.clone(), *pose, embodied_models::Shape::cuboid(hx, hy, hz))
