@@ -502,8 +502,15 @@ impl SphereGeom {
             self.pose_link(a, s);
             self.pose_link(b, s);
             let stop = self.pair_common[p] as usize;
+            let cb = s.link_c[b];
             for i in la.first..la.end {
                 let (ci, ri) = (s.centre[i], self.radius[i]);
+                // Sphere `i` against link b's bounding sphere first: b's bounding sphere holds
+                // every sphere of b, and `ep` bounds the growth of any two spheres of the pair.
+                let reach = ri + lb.r + ep;
+                if (ci - cb).norm_squared() > reach * reach {
+                    continue;
+                }
                 for j in lb.first..lb.end {
                     let d2 = (ci - s.centre[j]).norm_squared();
                     let r = ri + self.radius[j];
