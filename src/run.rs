@@ -764,7 +764,7 @@ pub fn render_summary(s: &RunSummary) -> String {
     if let Some(c) = &s.closed_chain {
         let _ = writeln!(
             out,
-            "  closed chain ({}): plan {:.1} ms, {:.2} s of motion; held {} steps; QP p50 {:.1} us, p99 {:.1} us, max {:.1} us ({} late, {} fallbacks, {} slacked); largest closure error {:.2e} m / {:.2e} rad (residual {:.1e}); object tracking {:.2e} m; nearest obstacle {:.3} m ({} damped steps); halts {}{}; object put down {} from its goal",
+            "  closed chain ({}): plan {:.1} ms wall, {:.2} s of motion; held {} steps; QP p50 {:.1} us, p99 {:.1} us, max {:.1} us ({} late, {} fallbacks, {} slacked); largest closure error {:.2e} m / {:.2e} rad (residual {:.1e}); object tracking {:.2e} m; nearest obstacle {:.3} m ({} damped steps); halts {}{}; object put down {} from its goal",
             c.agent,
             c.planning_ms,
             c.plan_duration_s,
