@@ -69,6 +69,13 @@ fn bench(c: &mut Criterion) {
             b.iter(|| black_box(rt.step().is_ok()))
         });
     }
+    // The same agents, fewer of them: per agent-step, the difference to the 1,000-agent
+    // sequential step is what 1,000 agents' data not fitting in cache costs.
+    let mut rt = simple_runtime(100, Parallelism::Sequential, 1);
+    g.throughput(Throughput::Elements(100));
+    g.bench_function(BenchmarkId::new("simple-100-agents-1kHz-step", "sequential"), |b| {
+        b.iter(|| black_box(rt.step().is_ok()))
+    });
     g.finish();
 }
 

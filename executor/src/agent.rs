@@ -168,14 +168,15 @@ impl<C: Send> Agent<C> {
     fn read_images(&mut self, world: &World, step: u64) {
         let inputs = &mut self.control.inputs;
         inputs.step = step;
-        if let Some(e) = &self.effector {
-            inputs.q.copy_from_slice(e.q());
-            inputs.qd.copy_from_slice(e.qd());
-        }
+        // One (doubly dynamic) call each for the measured state.
         let (q, qd) = match &self.effector {
             Some(e) => (e.q(), e.qd()),
             None => (&[][..], &[][..]),
         };
+        if !q.is_empty() {
+            inputs.q.copy_from_slice(q);
+            inputs.qd.copy_from_slice(qd);
+        }
         self.receptors.sample(world, q, qd, &mut self.readings);
         for (k, (sensor, _)) in self.sensors.iter_mut().enumerate() {
             let image = &mut inputs.sensors[k];

@@ -74,7 +74,7 @@ pub fn validate_limits(limits: &[JointLimits]) -> Result<(), ExecutorError> {
 /// before a position bound decelerating at `max_acceleration` (so that bounds are never
 /// crossed). From a state that already violates the last condition the window is the hardest
 /// allowed braking.
-#[inline]
+#[inline(always)]
 pub fn velocity_window(q: f64, v: f64, lim: &JointLimits, dt: f64) -> (f64, f64) {
     let a = lim.max_acceleration;
     let mut lo = (-lim.max_velocity).max(v - a * dt);
@@ -256,13 +256,39 @@ impl<E: Effector> SafetyLimiter<E> {
         let (q, v, limits) = (self.inner.q(), self.inner.qd(), self.inner.limits());
         out.mode = CommandMode::Position;
         let k = self.gain.min(1.0 / dt);
-        let joints = limits.iter().zip(q).zip(v).zip(out.q.iter_mut().zip(out.qd.iter_mut()));
-        for (i, (((lim, &q), &v), (out_q, out_qd))) in joints.enumerate() {
+        let n = limits.len();
+        // One joint: window, wanted velocity, clamp, consistent one-step command.
+        #[inline(always)]
+        fn joint(lim: &JointLimits, q: f64, v: f64, wanted: f64, dt: f64, out_q: &mut f64, out_qd: &mut f64) {
             let (lo, hi) = velocity_window(q, v, lim, dt);
-            let wanted = track(command.mode, command.q.get(i).copied(), command.qd.get(i).copied(), q, lim, k, dt);
             let v_next = wanted.clamp(lo, hi);
             *out_qd = v_next;
             *out_q = lim.clamp(q + v_next * dt);
+        }
+        let joints = limits.iter().zip(q).zip(v).zip(out.q.iter_mut().zip(out.qd.iter_mut()));
+        if command.q.len() >= n && command.qd.len() >= n {
+            // The usual full-length command: one loop per mode over zipped slices (no per-joint
+            // `get`, mode test or `Option`); the same arithmetic as the general loop below.
+            let targets = command.q.iter().zip(&command.qd);
+            match command.mode {
+                CommandMode::Position => {
+                    for ((((lim, &q), &v), (out_q, out_qd)), (&t, &f)) in joints.zip(targets) {
+                        let wanted = track(CommandMode::Position, Some(t), Some(f), q, lim, k, dt);
+                        joint(lim, q, v, wanted, dt, out_q, out_qd);
+                    }
+                }
+                CommandMode::Velocity => {
+                    for ((((lim, &q), &v), (out_q, out_qd)), (&t, &f)) in joints.zip(targets) {
+                        let wanted = track(CommandMode::Velocity, Some(t), Some(f), q, lim, k, dt);
+                        joint(lim, q, v, wanted, dt, out_q, out_qd);
+                    }
+                }
+            }
+            return;
+        }
+        for (i, (((lim, &q), &v), (out_q, out_qd))) in joints.enumerate() {
+            let wanted = track(command.mode, command.q.get(i).copied(), command.qd.get(i).copied(), q, lim, k, dt);
+            joint(lim, q, v, wanted, dt, out_q, out_qd);
         }
     }
 }

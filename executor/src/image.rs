@@ -168,7 +168,9 @@ impl InputImages {
             qd: vec![0.0; dof],
             limits,
             sensors: vec![SensorImage::default(); n_sensors],
-            inbox: Vec::with_capacity(16),
+            // Grown on the first delivery and kept: an agent that never receives messages keeps
+            // no 1.4 kB buffer between its hot data (1,000 agents stay in cache).
+            inbox: Vec::new(),
         }
     }
     /// This agent.
@@ -251,7 +253,7 @@ impl OutputImages {
             has_command: false,
             command: JointCommand { mode: CommandMode::Position, q: vec![0.0; dof], qd: vec![0.0; dof] },
             sensor_configs: vec![None; n_sensors],
-            outbox: Vec::with_capacity(16),
+            outbox: Vec::new(),
             events: Vec::new(),
             from,
             misuse: None,
