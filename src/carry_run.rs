@@ -473,6 +473,9 @@ pub struct QpBenchReport {
 
 /// Run the carry of `scenario` with every QP solved by both solvers.
 pub fn bench_qp(scenario: &str) -> Result<QpBenchReport, AppError> {
+    if crate::scenario::load_scenario(scenario)?.carry.is_none() {
+        return Err(AppError::Usage(format!("scenario `{scenario}` has no [carry] table: no closed-chain QP to time")));
+    }
     let args = crate::run::RunArgs { scenario: scenario.to_string(), qp_compare: true, ..Default::default() };
     let summary = crate::run::run_scenario(&args)?;
     let (Some(c), Some(record)) = (&summary.closed_chain, &summary.closed_chain_record) else {
