@@ -26,7 +26,7 @@ use embodied_executor::{
 use embodied_models::Robot;
 use embodied_models::collision::{Body, CollisionModel};
 use embodied_models::nalgebra::{DMatrix, DVector, Isometry3, Vector6};
-use embodied_planner::carry::{CarryPlan, plan_carry, pose_difference};
+use embodied_planner::carry::{CarryPlan, plan_carry, pose_difference, tool_pose};
 use serde::Serialize;
 
 use crate::AppError;
@@ -191,20 +191,19 @@ impl CarryAgent {
             }
         };
         let (q_plan, qd_plan, _) = self.plan.trajectory.sample(t + i.dt());
-        let planned = match ChainKinematics::new(&self.robot, &q_plan) {
-            Ok(k) => k,
-            Err(e) => return self.halt(e.to_string(), i, o),
-        };
         // The object's task: its frame rigidly attached to tool 1 (the symmetric "absolute" frame
-        // of the two tools is ill-defined when they face each other, as here).
+        // of the two tools is ill-defined when they face each other, as here). One forward
+        // kinematics pass per configuration serves every Jacobian of this step.
         let holder = &self.robot.end_effectors()[0];
         let frame = holder.tool * self.object_in_tool;
-        let j_object = self.robot.jacobian(q, holder.link, &frame);
+        let poses = self.robot.forward_kinematics(q);
+        let planned_poses = self.robot.forward_kinematics(&q_plan);
+        let j_object = self.robot.jacobian_with_poses(&poses, holder.link, &frame);
         let j_object = DMatrix::from_column_slice(6, q.len(), j_object.as_slice());
-        let j_planned = self.robot.jacobian(&q_plan, holder.link, &frame);
+        let j_planned = self.robot.jacobian_with_poses(&planned_poses, holder.link, &frame);
         let feedforward: Vector6<f64> = j_planned * DVector::from_column_slice(&qd_plan);
         let object = kin.tool1 * self.object_in_tool;
-        let planned_object = planned.tool1 * self.object_in_tool;
+        let planned_object = planned_poses[holder.link] * frame;
         let v_a = feedforward + pose_error(&planned_object, &object) * OBJECT_GAIN;
         let e_r = relative_pose_error(&kin.tool1, &kin.tool2, &reference);
         let posture: Vec<f64> =
@@ -214,7 +213,10 @@ impl CarryAgent {
         let mut dampers = Vec::new();
         let mut nearest = f64::INFINITY;
         let mut relaxed = false;
+        // Within one step the joints can only decelerate so much: a row asking for more than
+        // the acceleration limits allow becomes "approach as slowly as possible".
         let (mut lo, mut hi) = (vec![0.0; q.len()], vec![0.0; q.len()]);
+        step_bounds(q, self.controller.previous_velocity().as_slice(), &self.limits, i.dt(), &mut lo, &mut hi);
         let reports = [self.arm_against_arm.distance(q), self.against_environment.distance(q)];
         if let Some(r) = reports.iter().find(|r| r.distance <= 0.0) {
             let reason = format!("contact: {} and {}", r.a.name(), r.b.name());
@@ -228,16 +230,13 @@ impl CarryAgent {
             let normal = (report.point_a - report.point_b) / report.distance;
             let jac = |body: &Body, p: &embodied_models::nalgebra::Point3<f64>| match body {
                 Body::Link { link, .. } => {
-                    let local = self.robot.link_pose(q, *link).inverse_transform_point(p);
-                    self.robot.jacobian(q, *link, &Isometry3::translation(local.x, local.y, local.z))
+                    let local = poses[*link].inverse_transform_point(p);
+                    self.robot.jacobian_with_poses(&poses, *link, &Isometry3::translation(local.x, local.y, local.z))
                 }
                 Body::Obstacle { .. } => embodied_models::nalgebra::Matrix6xX::zeros(q.len()),
             };
             let (ja, jb) = (jac(&report.a, &report.point_a), jac(&report.b, &report.point_b));
             if let Some(mut row) = VelocityDamper::from_witness(&normal, &ja, &jb, report.distance, &self.damper) {
-                // Within one step the joints can only decelerate so much: a row asking for more
-                // than the acceleration limits allow becomes "approach as slowly as possible".
-                step_bounds(q, self.controller.previous_velocity().as_slice(), &self.limits, i.dt(), &mut lo, &mut hi);
                 let best: f64 =
                     row.a.iter().enumerate().map(|(j, a)| if *a > 0.0 { a * lo[j] } else { a * hi[j] }).sum();
                 if best > row.b {
@@ -291,10 +290,6 @@ impl CarryAgent {
             Err(e) => self.halt(e.to_string(), i, o),
         }
     }
-}
-
-fn tool_pose(robot: &Robot, q: &[f64], ee: usize) -> Isometry3<f64> {
-    robot.end_effector_poses(q, ee).1
 }
 
 /// The carrying agent's program: halt > closed chain > follow the plan.

@@ -250,8 +250,9 @@ pub fn two_arm_ik(
     Some(q)
 }
 
-fn largest_jump(a: &[f64], b: &[f64]) -> f64 {
-    a.iter().zip(b).map(|(x, y)| (x - y).abs()).fold(0.0, f64::max)
+/// Largest joint change between two configurations (the short way on continuous joints).
+fn largest_jump(robot: &Robot, a: &[f64], b: &[f64]) -> f64 {
+    robot.config_space().max_joint_step(a, b)
 }
 
 /// The quintic rest-to-rest time law s(u), u in [0, 1], and its first two derivatives.
@@ -290,8 +291,8 @@ fn follow(
         let s = k as f64 / n as f64;
         let [a, b] = targets(s);
         let next = two_arm_ik(robot, ee, [&a, &b], &q, 0, 1e-9).ok_or_else(|| format!("no IK at s = {s:.3}"))?;
-        if largest_jump(&q, &next) > max_jump {
-            return Err(format!("IK jumps {:.3} at s = {s:.3}", largest_jump(&q, &next)));
+        if largest_jump(robot, &q, &next) > max_jump {
+            return Err(format!("IK jumps {:.3} at s = {s:.3}", largest_jump(robot, &q, &next)));
         }
         *checks += 1;
         if let Some(c) = model.first_collision(&next) {
@@ -342,8 +343,8 @@ fn timed_follow(
         let (s, _, _) = quintic(k as f64 / steps as f64);
         let [a, b] = targets(s);
         let next = two_arm_ik(robot, ee, [&a, &b], &q, 0, 1e-10).ok_or_else(|| format!("no IK at s = {s:.4}"))?;
-        if largest_jump(&q, &next) > settings.max_joint_jump * 0.2 {
-            return Err(format!("IK jumps {:.3} at s = {s:.4}", largest_jump(&q, &next)));
+        if largest_jump(robot, &q, &next) > settings.max_joint_jump * 0.2 {
+            return Err(format!("IK jumps {:.3} at s = {s:.4}", largest_jump(robot, &q, &next)));
         }
         out.push(next.clone());
         q = next;
@@ -421,7 +422,7 @@ impl ObjectLattice<'_> {
         let [a, b] = self.targets(&self.pose(cell));
         let q = two_arm_ik(&self.task.robot, self.task.end_effectors, [&a, &b], from, 0, 1e-9).filter(|q| {
             *self.checks.borrow_mut() += 1;
-            largest_jump(from, q) <= self.settings.max_joint_jump && !self.held.collides(q)
+            largest_jump(&self.task.robot, from, q) <= self.settings.max_joint_jump && !self.held.collides(q)
         });
         match &q {
             None => *self.ik_failures.borrow_mut() += 1,
@@ -632,7 +633,7 @@ pub fn plan_carry(task: &CarryTask, settings: &CarrySettings) -> Result<CarryPla
             let (pa, pb) = (lattice.pose(w[0]), lattice.pose(w[1]));
             let targets = |s: f64| grasp_at(&interpolate_pose(&pa, &pb, s));
             let good = follow(robot, &held, ee, &targets, &qa, 5, settings.max_joint_jump, &mut checks)
-                .is_ok_and(|p| p.last().is_some_and(|q| largest_jump(q, &qb) < 1e-3));
+                .is_ok_and(|p| p.last().is_some_and(|q| largest_jump(robot, q, &qb) < 1e-3));
             if !good {
                 lattice.blocked.insert((w[0], w[1]));
                 lattice.blocked.insert((w[1], w[0]));
