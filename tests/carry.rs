@@ -1,6 +1,9 @@
 //! The two-handed carry plan: closure, limits, collisions, the obstacle, bad input.
 #![allow(clippy::unwrap_used)]
 
+mod common;
+use common::tmp;
+
 use std::path::Path;
 
 use embodied::scenario::{load_scenario, parse_scenario};
@@ -145,12 +148,6 @@ fn bad_carry_tables_name_the_place() {
         "name = \"c\"\ndescription = \"d\"\n[[agents]]\nname = \"arm\"\nrobot = \"irp6-postument\"\n[carry]\n";
     let e = err_of(&format!("{one_arm}agent = \"arm\"\n{ok}"));
     assert!(e.contains("a carry needs two"), "{e}");
-}
-
-fn tmp(name: &str) -> std::path::PathBuf {
-    let dir = std::env::temp_dir().join(format!("embodied-carry-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    dir.join(name)
 }
 
 fn log_lines(path: &Path) -> Vec<serde_json::Value> {

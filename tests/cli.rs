@@ -1,16 +1,8 @@
 //! End-to-end tests of the `embodied` binary.
 #![allow(clippy::unwrap_used)]
 
-use std::process::Command;
-
-fn embodied(args: &[&str]) -> (i32, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_embodied")).args(args).output().expect("binary runs");
-    (
-        out.status.code().unwrap_or(-1),
-        String::from_utf8_lossy(&out.stdout).into_owned(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
-}
+mod common;
+use common::{embodied, tmp};
 
 #[test]
 fn model_json_has_the_documented_fields() {
@@ -86,12 +78,6 @@ fn scenarios_lists_the_builtins() {
     for (name, _) in embodied::scenario::BUILTIN_SCENARIOS {
         assert!(names.contains(name));
     }
-}
-
-fn tmp(name: &str) -> std::path::PathBuf {
-    let dir = std::env::temp_dir().join(format!("embodied-cli-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    dir.join(name)
 }
 
 #[test]

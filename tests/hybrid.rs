@@ -2,17 +2,12 @@
 //! `embodied::run::run_scenario`, every behaviour asserted from the JSON Lines log.
 #![allow(clippy::unwrap_used)]
 
-use std::path::PathBuf;
+mod common;
+use common::tmp;
 
 use embodied::run::{RunArgs, run_scenario};
 use embodied::scenario::{ClockSpec, load_scenario};
 use embodied_models::collision::{CollisionModel, Environment};
-
-fn tmp(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("embodied-hybrid-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    dir.join(name)
-}
 
 struct Log {
     steps: Vec<serde_json::Value>,

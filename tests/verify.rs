@@ -1,8 +1,10 @@
 //! `embodied verify`: the certified plan checker and the run-log checker, end to end.
 #![allow(clippy::unwrap_used)]
 
+mod common;
+use common::embodied;
+
 use std::path::{Path, PathBuf};
-use std::process::Command;
 
 use embodied::plan::{PlanFile, agent_problem, plan_scenario};
 use embodied::scenario::{BUILTIN_SCENARIOS, load_scenario};
@@ -13,15 +15,6 @@ use embodied_models::{Shape, builtin};
 use embodied_planner::carry::{CarriedObject, ClosedChainSpan};
 use embodied_planner::trajectory::Trajectory;
 use embodied_planner::verify::certified::{CheckSettings, Finding, check_closure, check_collisions, check_trajectory};
-
-fn embodied(args: &[&str]) -> (i32, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_embodied")).args(args).output().expect("binary runs");
-    (
-        out.status.code().unwrap_or(-1),
-        String::from_utf8_lossy(&out.stdout).into_owned(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
-}
 
 fn temp_dir(name: &str) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("embodied-verify-{}-{name}", std::process::id()));
