@@ -6,7 +6,7 @@ use std::path::PathBuf;
 use embodied_models::collision::{CollisionModel, Environment, Obstacle, disable_always_colliding};
 use embodied_models::nalgebra::{Isometry3, Point3, UnitQuaternion, Vector3};
 use embodied_models::urdf::load_urdf;
-use embodied_models::{ConvexHull, Rng, Robot, Shape, builtin};
+use embodied_models::{ConvexHull, JointKind, JointLimits, PlacedShape, Rng, Robot, RobotBuilder, Shape, builtin};
 use proptest::prelude::*;
 
 fn fixture(name: &str) -> PathBuf {
@@ -77,6 +77,132 @@ fn spherized_ur5_takes_the_sphere_path_and_agrees_with_the_general_path() {
     // A robot with capsules does not take the sphere path.
     let irp6 = builtin("irp6-postument").unwrap();
     assert!(!CollisionModel::new(&irp6, Environment::new()).uses_sphere_path());
+}
+
+/// A sphere-only arm with every joint form the sphere path poses: skewed revolute axes, a
+/// prismatic joint along a skewed axis, a DH-style `post` transform with an offset, a fixed
+/// joint (two links on one body), a mimic joint, and a rotated base.
+fn skewed_sphere_arm() -> Robot {
+    let balls = |points: &[[f64; 3]], r: f64| -> Vec<PlacedShape> {
+        points.iter().map(|p| PlacedShape::new(Isometry3::translation(p[0], p[1], p[2]), Shape::sphere(r))).collect()
+    };
+    let rpy = |x: f64, y: f64, z: f64, r: f64, p: f64, w: f64| {
+        Isometry3::from_parts(Vector3::new(x, y, z).into(), UnitQuaternion::from_euler_angles(r, p, w))
+    };
+    let limits = JointLimits::new(-2.5, 2.5, 1.0, 2.0);
+    let mut b = RobotBuilder::new("skewed-spheres").base(rpy(0.05, -0.1, 0.0, 0.1, -0.2, 0.7));
+    let base = b.link("base", balls(&[[0.0, 0.0, 0.05], [0.05, 0.0, 0.1]], 0.08));
+    let l1 = b.link("l1", balls(&[[0.0, 0.0, 0.1], [0.0, 0.05, 0.25], [0.02, 0.1, 0.4]], 0.06));
+    let l2 = b.link("l2", balls(&[[0.0, 0.0, 0.0], [0.15, 0.0, 0.0], [0.3, 0.02, 0.0]], 0.05));
+    let l3 = b.link("l3", balls(&[[0.0, 0.0, 0.0], [0.0, 0.2, 0.0], [0.0, 0.35, 0.05]], 0.05));
+    let l3b = b.link("l3_cover", balls(&[[0.1, 0.3, 0.0], [0.12, 0.35, 0.1]], 0.04));
+    let l4 = b.link("l4", balls(&[[0.0, 0.0, 0.0], [0.1, 0.0, 0.1], [0.2, 0.0, 0.15]], 0.04));
+    b.joint(
+        "j1",
+        JointKind::Revolute,
+        base,
+        l1,
+        rpy(0.0, 0.0, 0.15, 0.0, 0.0, 0.3),
+        Vector3::new(0.3, -0.5, 0.8),
+        0.0,
+        Isometry3::identity(),
+        limits,
+    );
+    b.joint(
+        "j2",
+        JointKind::Prismatic,
+        l1,
+        l2,
+        rpy(0.02, 0.1, 0.45, 0.4, 0.2, -0.3),
+        Vector3::new(1.0, 1.0, 0.0),
+        0.05,
+        Isometry3::identity(),
+        JointLimits::new(-0.1, 0.35, 0.5, 1.0),
+    );
+    // DH: Tz(d) Tx(a) Rx(alpha) after the motion, with an offset on the joint value.
+    let post = Isometry3::translation(0.0, 0.0, 0.08)
+        * Isometry3::translation(0.12, 0.0, 0.0)
+        * Isometry3::rotation(Vector3::x() * 0.7);
+    b.joint(
+        "j3",
+        JointKind::Continuous,
+        l2,
+        l3,
+        rpy(0.3, 0.0, 0.0, 0.0, 0.5, 0.0),
+        Vector3::new(0.0, 1.0, 0.0),
+        0.3,
+        post,
+        JointLimits::continuous(1.0, 2.0),
+    );
+    b.joint(
+        "j3_cover",
+        JointKind::Fixed,
+        l3,
+        l3b,
+        rpy(0.0, 0.05, 0.0, 0.2, 0.0, 0.0),
+        Vector3::z(),
+        0.0,
+        Isometry3::identity(),
+        limits,
+    );
+    let j4 = b.joint(
+        "j4",
+        JointKind::Revolute,
+        l3,
+        l4,
+        rpy(0.0, 0.4, 0.05, 0.0, 0.0, 0.0),
+        Vector3::new(-0.2, 0.1, 1.0),
+        0.0,
+        Isometry3::identity(),
+        limits,
+    );
+    b.mimic(j4, "j1".into(), -0.8, 0.2);
+    b.build().unwrap()
+}
+
+#[test]
+fn sphere_path_agrees_with_the_general_path_on_every_joint_form() {
+    let robot = skewed_sphere_arm();
+    assert_eq!(robot.dof(), 3);
+    let space = robot.config_space();
+    for seed in 0..4 {
+        let mut env = Environment::new();
+        let mut rng = Rng::new(seed + 40);
+        for k in 0..10 {
+            let p = Vector3::new(rng.range(-0.7, 0.7), rng.range(-0.7, 0.7), rng.range(0.0, 0.9));
+            if p.xy().norm() < 0.2 {
+                continue;
+            }
+            let rot =
+                UnitQuaternion::from_euler_angles(rng.range(-3.0, 3.0), rng.range(-3.0, 3.0), rng.range(-3.0, 3.0));
+            let shape = if k % 2 == 0 { Shape::cuboid(0.1, 0.05, 0.08) } else { Shape::sphere(0.07) };
+            env.add(Obstacle::new(format!("o{k}"), Isometry3::from_parts(p.into(), rot), shape));
+        }
+        let fast = CollisionModel::new(&robot, env);
+        assert!(fast.uses_sphere_path());
+        let general = fast.clone().general_path_only();
+        let (mut hits, mut n) = (0, 0);
+        for _ in 0..1500 {
+            let q = robot.random_configuration(&mut rng);
+            let c = fast.collides(&q);
+            assert_eq!(c, general.collides(&q), "seed {seed}, q = {q:?}");
+            hits += c as usize;
+            n += 1;
+        }
+        assert!(hits > n / 20 && hits < n - n / 20, "seed {seed}: {hits} of {n} collide");
+        // Certified motions of the fast path are free when sampled finely.
+        let mut certified = 0;
+        for _ in 0..150 {
+            let qa = robot.random_configuration(&mut rng);
+            let far = robot.random_configuration(&mut rng);
+            let qb = space.interpolate(&qa, &far, 0.3);
+            if fast.motion_is_certified_free(&qa, &qb, 1e-4) {
+                certified += 1;
+                assert!(general.motion_is_free(&qa, &qb, 0.0005), "certified but collides: {qa:?} -> {qb:?}");
+            }
+        }
+        assert!(certified > 10, "seed {seed}: only {certified} of 150 motions certified");
+    }
 }
 
 /// Points that move rigidly with each link: shape centres and capsule end points, world frame.

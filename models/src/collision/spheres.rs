@@ -28,11 +28,18 @@ pub(crate) enum Check {
     Hit,
 }
 
+/// A body of the sphere path. Its frame is the robot's body frame turned by a constant rotation
+/// `A` chosen so that a revolute joint turns about the frame's own z axis (`A e_z` = the joint
+/// axis): posing it then costs one `sin_cos` and a 3x2 column mix instead of Rodrigues' formula
+/// and a full matrix product. `pre` and `post` are rewritten to match (`A_parentᵀ pre A`,
+/// `Aᵀ post A`), and so are the sphere centres (`Aᵀ c`). World positions are unchanged.
 #[derive(Debug, Clone)]
 struct Body {
     parent: usize,
     pre_r: Matrix3<f64>,
     pre_t: Vector3<f64>,
+    /// The joint axis in this body's (turned) frame: `e_z` for a revolute joint; for a prismatic
+    /// joint, in the frame after `pre`.
     axis: Vector3<f64>,
     prismatic: bool,
     offset: f64,
@@ -49,6 +56,30 @@ struct Link {
     r: f64,
 }
 
+/// The links that ride on one body, with a sphere around all of their bounding spheres (body
+/// frame). The broad phase tests these first: the UR5's last body carries ten links.
+#[derive(Debug, Clone)]
+struct Group {
+    body: usize,
+    /// Range into [`SphereGeom::group_links`].
+    first: usize,
+    end: usize,
+    c: Vector3<f64>,
+    r: f64,
+}
+
+/// The self pairs joining the links of two groups (possibly the same group twice).
+#[derive(Debug, Clone)]
+struct GroupPair {
+    a: usize,
+    b: usize,
+    /// Sum of the two group radii.
+    rr: f64,
+    /// Range into [`SphereGeom::pair_order`].
+    first: usize,
+    end: usize,
+}
+
 /// A sphere robot prepared for the fast path (built from [`RobotGeom`] when every shape is a sphere).
 #[derive(Debug, Clone)]
 pub(crate) struct SphereGeom {
@@ -62,6 +93,14 @@ pub(crate) struct SphereGeom {
     self_pairs: Vec<(u32, u32)>,
     /// The deepest body carrying both links of each self pair.
     pair_common: Vec<u32>,
+    /// The sum of the two link bounding radii of each self pair.
+    pair_rr: Vec<f64>,
+    groups: Vec<Group>,
+    /// Link slots, grouped by body.
+    group_links: Vec<u32>,
+    group_pairs: Vec<GroupPair>,
+    /// Self-pair indices, grouped by group pair.
+    pair_order: Vec<u32>,
     dof: usize,
     /// Per-sphere lever arms, `lever[(k * bodies + stop) * dof + i]`: how far sphere `k`'s
     /// centre moves per unit change of joint value `i` relative to body `stop` (0 = the world),
@@ -152,23 +191,37 @@ fn dist2(solid: &Solid, p: &Vector3<f64>) -> Option<f64> {
     })
 }
 
-/// Rotation by `angle` about the unit `axis` (Rodrigues).
+/// `a * b`, written out (nalgebra's generic product costs more instructions here).
 #[inline(always)]
-fn axis_angle(axis: &Vector3<f64>, angle: f64) -> Matrix3<f64> {
-    let (s, c) = angle.sin_cos();
-    let k = 1.0 - c;
-    let (x, y, z) = (axis.x, axis.y, axis.z);
-    Matrix3::new(
-        c + x * x * k,
-        x * y * k - z * s,
-        x * z * k + y * s,
-        y * x * k + z * s,
-        c + y * y * k,
-        y * z * k - x * s,
-        z * x * k - y * s,
-        z * y * k + x * s,
-        c + z * z * k,
+fn mul3(a: &Matrix3<f64>, b: &Matrix3<f64>) -> Matrix3<f64> {
+    let mut out = Matrix3::zeros();
+    for c in 0..3 {
+        let (b0, b1, b2) = (b[(0, c)], b[(1, c)], b[(2, c)]);
+        for r in 0..3 {
+            out[(r, c)] = a[(r, 0)] * b0 + a[(r, 1)] * b1 + a[(r, 2)] * b2;
+        }
+    }
+    out
+}
+
+/// `a * v`, written out.
+#[inline(always)]
+fn mul3v(a: &Matrix3<f64>, v: &Vector3<f64>) -> Vector3<f64> {
+    let (x, y, z) = (v.x, v.y, v.z);
+    Vector3::new(
+        a[(0, 0)] * x + a[(0, 1)] * y + a[(0, 2)] * z,
+        a[(1, 0)] * x + a[(1, 1)] * y + a[(1, 2)] * z,
+        a[(2, 0)] * x + a[(2, 1)] * y + a[(2, 2)] * z,
     )
+}
+
+/// Whether the sphere (`c`, `r`) reaches the obstacle's bounding box.
+#[inline(always)]
+fn sphere_near_box(c: &Vector3<f64>, r: f64, o: &ObstacleGeom) -> bool {
+    let dx = (o.lo.x - c.x).max(0.0).max(c.x - o.hi.x);
+    let dy = (o.lo.y - c.y).max(0.0).max(c.y - o.hi.y);
+    let dz = (o.lo.z - c.z).max(0.0).max(c.z - o.hi.z);
+    dx * dx + dy * dy + dz * dz <= r * r
 }
 
 /// Working memory of the fast path, kept inside [`super::CollisionScratch`].
@@ -179,6 +232,12 @@ pub(crate) struct SphereScratch {
     link_c: Vec<Vector3<f64>>,
     centre: Vec<Vector3<f64>>,
     posed: Vec<u32>,
+    /// World centres of the group spheres, and of the link bounding spheres (posed on demand:
+    /// `link_posed[l] == stamp`).
+    group_c: Vec<Vector3<f64>>,
+    link_posed: Vec<u32>,
+    /// Per check: the largest link margin of each group (inflated queries).
+    group_e: Vec<f64>,
     stamp: u32,
 }
 
@@ -195,8 +254,110 @@ fn is_below(bodies: &[super::FkBody], mut m: usize, stop: usize) -> bool {
 
 impl SphereScratch {
     pub(crate) const fn new() -> Self {
-        Self { rot: Vec::new(), pos: Vec::new(), link_c: Vec::new(), centre: Vec::new(), posed: Vec::new(), stamp: 0 }
+        Self {
+            rot: Vec::new(),
+            pos: Vec::new(),
+            link_c: Vec::new(),
+            centre: Vec::new(),
+            posed: Vec::new(),
+            group_c: Vec::new(),
+            link_posed: Vec::new(),
+            group_e: Vec::new(),
+            stamp: 0,
+        }
     }
+}
+
+/// A rotation whose third column is the unit vector `a` (right-handed).
+fn frame_with_z(a: &Vector3<f64>) -> Matrix3<f64> {
+    // Start from the world axis least aligned with `a`.
+    let pick = if a.x.abs() <= a.y.abs() && a.x.abs() <= a.z.abs() {
+        Vector3::x()
+    } else if a.y.abs() <= a.z.abs() {
+        Vector3::y()
+    } else {
+        Vector3::z()
+    };
+    let u = (pick - a * pick.dot(a)).normalize();
+    let v = a.cross(&u);
+    Matrix3::from_columns(&[u, v, *a])
+}
+
+/// Turn every revolute body's frame so that its joint turns about the frame's z axis (see
+/// [`Body`]); sphere and link centres follow their body.
+fn turn_to_z(
+    mut bodies: Vec<Body>,
+    mut centre: Vec<Vector3<f64>>,
+    mut links: Vec<Link>,
+) -> (Vec<Body>, Vec<Vector3<f64>>, Vec<Link>) {
+    let turn: Vec<Matrix3<f64>> = bodies
+        .iter()
+        .enumerate()
+        .map(|(i, b)| if i == 0 || b.prismatic { Matrix3::identity() } else { frame_with_z(&b.axis) })
+        .collect();
+    for (i, b) in bodies.iter_mut().enumerate().skip(1) {
+        let (tp, tb) = (turn[b.parent].transpose(), turn[i]);
+        b.pre_r = tp * b.pre_r * tb;
+        b.pre_t = tp * b.pre_t;
+        if !b.prismatic {
+            b.axis = Vector3::z();
+            b.post = b.post.map(|(r, t)| (tb.transpose() * r * tb, tb.transpose() * t));
+        }
+    }
+    for link in &mut links {
+        let t = turn[link.body].transpose();
+        link.c = t * link.c;
+        for c in &mut centre[link.first..link.end] {
+            *c = t * *c;
+        }
+    }
+    (bodies, centre, links)
+}
+
+/// Group the links by body (see [`Group`]) and the self pairs by the groups they join.
+fn group_by_body(links: &[Link], self_pairs: &[(u32, u32)]) -> (Vec<Group>, Vec<u32>, Vec<GroupPair>, Vec<u32>) {
+    let mut bodies: Vec<usize> = links.iter().map(|l| l.body).collect();
+    bodies.sort_unstable();
+    bodies.dedup();
+    let mut groups = Vec::new();
+    let mut group_links = Vec::new();
+    let mut group_of = vec![0usize; links.len()];
+    for &body in &bodies {
+        let first = group_links.len();
+        for (l, link) in links.iter().enumerate() {
+            if link.body == body {
+                group_of[l] = groups.len();
+                group_links.push(l as u32);
+            }
+        }
+        let members = &group_links[first..];
+        let c = members.iter().map(|&l| links[l as usize].c).sum::<Vector3<f64>>() / members.len() as f64;
+        let r = members.iter().map(|&l| (links[l as usize].c - c).norm() + links[l as usize].r).fold(0.0, f64::max);
+        // A hair more, so that rounding in the group test never drops a link the link test keeps.
+        groups.push(Group { body, first, end: group_links.len(), c, r: r * (1.0 + 1e-12) + 1e-12 });
+    }
+    let mut keyed: Vec<((usize, usize), u32)> = self_pairs
+        .iter()
+        .enumerate()
+        .map(|(p, &(a, b))| {
+            let (ga, gb) = (group_of[a as usize], group_of[b as usize]);
+            ((ga.min(gb), ga.max(gb)), p as u32)
+        })
+        .collect();
+    keyed.sort_unstable();
+    let mut group_pairs: Vec<GroupPair> = Vec::new();
+    let mut pair_order = Vec::with_capacity(keyed.len());
+    for (k, &((a, b), p)) in keyed.iter().enumerate() {
+        if k == 0 || keyed[k - 1].0 != (a, b) {
+            let rr = groups[a].r + groups[b].r;
+            group_pairs.push(GroupPair { a, b, rr, first: k, end: k });
+        }
+        pair_order.push(p);
+        if let Some(last) = group_pairs.last_mut() {
+            last.end = k + 1;
+        }
+    }
+    (groups, group_links, group_pairs, pair_order)
 }
 
 impl SphereGeom {
@@ -287,6 +448,8 @@ impl SphereGeom {
             .iter()
             .map(|&(a, b)| super::common_body(&g.bodies, links[a as usize].body, links[b as usize].body) as u32)
             .collect();
+        let (bodies, centre, links) = turn_to_z(bodies, centre, links);
+        let (groups, group_links, group_pairs, pair_order) = group_by_body(&links, &g.self_pairs);
         Some(SphereGeom {
             base_r: mat(&g.base.rotation),
             base_t: g.base.translation.vector,
@@ -295,6 +458,11 @@ impl SphereGeom {
             centre,
             radius,
             self_pairs: g.self_pairs.clone(),
+            groups,
+            group_links,
+            group_pairs,
+            pair_order,
+            pair_rr: g.self_pairs.iter().map(|&(a, b)| g.links[a as usize].r + g.links[b as usize].r).collect(),
             pair_common,
             dof,
             lever,
@@ -319,12 +487,20 @@ impl SphereGeom {
             s.link_c.resize(self.links.len(), Vector3::zeros());
             s.posed.resize(self.links.len(), 0);
         }
+        if s.group_c.len() != self.groups.len() {
+            s.group_c.resize(self.groups.len(), Vector3::zeros());
+            s.group_e.resize(self.groups.len(), 0.0);
+        }
+        if s.link_posed.len() != self.links.len() {
+            s.link_posed.resize(self.links.len(), 0);
+        }
         if s.centre.len() != self.centre.len() {
             s.centre.resize(self.centre.len(), Vector3::zeros());
         }
         s.stamp = s.stamp.wrapping_add(1);
         if s.stamp == 0 {
             s.posed.iter_mut().for_each(|p| *p = 0);
+            s.link_posed.iter_mut().for_each(|p| *p = 0);
             s.stamp = 1;
         }
     }
@@ -335,28 +511,51 @@ impl SphereGeom {
         self.begin(s);
         s.rot[0] = self.base_r;
         s.pos[0] = self.base_t;
+        let n = self.bodies.len();
+        let (rot, pos) = (&mut s.rot[..n], &mut s.pos[..n]);
         for (i, b) in self.bodies.iter().enumerate().skip(1) {
             let v = match b.value {
                 Value::Dof(d) => q[d],
                 Value::Mimic(d, m, o) => q[d] * m + o,
                 Value::Zero => 0.0,
             } + b.offset;
+            let (pr, pp) = (rot[b.parent], pos[b.parent]);
+            let m = mul3(&pr, &b.pre_r);
             let (mut r, mut t) = if b.prismatic {
-                (b.pre_r, b.pre_t + b.pre_r * (b.axis * v))
+                let a = b.axis * v;
+                (m, pr * b.pre_t + m * a + pp)
             } else {
-                (b.pre_r * axis_angle(&b.axis, v), b.pre_t)
+                // m * Rz(v): only the first two columns change.
+                let (sn, cs) = v.sin_cos();
+                let mut r = m;
+                for row in 0..3 {
+                    let (c0, c1) = (m[(row, 0)], m[(row, 1)]);
+                    r[(row, 0)] = c0 * cs + c1 * sn;
+                    r[(row, 1)] = c1 * cs - c0 * sn;
+                }
+                (r, mul3v(&pr, &b.pre_t) + pp)
             };
-            if let Some((pr, pt)) = &b.post {
-                t += r * pt;
-                r *= pr;
+            if let Some((qr, qt)) = &b.post {
+                t += mul3v(&r, qt);
+                r = mul3(&r, qr);
             }
-            let (pr, pp) = (s.rot[b.parent], s.pos[b.parent]);
-            s.rot[i] = pr * r;
-            s.pos[i] = pr * t + pp;
+            rot[i] = r;
+            pos[i] = t;
         }
-        for (l, link) in self.links.iter().enumerate() {
-            s.link_c[l] = s.rot[link.body] * link.c + s.pos[link.body];
+        for (g, c) in self.groups.iter().zip(s.group_c.iter_mut()) {
+            *c = mul3v(&rot[g.body], &g.c) + pos[g.body];
         }
+    }
+
+    /// World centre of link `l`'s bounding sphere, computed once per query.
+    #[inline(always)]
+    fn link_centre(&self, l: usize, s: &mut SphereScratch) -> Vector3<f64> {
+        if s.link_posed[l] != s.stamp {
+            s.link_posed[l] = s.stamp;
+            let link = &self.links[l];
+            s.link_c[l] = mul3v(&s.rot[link.body], &link.c) + s.pos[link.body];
+        }
+        s.link_c[l]
     }
 
     /// World centres of link `l`'s spheres, computed once per query.
@@ -368,8 +567,9 @@ impl SphereGeom {
         s.posed[l] = s.stamp;
         let link = &self.links[l];
         let (r, t) = (s.rot[link.body], s.pos[link.body]);
-        for k in link.first..link.end {
-            s.centre[k] = r * self.centre[k] + t;
+        let (local, world) = (&self.centre[link.first..link.end], &mut s.centre[link.first..link.end]);
+        for (w, c) in world.iter_mut().zip(local) {
+            *w = mul3v(&r, c) + t;
         }
     }
 
@@ -430,100 +630,121 @@ impl SphereGeom {
         // exact contact matters, so the rest of the query runs without margins.
         let mut inf = if GROW { inflation } else { None };
         let mut near = false;
-        // The box around every (grown) link sphere: obstacles outside it are skipped whole.
-        let mut lo = Vector3::repeat(f64::INFINITY);
-        let mut hi = Vector3::repeat(f64::NEG_INFINITY);
-        for (l, link) in self.links.iter().enumerate() {
-            let r = Vector3::repeat(link.r + inf.map_or(0.0, |i| i.link[l]));
-            lo = lo.inf(&(s.link_c[l] - r));
-            hi = hi.sup(&(s.link_c[l] + r));
+        // The largest link margin of each group.
+        if let Some(i) = inf {
+            for (g, e) in self.groups.iter().zip(s.group_e.iter_mut()) {
+                *e = self.group_links[g.first..g.end].iter().map(|&l| i.link[l as usize]).fold(0.0, f64::max);
+            }
+        }
+        // The box around every (grown) group sphere: obstacles outside it are skipped whole.
+        let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
+        for (k, (g, c)) in self.groups.iter().zip(&s.group_c).enumerate() {
+            let r = g.r + if inf.is_some() { s.group_e[k] } else { 0.0 };
+            for d in 0..3 {
+                lo[d] = lo[d].min(c[d] - r);
+                hi[d] = hi[d].max(c[d] + r);
+            }
         }
         for (o, solid) in obstacles.iter().zip(solids) {
-            if o.lo.x > hi.x || o.hi.x < lo.x || o.lo.y > hi.y || o.hi.y < lo.y || o.lo.z > hi.z || o.hi.z < lo.z {
+            if o.lo.x > hi[0] || o.hi.x < lo[0] || o.lo.y > hi[1] || o.hi.y < lo[1] || o.lo.z > hi[2] || o.hi.z < lo[2]
+            {
                 continue;
             }
-            for (l, link) in self.links.iter().enumerate() {
-                let el = inf.map_or(0.0, |i| i.link[l]);
-                let rl = link.r + el;
-                let c = &s.link_c[l];
-                // Link sphere against the obstacle's box.
-                let dx = (o.lo.x - c.x).max(0.0).max(c.x - o.hi.x);
-                let dy = (o.lo.y - c.y).max(0.0).max(c.y - o.hi.y);
-                let dz = (o.lo.z - c.z).max(0.0).max(c.z - o.hi.z);
-                if dx * dx + dy * dy + dz * dz > rl * rl {
+            for (gi, g) in self.groups.iter().enumerate() {
+                let eg = if inf.is_some() { s.group_e[gi] } else { 0.0 };
+                if !sphere_near_box(&s.group_c[gi], g.r + eg, o) {
                     continue;
                 }
-                self.pose_link(l, s);
-                for k in link.first..link.end {
-                    let p = &s.centre[k];
-                    let r = self.radius[k];
-                    match dist2(solid, p) {
-                        Some(d2) => {
-                            if d2 <= r * r {
-                                return Check::Hit;
-                            }
-                            if let Some(i) = inf {
-                                // The link's margin bounds the sphere's: test the tight one
-                                // only when the loose one touches.
-                                let rel = r + el;
-                                if d2 <= rel * rel {
-                                    let re = r + self.margin(k, 0, i.step);
-                                    if d2 <= re * re {
-                                        near = true;
-                                        inf = None;
+                for gl in g.first..g.end {
+                    let l = self.group_links[gl] as usize;
+                    let link = &self.links[l];
+                    let el = inf.map_or(0.0, |i| i.link[l]);
+                    let c = self.link_centre(l, s);
+                    if !sphere_near_box(&c, link.r + el, o) {
+                        continue;
+                    }
+                    self.pose_link(l, s);
+                    for k in link.first..link.end {
+                        let p = &s.centre[k];
+                        let r = self.radius[k];
+                        match dist2(solid, p) {
+                            Some(d2) => {
+                                if d2 <= r * r {
+                                    return Check::Hit;
+                                }
+                                if let Some(i) = inf {
+                                    // The link's margin bounds the sphere's: test the tight one
+                                    // only when the loose one touches.
+                                    let rel = r + el;
+                                    if d2 <= rel * rel {
+                                        let re = r + self.margin(k, 0, i.step);
+                                        if d2 <= re * re {
+                                            near = true;
+                                            inf = None;
+                                        }
                                     }
                                 }
                             }
-                        }
-                        None => {
-                            let sep = narrow::separation(&View::Sphere { c: Point3::from(*p), r }, &o.world.view());
-                            if sep.distance <= 0.0 {
-                                return Check::Hit;
-                            }
-                            if let Some(i) = inf
-                                && sep.distance <= self.margin(k, 0, i.step)
-                            {
-                                near = true;
-                                inf = None;
+                            None => {
+                                let sep = narrow::separation(&View::Sphere { c: Point3::from(*p), r }, &o.world.view());
+                                if sep.distance <= 0.0 {
+                                    return Check::Hit;
+                                }
+                                if let Some(i) = inf
+                                    && sep.distance <= self.margin(k, 0, i.step)
+                                {
+                                    near = true;
+                                    inf = None;
+                                }
                             }
                         }
                     }
                 }
             }
         }
-        for (p, &(a, b)) in self.self_pairs.iter().enumerate() {
-            let (a, b) = (a as usize, b as usize);
-            let (la, lb) = (&self.links[a], &self.links[b]);
-            let ep = inf.map_or(0.0, |i| i.pair[p]);
-            let rr = la.r + lb.r + ep;
-            if (s.link_c[a] - s.link_c[b]).norm_squared() > rr * rr {
+        for gp in &self.group_pairs {
+            let pairs = &self.pair_order[gp.first..gp.end];
+            let eg = inf.map_or(0.0, |i| pairs.iter().map(|&p| i.pair[p as usize]).fold(0.0, f64::max));
+            let rr = gp.rr + eg;
+            if gp.a != gp.b && (s.group_c[gp.a] - s.group_c[gp.b]).norm_squared() > rr * rr {
                 continue;
             }
-            self.pose_link(a, s);
-            self.pose_link(b, s);
-            let stop = self.pair_common[p] as usize;
-            let cb = s.link_c[b];
-            for i in la.first..la.end {
-                let (ci, ri) = (s.centre[i], self.radius[i]);
-                // Sphere `i` against link b's bounding sphere first: b's bounding sphere holds
-                // every sphere of b, and `ep` bounds the growth of any two spheres of the pair.
-                let reach = ri + lb.r + ep;
-                if (ci - cb).norm_squared() > reach * reach {
+            for &p in pairs {
+                let p = p as usize;
+                let (a, b) = self.self_pairs[p];
+                let (a, b) = (a as usize, b as usize);
+                let (la, lb) = (&self.links[a], &self.links[b]);
+                let ep = inf.map_or(0.0, |i| i.pair[p]);
+                let rr = self.pair_rr[p] + ep;
+                let cb = self.link_centre(b, s);
+                if (self.link_centre(a, s) - cb).norm_squared() > rr * rr {
                     continue;
                 }
-                for j in lb.first..lb.end {
-                    let d2 = (ci - s.centre[j]).norm_squared();
-                    let r = ri + self.radius[j];
-                    if d2 <= r * r {
-                        return Check::Hit;
+                self.pose_link(a, s);
+                self.pose_link(b, s);
+                let stop = self.pair_common[p] as usize;
+                for i in la.first..la.end {
+                    let (ci, ri) = (s.centre[i], self.radius[i]);
+                    // Sphere `i` against link b's bounding sphere first: b's bounding sphere holds
+                    // every sphere of b, and `ep` bounds the growth of any two spheres of the pair.
+                    let reach = ri + lb.r + ep;
+                    if (ci - cb).norm_squared() > reach * reach {
+                        continue;
                     }
-                    if let Some(inf_now) = inf {
-                        let rp = r + ep;
-                        if d2 <= rp * rp {
-                            let re = r + self.margin(i, stop, inf_now.step) + self.margin(j, stop, inf_now.step);
-                            if d2 <= re * re {
-                                near = true;
-                                inf = None;
+                    for j in lb.first..lb.end {
+                        let d2 = (ci - s.centre[j]).norm_squared();
+                        let r = ri + self.radius[j];
+                        if d2 <= r * r {
+                            return Check::Hit;
+                        }
+                        if let Some(inf_now) = inf {
+                            let rp = r + ep;
+                            if d2 <= rp * rp {
+                                let re = r + self.margin(i, stop, inf_now.step) + self.margin(j, stop, inf_now.step);
+                                if d2 <= re * re {
+                                    near = true;
+                                    inf = None;
+                                }
                             }
                         }
                     }
