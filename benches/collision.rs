@@ -11,7 +11,9 @@ use std::hint::black_box;
 use std::path::Path;
 
 use criterion::{Criterion, criterion_group, criterion_main};
-use embodied_models::collision::{CollisionModel, Environment, Obstacle, disable_always_colliding};
+use embodied_models::collision::{
+    CollisionModel, Environment, Obstacle, disable_always_colliding, disable_never_colliding,
+};
 use embodied_models::nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion};
 use embodied_models::{Rng, Robot, Shape, builtin};
 
@@ -210,6 +212,12 @@ fn ur5_table_pick(c: &mut Criterion) {
             black_box(model.collides_with(black_box(&free[i]), &mut scratch))
         })
     });
+    // The pairs `embodied bench mbm` checks: also without the pairs proven never to touch.
+    let mut pruned = robot.clone();
+    disable_never_colliding(&mut pruned, 2, 200_000);
+    let planner_model = CollisionModel::new(&pruned, table_pick_scene0001());
+    eprintln!("ur5: {} self pairs checked as in bench mbm", planner_model.self_collision_pairs().len());
+    bench_cycle(c, "collides/ur5-table-pick/free/mbm-pairs", &free, |q| planner_model.collides(q));
     let general = model.clone().general_path_only();
     bench_cycle(c, "collides/ur5-table-pick/free/general-path", &free, |q| general.collides(q));
     bench_cycle(c, "distance/ur5-table-pick/free", &free, |q| model.distance(q).distance > 0.0);
