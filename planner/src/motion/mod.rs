@@ -82,7 +82,7 @@ pub struct MotionSettings {
     pub shortcut: bool,
     /// Random shortcut attempts after the greedy pass (each is one segment check). On the
     /// MotionBenchMaker UR5 problems (one run, lazy RRT-Connect): 0 attempts, median 589
-    /// collision checks and mean path length 6.82; 5, 745 and 6.57; 10 (the default), 878 and
+    /// collision checks and mean path length 6.82; 5 (the default), 745 and 6.57; 10, 878 and
     /// 6.45; 20, 1296 and 6.32. (Eagerly certified RRT-Connect with 10 attempts: 1279 and 6.56.)
     pub shortcut_attempts: usize,
     /// The search after the straight segment.
@@ -100,10 +100,11 @@ pub struct MotionSettings {
     /// and certified once they lie on a path that joins the trees; an edge whose certificate
     /// fails is cut off with its subtree and the search goes on. With `shortcut`, the path is
     /// certified by the greedy shortcut pass itself, so edges it skips are never certified.
-    /// 0 certifies every edge as it is added. On the MotionBenchMaker UR5 problems (one run):
-    /// 0.1 (the default), median 878 collision checks and path length 6.45; 0 (eager), 1279 and
-    /// 6.56; 0.15, 914; 0.07, 944; with no probe at all (infinite step), 2271 and 4 problems
-    /// unsolved within 1 s.
+    /// 0 certifies every edge as it is added. On the MotionBenchMaker UR5 problems (one run, 10
+    /// shortcut attempts): 0.1 (the default), median 878 collision checks and mean path length
+    /// 6.45; 0 (eager), 1279 and 6.56; no probe at all (a step longer than any edge), 2271 and 4
+    /// problems unsolved within 1 s. (With the greedy pass capped at 12 vertices: 0.07, 944; 0.1,
+    /// 904; 0.15, 914.)
     pub lazy_probe: f64,
     /// Samples (PRM) or tree nodes (RRT) after which the planner gives up with
     /// [`PlanError::NoPath`]: planning ends even without a deadline.
@@ -120,7 +121,7 @@ impl Default for MotionSettings {
             resolution: DEFAULT_RESOLUTION,
             deadline: Deadline::none(),
             shortcut: true,
-            shortcut_attempts: 10,
+            shortcut_attempts: 5,
             planner: PlannerKind::RrtConnect,
             batch_size: 200,
             k_neighbours: 10,
