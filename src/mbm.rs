@@ -54,7 +54,7 @@ pub struct MbmArgs {
     pub edge_check: EdgeCheck,
     /// Collision-checking resolution of the planner's edges when sampled (rad, largest joint step).
     pub resolution: f64,
-    /// Random shortcut attempts after the greedy shortcut pass (the planner's default: 10).
+    /// Random shortcut attempts after the greedy shortcut pass (the planner's default: 5).
     pub shortcut_attempts: usize,
     /// Only these families (all when `None`).
     pub families: Option<Vec<String>>,

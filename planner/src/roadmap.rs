@@ -245,6 +245,7 @@ impl Roadmap {
                     searches: counters.searches,
                     planner: "lazy-prm",
                     path_length: 0.0,
+                    ..Default::default()
                 },
             }),
         }

@@ -8,7 +8,7 @@ use embodied_models::nalgebra::Isometry3;
 use embodied_models::{Shape, builtin};
 use embodied_planner::PlanError;
 use embodied_planner::deadline::Deadline;
-use embodied_planner::motion::{Goal, MotionSettings, PlannerKind, plan_motion};
+use embodied_planner::motion::{CERTIFY_TOLERANCE, Goal, MotionSettings, PlannerKind, plan_motion};
 use embodied_planner::roadmap::Roadmap;
 use embodied_planner::trajectory::time_parameterize;
 use embodied_planner::verify::{Violation, verify_path, verify_trajectory};
@@ -59,6 +59,38 @@ fn irp6_plans_around_a_box_with_both_planners() {
         assert_plan_ok(&model, &start, &goal, &plan.path);
         assert!(plan.path.len() > 2);
         assert_ne!(plan.stats.planner, "direct");
+    }
+}
+
+#[test]
+fn lazy_rrt_connect_cuts_edges_whose_certificate_fails() {
+    let (model, start, goal) = irp6_around_box();
+    let goal_q = Goal::Configuration(goal.clone());
+    // A probe step longer than any edge checks no inner configuration: edges through the box
+    // join the trees, and only their certificates, once on a path, find them out.
+    for shortcut in [true, false] {
+        for seed in 0..4 {
+            let s = MotionSettings { seed, shortcut, lazy_probe: 100.0, ..settings(PlannerKind::RrtConnect) };
+            let plan = plan_motion(&model, &start, &goal_q, &s).unwrap_or_else(|e| panic!("seed {seed}: {e}"));
+            assert_plan_ok(&model, &start, &goal, &plan.path);
+            for w in plan.path.windows(2) {
+                assert!(model.motion_is_certified_free(&w[0], &w[1], CERTIFY_TOLERANCE), "uncertified {w:?}");
+            }
+            assert!(plan.stats.cut_edges > 0, "seed {seed}: no edge through the box was cut");
+            assert_eq!(plan.stats.probe_checks, 0);
+        }
+    }
+    // The default probes tree edges; 0 certifies every edge as it is added (nothing to cut).
+    let lazy = plan_motion(&model, &start, &goal_q, &settings(PlannerKind::RrtConnect)).expect("lazy");
+    assert!(lazy.stats.probe_checks > 0);
+    let eager = MotionSettings { lazy_probe: 0.0, ..settings(PlannerKind::RrtConnect) };
+    let eager = plan_motion(&model, &start, &goal_q, &eager).expect("eager");
+    assert_plan_ok(&model, &start, &goal, &eager.path);
+    assert_eq!((eager.stats.probe_checks, eager.stats.cut_edges), (0, 0));
+    for bad in [-0.1, f64::NAN] {
+        let s = MotionSettings { lazy_probe: bad, ..MotionSettings::default() };
+        let err = plan_motion(&model, &start, &goal_q, &s).expect_err("bad lazy_probe");
+        assert!(matches!(err, PlanError::InvalidInput { .. }), "{err}");
     }
 }
 

@@ -6,38 +6,20 @@ use embodied_models::Rng;
 
 use super::validity::{Budget, Validity};
 
-/// Shorten `path` with up to `attempts` shortcut tries between random points of the path
-/// (vertices or points inside segments).
+/// Shorten `path` with the greedy pass (when `greedy`: lazy RRT-Connect has run it already)
+/// and up to `attempts` shortcut tries between random points of the path (vertices or points
+/// inside segments).
 pub(crate) fn shortcut(
     mut path: Vec<Vec<f64>>,
     validity: &mut Validity<'_>,
     budget: &mut Budget<'_>,
     rng: &mut Rng,
+    greedy: bool,
     attempts: usize,
 ) -> Vec<Vec<f64>> {
-    // First the cheap greedy pass from the start: skip to the farthest directly visible vertex.
-    let mut i = 0;
-    let mut greedy = vec![path[0].clone()];
-    while i + 1 < path.len() {
-        let mut next = i + 1;
-        for j in (i + 2..path.len()).rev() {
-            if budget.spend(1) {
-                break;
-            }
-            if validity.segment_free(&path[i], &path[j]) {
-                next = j;
-                break;
-            }
-        }
-        greedy.push(path[next].clone());
-        i = next;
-        if path.len() > 12 {
-            // On long paths the quadratic greedy pass costs too much; random tries follow.
-            greedy.extend(path[i + 1..].iter().cloned());
-            break;
-        }
+    if greedy {
+        path = greedy_pass(path, validity, budget);
     }
-    path = greedy;
     let space = validity.space.clone();
     for _ in 0..attempts {
         if path.len() < 3 || budget.spend(1) {
@@ -77,4 +59,30 @@ pub(crate) fn shortcut(
         }
     }
     path
+}
+
+/// The greedy pass from the start: skip to the farthest directly visible vertex.
+fn greedy_pass(path: Vec<Vec<f64>>, validity: &mut Validity<'_>, budget: &mut Budget<'_>) -> Vec<Vec<f64>> {
+    let mut i = 0;
+    let mut greedy = vec![path[0].clone()];
+    while i + 1 < path.len() {
+        let mut next = i + 1;
+        for j in (i + 2..path.len()).rev() {
+            if budget.spend(1) {
+                break;
+            }
+            if validity.segment_free(&path[i], &path[j]) {
+                next = j;
+                break;
+            }
+        }
+        greedy.push(path[next].clone());
+        i = next;
+        if path.len() > 12 {
+            // On long paths the quadratic greedy pass costs too much; random tries follow.
+            greedy.extend(path[i + 1..].iter().cloned());
+            break;
+        }
+    }
+    greedy
 }

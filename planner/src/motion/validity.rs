@@ -5,6 +5,10 @@
 //! at the resolution instead, in bisection order (midpoint first, then quarter points...) because a
 //! colliding segment usually collides somewhere in the middle: the first hit ends the check.
 //! The independent checker in [`crate::verify`] walks segments its own way.
+//!
+//! [`Validity::segment_probed`] is the cheap, incomplete test of lazy RRT-Connect: plain
+//! collision checks of sampled configurations, before a segment is certified (or instead of it,
+//! for tree edges that never end up on a path).
 
 use std::time::Instant;
 
@@ -24,6 +28,8 @@ pub(crate) struct Validity<'m> {
     buf: Vec<f64>,
     pub collision_checks: u64,
     pub edges_checked: usize,
+    /// Collision checks of [`Self::segment_probed`] (also counted in `collision_checks`).
+    pub probe_checks: u64,
 }
 
 impl<'m> Validity<'m> {
@@ -38,6 +44,7 @@ impl<'m> Validity<'m> {
             buf: vec![0.0; robot.dof()],
             collision_checks: 0,
             edges_checked: 0,
+            probe_checks: 0,
         }
     }
 
@@ -69,7 +76,21 @@ impl<'m> Validity<'m> {
             self.collision_checks += u64::from(checks);
             return free;
         }
-        let n = steps(&self.space, a, b, self.resolution);
+        self.sampled(a, b, self.resolution)
+    }
+
+    /// No sampled configuration of the segment `a`-`b` collides, at `resolution` (largest joint
+    /// step), ends excluded. A probe, not a certificate: an obstacle between samples is missed.
+    pub fn segment_probed(&mut self, a: &[f64], b: &[f64], resolution: f64) -> bool {
+        let before = self.collision_checks;
+        let free = self.sampled(a, b, resolution);
+        self.probe_checks += self.collision_checks - before;
+        free
+    }
+
+    /// Sampled check of the segment's inner points, in bisection order.
+    fn sampled(&mut self, a: &[f64], b: &[f64], resolution: f64) -> bool {
+        let n = steps(&self.space, a, b, resolution);
         if n < 2 {
             return true;
         }
