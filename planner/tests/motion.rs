@@ -380,3 +380,26 @@ proptest! {
         prop_assert!(space.distance(&q_end, &path[n - 1]) < 1e-9);
     }
 }
+
+/// Found by `time_parameterisation_respects_limits`: the last interval of this trajectory lasts
+/// 17 µs (the leftover after the last 1 ms sample), and an acceleration taken from the
+/// positions there read 7.0000158 rad/s² against a limit of 7.
+#[test]
+fn sampled_acceleration_stays_within_limits_on_a_short_last_interval() {
+    let robot = builtin("irp6-postument").unwrap();
+    let mut rng = embodied_models::Rng::new(5997461242674014337);
+    let path: Vec<Vec<f64>> = (0..2).map(|_| robot.random_configuration(&mut rng)).collect();
+    let traj = time_parameterize(&path, &robot, 0.001);
+    let n = traj.t.len();
+    let last = traj.t[n - 1] - traj.t[n - 2];
+    assert!(last < 1e-4, "the case needs a short last interval, got {last} s");
+    let limits = robot.limits();
+    for k in 0..=20 {
+        let t = traj.t[n - 2] + last * k as f64 / 20.0;
+        let (_, qd, qdd) = traj.sample(t);
+        for j in 0..robot.dof() {
+            assert!(qd[j].abs() <= limits[j].max_velocity * (1.0 + 1e-9), "t {t}: qd[{j}] = {}", qd[j]);
+            assert!(qdd[j].abs() <= limits[j].max_acceleration * (1.0 + 1e-9), "t {t}: qdd[{j}] = {}", qdd[j]);
+        }
+    }
+}
