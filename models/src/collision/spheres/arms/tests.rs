@@ -1,6 +1,6 @@
 //! Soundness of the certificate's per-segment arms: property tests against densely sampled
 //! motions, on the spherized UR5 and on sphere versions of the built-in robots.
-#![allow(clippy::unwrap_used)]
+#![allow(clippy::unwrap_used, clippy::needless_range_loop)]
 
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -288,7 +288,7 @@ fn clutter(seed: u64) -> Environment {
         if p.xy().norm() < 0.35 {
             continue;
         }
-        let shape = if env.len() % 2 == 0 {
+        let shape = if env.len().is_multiple_of(2) {
             Shape::cuboid(rng.range(0.02, 0.2), rng.range(0.02, 0.2), rng.range(0.02, 0.2))
         } else {
             Shape::sphere(rng.range(0.03, 0.15))
