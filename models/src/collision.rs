@@ -1090,7 +1090,12 @@ impl CollisionModel {
     /// sub-interval is free, the whole sub-interval is free. The check starts with the whole
     /// segment and halves only the sub-intervals that cannot be certified, breadth first (a
     /// collision is usually found after few checks); far from obstacles one check certifies a
-    /// long motion. A sub-interval that still cannot be certified when its margin is below
+    /// long motion. On the sphere fast path the margins of the spheres a query actually tests
+    /// are tighter, from the pose at the sub-interval's midpoint (each joint counts the sphere's
+    /// distance from its axis there, plus how far the joints below can move it), and a
+    /// self-collision pair counts how much the distance between two spheres can shrink rather
+    /// than how far each moves (see `spheres::arms` in the source); the link bounds stay the
+    /// pre-filter. A sub-interval that still cannot be certified when its margin is below
     /// `tolerance` (m) makes the answer `false`: motions that pass closer than about
     /// `tolerance` to contact are rejected, never let through.
     ///

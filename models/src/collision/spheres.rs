@@ -19,6 +19,8 @@ use nalgebra::{Matrix3, Point3, Vector3};
 use super::narrow::{self, View};
 use super::{Inflation, ObstacleGeom, RobotGeom, Value, World};
 
+mod arms;
+
 /// The answer of one (possibly inflated) query.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub(crate) enum Check {
@@ -101,13 +103,9 @@ pub(crate) struct SphereGeom {
     group_pairs: Vec<GroupPair>,
     /// Self-pair indices, grouped by group pair.
     pair_order: Vec<u32>,
-    dof: usize,
-    /// Per-sphere lever arms, `lever[(k * bodies + stop) * dof + i]`: how far sphere `k`'s
-    /// centre moves per unit change of joint value `i` relative to body `stop` (0 = the world),
-    /// over the joints between them. Tighter than the per-link arms: each sphere counts its own
-    /// distance, and the joint that carries it directly counts the sphere's exact (constant)
-    /// distance from its axis.
-    lever: Vec<f64>,
+    /// Per-sphere lever arms of the motion certificate, and how the pose at a sub-interval's
+    /// midpoint tightens them: see [`arms`].
+    arms: arms::Arms,
 }
 
 /// An obstacle in the closed form the sphere test needs.
@@ -284,17 +282,6 @@ pub(crate) struct SphereScratch {
     stamp: u32,
 }
 
-/// Whether body `m` lies below body `stop` (`stop` is one of its ancestors).
-fn is_below(bodies: &[super::FkBody], mut m: usize, stop: usize) -> bool {
-    while m != 0 {
-        m = bodies[m].parent;
-        if m == stop {
-            return true;
-        }
-    }
-    false
-}
-
 impl SphereScratch {
     pub(crate) const fn new() -> Self {
         Self {
@@ -437,61 +424,15 @@ impl SphereGeom {
                 value: b.value,
             })
             .collect();
-        let dof = g.dof;
-        let nb = g.bodies.len();
-        let mut lever = vec![0.0; centre.len() * nb * dof];
-        for link in &links {
-            for k in link.first..link.end {
-                // Walk from the sphere's body to the base; `dist` bounds the distance from the
-                // current body's origin to the centre.
-                let mut dist = centre[k].norm();
-                let mut b = link.body;
-                let mut own = true;
-                let mut arms: Vec<(usize, usize, f64)> = Vec::new(); // (body, dof, arm)
-                while b != 0 {
-                    let body = &g.bodies[b];
-                    let post = body.post.map_or(0.0, |p| p.translation.vector.norm());
-                    let mut arm = if body.prismatic { 1.0 } else { dist + post };
-                    if own && !body.prismatic {
-                        // Exact: the centre's distance from this joint's axis never changes.
-                        let p = match body.post {
-                            Some(post) => (post * Point3::from(centre[k])).coords,
-                            None => centre[k],
-                        };
-                        let a = body.axis.into_inner();
-                        arm = arm.min((p - a * p.dot(&a)).norm());
-                    }
-                    own = false;
-                    match body.value {
-                        Value::Dof(i) => arms.push((b, i, arm)),
-                        Value::Mimic(d, m, _) => arms.push((b, d, arm * m.abs())),
-                        Value::Zero => {}
-                    }
-                    dist += post + body.reach + body.pre.translation.vector.norm();
-                    b = body.parent;
-                }
-                // Relative to `stop`: the joints of the bodies strictly below it.
-                let mut stop = link.body;
-                loop {
-                    let out = &mut lever[(k * nb + stop) * dof..(k * nb + stop + 1) * dof];
-                    for &(m, i, arm) in &arms {
-                        if m > stop && is_below(&g.bodies, m, stop) {
-                            out[i] += arm;
-                        }
-                    }
-                    if stop == 0 {
-                        break;
-                    }
-                    stop = g.bodies[stop].parent;
-                }
-            }
-        }
+        let arms = arms::Arms::new(g, &links, &centre);
         let pair_common = g
             .self_pairs
             .iter()
             .map(|&(a, b)| super::common_body(&g.bodies, links[a as usize].body, links[b as usize].body) as u32)
             .collect();
         let (bodies, centre, links) = turn_to_z(bodies, centre, links);
+        let mut arms = arms;
+        arms.use_turned_axes(&bodies);
         let (groups, group_links, group_pairs, pair_order) = group_by_body(&links, &g.self_pairs);
         Some(SphereGeom {
             base_r: mat(&g.base.rotation),
@@ -507,18 +448,8 @@ impl SphereGeom {
             pair_order,
             pair_rr: g.self_pairs.iter().map(|&(a, b)| g.links[a as usize].r + g.links[b as usize].r).collect(),
             pair_common,
-            dof,
-            lever,
+            arms,
         })
-    }
-
-    /// How far sphere `k`'s centre can move relative to body `stop` over a sub-interval whose
-    /// joint steps (already scaled) are `step`.
-    #[inline]
-    fn margin(&self, k: usize, stop: usize, step: &[f64]) -> f64 {
-        let nb = self.bodies.len();
-        let arms = &self.lever[(k * nb + stop) * self.dof..(k * nb + stop + 1) * self.dof];
-        arms.iter().zip(step).map(|(a, d)| a * d).sum::<f64>() + 1e-12
     }
 
     fn begin(&self, s: &mut SphereScratch) {
@@ -628,14 +559,14 @@ impl SphereGeom {
         let (la, lb) = (&self.links[a], &self.links[b]);
         let mut near = false;
         for i in la.first..la.end {
-            let ei = self.margin(i, stop, step);
+            let ei = self.margin(i, stop, step, None);
             for j in lb.first..lb.end {
                 let d2 = (s.centre[i] - s.centre[j]).norm_squared();
                 let r = self.radius[i] + self.radius[j];
                 if d2 <= r * r {
                     return Check::Hit;
                 }
-                let re = r + ei + self.margin(j, stop, step);
+                let re = r + ei + self.margin(j, stop, step, None);
                 near |= d2 <= re * re;
             }
         }
@@ -720,7 +651,7 @@ impl SphereGeom {
                                     // only when the loose one touches.
                                     let rel = r + el;
                                     if d2 <= rel * rel {
-                                        let re = r + self.margin(k, 0, i.step);
+                                        let re = r + self.margin(k, 0, i.step, Some(s));
                                         if d2 <= re * re {
                                             near = true;
                                             inf = None;
@@ -734,7 +665,7 @@ impl SphereGeom {
                                     return Check::Hit;
                                 }
                                 if let Some(i) = inf
-                                    && sep.distance <= self.margin(k, 0, i.step)
+                                    && sep.distance <= self.margin(k, 0, i.step, Some(s))
                                 {
                                     near = true;
                                     inf = None;
@@ -783,7 +714,7 @@ impl SphereGeom {
                         if let Some(inf_now) = inf {
                             let rp = r + ep;
                             if d2 <= rp * rp {
-                                let re = r + self.margin(i, stop, inf_now.step) + self.margin(j, stop, inf_now.step);
+                                let re = r + self.pair_margin(i, j, stop, inf_now.step, s);
                                 if d2 <= re * re {
                                     near = true;
                                     inf = None;

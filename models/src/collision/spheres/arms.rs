@@ -1,0 +1,210 @@
+//! Lever arms of the motion certificate on the sphere path: how far a sphere centre can move
+//! while the joints move along a sub-interval of a straight joint-space segment.
+//!
+//! An inflated query poses the robot at the midpoint `q(tm)` of a sub-interval over which
+//! every DOF changes by at most `step_i` either side (already scaled, see
+//! [`super::Inflation::step`]). A point `p` carried by the robot moves, relative to a body
+//! `stop` up its chain, by at most `sum_j sup rho_j * s_j`, over the moving joints `j` between
+//! `p` and `stop`, where `s_j` is joint `j`'s change (a mimic joint's is its multiplier times
+//! its DOF's) and `rho_j` is the distance of `p` from joint `j`'s axis over the sub-interval
+//! (1 for a prismatic joint): the triangle inequality over the joints.
+//!
+//! Two bounds on `sup rho_j`, both sound; the arm is the smaller:
+//!
+//! - **Static** ([`Arms::arm`]): valid in every configuration. The sphere's own joint counts its
+//!   exact, constant distance from the axis; a joint further up counts the distance to its
+//!   origin, bounded by the chain's fixed lengths.
+//! - **At the midpoint**: `rho_j` depends only on the joints between `j` and `p` (joint `j` and
+//!   those above it move the axis and the point together), and distance from a line is
+//!   1-Lipschitz, so over the sub-interval `rho_j <= rho_j(tm) + M_j`, where `M_j` bounds how
+//!   far `p` moves in joint `j`'s frame: the margin summed so far over the joints below `j`.
+//!   Walking from the sphere up its chain gives both at once. For an arm that is not stretched
+//!   out this is far below the static arm (the UR5's base joint sees its wrist at about its
+//!   full reach statically), and it costs a cross product per joint, only for the spheres the
+//!   query actually tests with margins.
+//!
+//! **Pairs** ([`SphereGeom::pair_margin`]): what must be bounded for a self-collision pair is
+//! how much the distance `|p_i - p_j|` can shrink, not how far each centre moves. A joint `k`
+//! that moves `p_i` (and not `p_j`) changes that distance at a rate at most
+//! `min(rho_k(p_i), rho_k(p_j)) |dv_k|`: along the unit direction `u` from `p_j` to `p_i`,
+//! `u . (w x (p_i - o)) = u . (w x (p_j - o))` since `u x (p_i - p_j) = 0`. The distance of
+//! the *other* centre from the axis is bounded the same way at the midpoint, walking down
+//! from the common body (the axis moves relative to it only through the joints above `k`).
+//! So a joint that carries one link about an axis through the other's sphere (the UR5's base
+//! joint, about `base_link`'s sphere) does not count at all for that pair.
+//!
+//! The links' and pairs' margins of [`super::Inflation`] (static, from the per-link arms) stay
+//! valid pre-filters: every bound here is at most the static per-sphere one, which they bound.
+
+use nalgebra::{Point3, Vector3};
+
+use super::super::{RobotGeom, Value};
+use super::{Link, SphereGeom, SphereScratch};
+
+/// Deepest chain (bodies between a sphere and a pair's common body) that pair margins
+/// tighten; deeper ones fall back to the sum of the two spheres' margins.
+const DEEP: usize = 24;
+
+/// Static lever arms, prepared at construction.
+///
+/// Every sphere `k` has one *entry* per body on its chain, from its link's body up to, not
+/// including, the base (body 0): entry `e` of sphere `k` is at `off[k] + e`.
+#[derive(Debug, Clone, Default)]
+pub(super) struct Arms {
+    /// Each sphere's body.
+    body: Vec<u32>,
+    /// Each sphere's first entry.
+    off: Vec<u32>,
+    /// Static arm of each sphere entry (0 for joints that do not move).
+    arm: Vec<f64>,
+    /// Each body's joint axis in its parent's frame (`pre` rotation times axis).
+    axis: Vec<Vector3<f64>>,
+}
+
+impl Arms {
+    /// The joint axes in the parents' frames as the sphere path turns its body frames (see
+    /// `turn_to_z`): `pre_r * axis` of each turned body. Call once the bodies are turned.
+    pub(super) fn use_turned_axes(&mut self, bodies: &[super::Body]) {
+        self.axis = bodies.iter().map(|b| b.pre_r * b.axis).collect();
+    }
+
+    pub(super) fn new(g: &RobotGeom, links: &[Link], centre: &[Vector3<f64>]) -> Arms {
+        let axis = g.bodies.iter().map(|b| b.pre.rotation * b.axis.into_inner()).collect();
+        let mut arms = Arms { axis, ..Arms::default() };
+        for link in links {
+            for c in &centre[link.first..link.end] {
+                arms.body.push(link.body as u32);
+                arms.off.push(arms.arm.len() as u32);
+                // Walk from the sphere's body to the base; `dist` bounds the distance from the
+                // current body's origin to the centre.
+                let mut dist = c.norm();
+                let mut b = link.body;
+                let mut own = true;
+                while b != 0 {
+                    let body = &g.bodies[b];
+                    let post = body.post.map_or(0.0, |p| p.translation.vector.norm());
+                    let mut arm = if body.prismatic { 1.0 } else { dist + post };
+                    if own && !body.prismatic {
+                        // Exact: the centre's distance from this joint's axis never changes.
+                        let p = match body.post {
+                            Some(post) => (post * Point3::from(*c)).coords,
+                            None => *c,
+                        };
+                        let a = body.axis.into_inner();
+                        arm = arm.min((p - a * p.dot(&a)).norm());
+                    }
+                    own = false;
+                    arms.arm.push(if matches!(body.value, Value::Zero) { 0.0 } else { arm });
+                    dist += post + body.reach + body.pre.translation.vector.norm();
+                    b = body.parent;
+                }
+            }
+        }
+        arms
+    }
+}
+
+impl SphereGeom {
+    /// How much joint `value` changes when the DOFs change by `step`.
+    #[inline(always)]
+    fn joint_step(value: Value, step: &[f64]) -> f64 {
+        match value {
+            Value::Dof(i) => step[i],
+            Value::Mimic(d, m, _) => step[d] * m.abs(),
+            Value::Zero => 0.0,
+        }
+    }
+
+    /// Distance of the world point `p` from body `b`'s joint axis, in the pose of `s`.
+    #[inline(always)]
+    fn rho(&self, b: usize, p: &Vector3<f64>, s: &SphereScratch) -> f64 {
+        let body = &self.bodies[b];
+        let (r, t) = (&s.rot[body.parent], &s.pos[body.parent]);
+        let o = r * body.pre_t + t;
+        (p - o).cross(&(r * self.arms.axis[b])).norm()
+    }
+
+    /// Walks sphere `k`'s chain up to body `stop` (one of its body's ancestors, or 0 for the
+    /// world), calling `each(body, arm, joint step)` for every joint that moves, and returns the
+    /// margin without slack. With `at` (the pose of the sub-interval's midpoint, `k` posed),
+    /// arms are tightened by the midpoint distances (see the module documentation).
+    #[inline(always)]
+    fn walk(
+        &self,
+        k: usize,
+        stop: usize,
+        step: &[f64],
+        at: Option<&SphereScratch>,
+        mut each: impl FnMut(usize, f64, f64),
+    ) -> f64 {
+        let arms = &self.arms;
+        let mut b = arms.body[k] as usize;
+        let mut e = arms.off[k] as usize;
+        let first = e;
+        let mut m = 0.0;
+        while b != stop && b != 0 {
+            let body = &self.bodies[b];
+            let d = Self::joint_step(body.value, step);
+            if d > 0.0 {
+                let mut arm = arms.arm[e];
+                if let Some(s) = at
+                    && e != first
+                    && !body.prismatic
+                {
+                    arm = arm.min(self.rho(b, &s.centre[k], s) + m);
+                }
+                each(b, arm, d);
+                m += arm * d;
+            }
+            e += 1;
+            b = body.parent;
+        }
+        m
+    }
+
+    /// How far sphere `k`'s centre can move relative to body `stop` (one of its body's
+    /// ancestors, or 0 for the world) when the joints move by at most `step` (already scaled)
+    /// either side of the pose in `at` (with `k` posed), or of any pose without `at`.
+    #[inline]
+    pub(super) fn margin(&self, k: usize, stop: usize, step: &[f64], at: Option<&SphereScratch>) -> f64 {
+        self.walk(k, stop, step, at, |_, _, _| {}) + 1e-12
+    }
+
+    /// How much the distance between the centres of spheres `i` and `j` of a self-collision
+    /// pair with common body `stop` can shrink when the joints move by at most `step` (already
+    /// scaled) either side of the pose in `s` (both posed). At most
+    /// `margin(i, stop) + margin(j, stop)`.
+    #[inline]
+    pub(super) fn pair_margin(&self, i: usize, j: usize, stop: usize, step: &[f64], s: &SphereScratch) -> f64 {
+        let mut own = [[(0usize, 0.0f64, 0.0f64); DEEP]; 2];
+        let mut len = [0usize; 2];
+        let mut walk = |side: usize, k: usize| {
+            self.walk(k, stop, step, Some(s), |b, arm, d| {
+                if len[side] < DEEP {
+                    own[side][len[side]] = (b, arm, d);
+                }
+                len[side] += 1;
+            })
+        };
+        let mi = walk(0, i);
+        let mj = walk(1, j);
+        if len[0] > DEEP || len[1] > DEEP {
+            return mi + mj + 2e-12;
+        }
+        // Each side's joints, from the common body down, against the other side's centre:
+        // `moved` bounds how far that centre moves in the current joint's parent frame.
+        let mut total = 0.0;
+        for (side, (other, moved)) in [(s.centre[j], mj), (s.centre[i], mi)].into_iter().enumerate() {
+            let mut moved = moved;
+            for &(b, arm, d) in own[side][..len[side]].iter().rev() {
+                let cross = if self.bodies[b].prismatic { 1.0 } else { self.rho(b, &other, s) + moved };
+                total += arm.min(cross) * d;
+                moved += cross * d;
+            }
+        }
+        total + 2e-12
+    }
+}
+
+#[cfg(test)]
+mod tests;
