@@ -27,7 +27,11 @@ fn main() -> ExitCode {
         argv.get(i).map_or(Ok(default), |v| v.parse().map_err(|_| format!("{what} must be a count, got `{v}`")))
     };
     let (used, rounds) = match (number(3, 12, "PROBLEMS_USED"), number(4, 20, "ROUNDS")) {
-        (Ok(u), Ok(r)) => (u, r),
+        (Ok(u), Ok(r)) if u > 0 && r > 0 => (u, r),
+        (Ok(_), Ok(_)) => {
+            eprintln!("PROBLEMS_USED and ROUNDS must be at least 1");
+            return ExitCode::from(2);
+        }
         (Err(e), _) | (_, Err(e)) => {
             eprintln!("{e}");
             return ExitCode::from(2);

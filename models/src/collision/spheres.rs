@@ -17,7 +17,7 @@
 use nalgebra::{Matrix3, Point3, Vector3};
 
 use super::narrow::{self, View};
-use super::{Inflation, ObstacleGeom, RobotGeom, Value, World};
+use super::{Inflation, ObstacleGeom, RobotGeom, Value, World, sphere_hits_aabb};
 
 mod arms;
 
@@ -256,15 +256,6 @@ fn mul3v(a: &Matrix3<f64>, v: &Vector3<f64>) -> Vector3<f64> {
     )
 }
 
-/// Whether the sphere (`c`, `r`) reaches the obstacle's bounding box.
-#[inline(always)]
-fn sphere_near_box(c: &Vector3<f64>, r: f64, o: &ObstacleGeom) -> bool {
-    let dx = (o.lo.x - c.x).max(0.0).max(c.x - o.hi.x);
-    let dy = (o.lo.y - c.y).max(0.0).max(c.y - o.hi.y);
-    let dz = (o.lo.z - c.z).max(0.0).max(c.z - o.hi.z);
-    dx * dx + dy * dy + dz * dz <= r * r
-}
-
 /// Working memory of the fast path, kept inside [`super::CollisionScratch`].
 #[derive(Debug, Clone)]
 pub(crate) struct SphereScratch {
@@ -360,11 +351,11 @@ fn group_by_body(links: &[Link], self_pairs: &[(u32, u32)]) -> (Vec<Group>, Vec<
                 group_links.push(l as u32);
             }
         }
-        let members = &group_links[first..];
-        let c = members.iter().map(|&l| links[l as usize].c).sum::<Vector3<f64>>() / members.len() as f64;
-        let r = members.iter().map(|&l| (links[l as usize].c - c).norm() + links[l as usize].r).fold(0.0, f64::max);
+        let members: Vec<(Point3<f64>, f64)> =
+            group_links[first..].iter().map(|&l| (Point3::from(links[l as usize].c), links[l as usize].r)).collect();
+        let (c, r) = super::enclosing_sphere(&members);
         // A hair more, so that rounding in the group test never drops a link the link test keeps.
-        groups.push(Group { body, first, end: group_links.len(), c, r: r * (1.0 + 1e-12) + 1e-12 });
+        groups.push(Group { body, first, end: group_links.len(), c: c.coords, r: r * (1.0 + 1e-12) + 1e-12 });
     }
     let mut keyed: Vec<((usize, usize), u32)> = self_pairs
         .iter()
@@ -424,14 +415,13 @@ impl SphereGeom {
                 value: b.value,
             })
             .collect();
-        let arms = arms::Arms::new(g, &links, &centre);
+        let mut arms = arms::Arms::new(g, &links, &centre);
         let pair_common = g
             .self_pairs
             .iter()
             .map(|&(a, b)| super::common_body(&g.bodies, links[a as usize].body, links[b as usize].body) as u32)
             .collect();
         let (bodies, centre, links) = turn_to_z(bodies, centre, links);
-        let mut arms = arms;
         arms.use_turned_axes(&bodies);
         let (groups, group_links, group_pairs, pair_order) = group_by_body(&links, &g.self_pairs);
         Some(SphereGeom {
@@ -626,7 +616,7 @@ impl SphereGeom {
             }
             for (gi, g) in self.groups.iter().enumerate() {
                 let eg = if inf.is_some() { s.group_e[gi] } else { 0.0 };
-                if !sphere_near_box(&s.group_c[gi], g.r + eg, o) {
+                if !sphere_hits_aabb(&Point3::from(s.group_c[gi]), g.r + eg, o) {
                     continue;
                 }
                 for gl in g.first..g.end {
@@ -634,7 +624,7 @@ impl SphereGeom {
                     let link = &self.links[l];
                     let el = inf.map_or(0.0, |i| i.link[l]);
                     let c = self.link_centre(l, s);
-                    if !sphere_near_box(&c, link.r + el, o) {
+                    if !sphere_hits_aabb(&Point3::from(c), link.r + el, o) {
                         continue;
                     }
                     self.pose_link(l, s);
