@@ -70,16 +70,39 @@ struct Group {
     r: f64,
 }
 
-/// The self pairs joining the links of two groups (possibly the same group twice).
+/// The self pairs joining the links of two groups (possibly the same group twice). One side is
+/// the *outer* one, the side with fewer distinct links (the UR5's forearm against the ten links
+/// of its last body): the query tests each outer sphere against the inner group's sphere once,
+/// and only the few that reach it against the inner links.
 #[derive(Debug, Clone)]
 struct GroupPair {
-    a: usize,
-    b: usize,
+    outer: usize,
+    inner: usize,
     /// Sum of the two group radii.
     rr: f64,
-    /// Range into [`SphereGeom::pair_order`].
-    first: usize,
-    end: usize,
+    /// Range into [`SphereGeom::runs`].
+    runs: std::ops::Range<usize>,
+    /// Range into [`SphereGeom::run_pairs`] (all pairs of the group pair).
+    pairs: std::ops::Range<usize>,
+}
+
+/// One self pair of a [`Run`], with its inner link's bounding sphere (body frame) and spheres.
+#[derive(Debug, Clone)]
+struct RunPair {
+    c: Vector3<f64>,
+    r: f64,
+    pair: u32,
+    link: u32,
+    first: u32,
+    end: u32,
+}
+
+/// The self pairs of one group pair that share their outer link.
+#[derive(Debug, Clone)]
+struct Run {
+    outer: usize,
+    /// Range into [`SphereGeom::run_pairs`].
+    pairs: std::ops::Range<usize>,
 }
 
 /// A sphere robot prepared for the fast path (built from [`RobotGeom`] when every shape is a sphere).
@@ -95,14 +118,13 @@ pub(crate) struct SphereGeom {
     self_pairs: Vec<(u32, u32)>,
     /// The deepest body carrying both links of each self pair.
     pair_common: Vec<u32>,
-    /// The sum of the two link bounding radii of each self pair.
-    pair_rr: Vec<f64>,
     groups: Vec<Group>,
     /// Link slots, grouped by body.
     group_links: Vec<u32>,
     group_pairs: Vec<GroupPair>,
-    /// Self-pair indices, grouped by group pair.
-    pair_order: Vec<u32>,
+    runs: Vec<Run>,
+    /// Self pairs, grouped by group pair, then by outer link.
+    run_pairs: Vec<RunPair>,
     /// Per-sphere lever arms of the motion certificate, and how the pose at a sub-interval's
     /// midpoint tightens them: see [`arms`].
     arms: arms::Arms,
@@ -256,6 +278,17 @@ fn mul3v(a: &Matrix3<f64>, v: &Vector3<f64>) -> Vector3<f64> {
     )
 }
 
+/// `aᵀ * v`, written out.
+#[inline(always)]
+fn mul3tv(a: &Matrix3<f64>, v: &Vector3<f64>) -> Vector3<f64> {
+    let (x, y, z) = (v.x, v.y, v.z);
+    Vector3::new(
+        a[(0, 0)] * x + a[(1, 0)] * y + a[(2, 0)] * z,
+        a[(0, 1)] * x + a[(1, 1)] * y + a[(2, 1)] * z,
+        a[(0, 2)] * x + a[(1, 2)] * y + a[(2, 2)] * z,
+    )
+}
+
 /// Working memory of the fast path, kept inside [`super::CollisionScratch`].
 #[derive(Debug, Clone)]
 pub(crate) struct SphereScratch {
@@ -335,8 +368,18 @@ fn turn_to_z(
     (bodies, centre, links)
 }
 
+/// The links grouped by body (see [`Group`]) and their self pairs grouped by group pair and
+/// outer link (see [`GroupPair`]).
+struct Grouping {
+    groups: Vec<Group>,
+    group_links: Vec<u32>,
+    group_pairs: Vec<GroupPair>,
+    runs: Vec<Run>,
+    run_pairs: Vec<RunPair>,
+}
+
 /// Group the links by body (see [`Group`]) and the self pairs by the groups they join.
-fn group_by_body(links: &[Link], self_pairs: &[(u32, u32)]) -> (Vec<Group>, Vec<u32>, Vec<GroupPair>, Vec<u32>) {
+fn group_by_body(links: &[Link], self_pairs: &[(u32, u32)]) -> Grouping {
     let mut bodies: Vec<usize> = links.iter().map(|l| l.body).collect();
     bodies.sort_unstable();
     bodies.dedup();
@@ -357,28 +400,52 @@ fn group_by_body(links: &[Link], self_pairs: &[(u32, u32)]) -> (Vec<Group>, Vec<
         // A hair more, so that rounding in the group test never drops a link the link test keeps.
         groups.push(Group { body, first, end: group_links.len(), c: c.coords, r: r * (1.0 + 1e-12) + 1e-12 });
     }
-    let mut keyed: Vec<((usize, usize), u32)> = self_pairs
+    // Each pair with its link in the lower group first: (groups, links, pair index).
+    type Keyed = ((usize, usize), (u32, u32), u32);
+    let mut keyed: Vec<Keyed> = self_pairs
         .iter()
         .enumerate()
         .map(|(p, &(a, b))| {
             let (ga, gb) = (group_of[a as usize], group_of[b as usize]);
-            ((ga.min(gb), ga.max(gb)), p as u32)
+            if ga <= gb { ((ga, gb), (a, b), p as u32) } else { ((gb, ga), (b, a), p as u32) }
         })
         .collect();
-    keyed.sort_unstable();
-    let mut group_pairs: Vec<GroupPair> = Vec::new();
-    let mut pair_order = Vec::with_capacity(keyed.len());
-    for (k, &((a, b), p)) in keyed.iter().enumerate() {
-        if k == 0 || keyed[k - 1].0 != (a, b) {
-            let rr = groups[a].r + groups[b].r;
-            group_pairs.push(GroupPair { a, b, rr, first: k, end: k });
+    keyed.sort_unstable_by_key(|&(g, _, p)| (g, p));
+    let mut grouping =
+        Grouping { groups, group_links, group_pairs: Vec::new(), runs: Vec::new(), run_pairs: Vec::new() };
+    for block in keyed.chunk_by(|x, y| x.0 == y.0) {
+        let (lower, upper) = block[0].0;
+        let distinct = |side: fn(&(u32, u32)) -> u32| {
+            let mut v: Vec<u32> = block.iter().map(|(_, l, _)| side(l)).collect();
+            v.sort_unstable();
+            v.dedup();
+            v.len()
+        };
+        // Outer: the side with fewer distinct links.
+        let lower_outer = distinct(|l| l.0) <= distinct(|l| l.1);
+        let mut oriented: Vec<(u32, u32, u32)> =
+            block.iter().map(|&(_, (a, b), p)| if lower_outer { (a, b, p) } else { (b, a, p) }).collect();
+        oriented.sort_unstable();
+        let (outer, inner) = if lower_outer { (lower, upper) } else { (upper, lower) };
+        let (runs_first, pairs_first) = (grouping.runs.len(), grouping.run_pairs.len());
+        for run in oriented.chunk_by(|x, y| x.0 == y.0) {
+            let first = grouping.run_pairs.len();
+            grouping.run_pairs.extend(run.iter().map(|&(_, b, p)| {
+                let l = &links[b as usize];
+                RunPair { c: l.c, r: l.r, pair: p, link: b, first: l.first as u32, end: l.end as u32 }
+            }));
+            grouping.runs.push(Run { outer: run[0].0 as usize, pairs: first..grouping.run_pairs.len() });
         }
-        pair_order.push(p);
-        if let Some(last) = group_pairs.last_mut() {
-            last.end = k + 1;
-        }
+        let rr = grouping.groups[outer].r + grouping.groups[inner].r;
+        grouping.group_pairs.push(GroupPair {
+            outer,
+            inner,
+            rr,
+            runs: runs_first..grouping.runs.len(),
+            pairs: pairs_first..grouping.run_pairs.len(),
+        });
     }
-    (groups, group_links, group_pairs, pair_order)
+    grouping
 }
 
 impl SphereGeom {
@@ -423,7 +490,7 @@ impl SphereGeom {
             .collect();
         let (bodies, centre, links) = turn_to_z(bodies, centre, links);
         arms.use_turned_axes(&bodies);
-        let (groups, group_links, group_pairs, pair_order) = group_by_body(&links, &g.self_pairs);
+        let Grouping { groups, group_links, group_pairs, runs, run_pairs } = group_by_body(&links, &g.self_pairs);
         Some(SphereGeom {
             base_r: mat(&g.base.rotation),
             base_t: g.base.translation.vector,
@@ -435,8 +502,8 @@ impl SphereGeom {
             groups,
             group_links,
             group_pairs,
-            pair_order,
-            pair_rr: g.self_pairs.iter().map(|&(a, b)| g.links[a as usize].r + g.links[b as usize].r).collect(),
+            runs,
+            run_pairs,
             pair_common,
             arms,
         })
@@ -666,48 +733,86 @@ impl SphereGeom {
                 }
             }
         }
+        if self.self_pass::<GROW>(&mut inf, &mut near, s) {
+            return Check::Hit;
+        }
+        if near { Check::Near } else { Check::Free }
+    }
+
+    /// The self-collision part of [`Self::check_impl`]: true on an exact contact; sets `near`
+    /// (and drops `inf`) when only grown spheres touch.
+    ///
+    /// Nothing is posed in the world here: the inner group's centre is taken into the outer
+    /// body's frame, where each outer sphere is tested against it as stored; the few that reach
+    /// it are taken into the inner body's frame, where the inner links' bounding spheres and
+    /// spheres are tested as stored.
+    #[inline(never)]
+    fn self_pass<const GROW: bool>(
+        &self,
+        inf: &mut Option<Inflation<'_>>,
+        near: &mut bool,
+        s: &mut SphereScratch,
+    ) -> bool {
+        if !GROW {
+            *inf = None;
+        }
         for gp in &self.group_pairs {
-            let pairs = &self.pair_order[gp.first..gp.end];
-            let eg = inf.map_or(0.0, |i| pairs.iter().map(|&p| i.pair[p as usize]).fold(0.0, f64::max));
+            let eg = inf.filter(|_| GROW).map_or(0.0, |i| {
+                self.run_pairs[gp.pairs.clone()].iter().map(|rp| i.pair[rp.pair as usize]).fold(0.0, f64::max)
+            });
+            let c_inner = s.group_c[gp.inner];
             let rr = gp.rr + eg;
-            if gp.a != gp.b && (s.group_c[gp.a] - s.group_c[gp.b]).norm_squared() > rr * rr {
+            if gp.outer != gp.inner && (s.group_c[gp.outer] - c_inner).norm_squared() > rr * rr {
                 continue;
             }
-            for &p in pairs {
-                let p = p as usize;
-                let (a, b) = self.self_pairs[p];
-                let (a, b) = (a as usize, b as usize);
-                let (la, lb) = (&self.links[a], &self.links[b]);
-                let ep = inf.map_or(0.0, |i| i.pair[p]);
-                let rr = self.pair_rr[p] + ep;
-                let cb = self.link_centre(b, s);
-                if (self.link_centre(a, s) - cb).norm_squared() > rr * rr {
+            // Any sphere that can touch (grown) a sphere of an inner link reaches this far from
+            // the inner group's centre: the group sphere holds every inner sphere.
+            let r_inner = self.groups[gp.inner].r + eg;
+            let (body_o, body_i) = (self.groups[gp.outer].body, self.groups[gp.inner].body);
+            let (rot_o, pos_o) = (s.rot[body_o], s.pos[body_o]);
+            let (rot_i, pos_i) = (s.rot[body_i], s.pos[body_i]);
+            let g = mul3tv(&rot_o, &(c_inner - pos_o));
+            for run in &self.runs[gp.runs.clone()] {
+                let a = run.outer;
+                let la = &self.links[a];
+                let reach = la.r + r_inner;
+                if (la.c - g).norm_squared() > reach * reach {
                     continue;
                 }
-                self.pose_link(a, s);
-                self.pose_link(b, s);
-                let stop = self.pair_common[p] as usize;
                 for i in la.first..la.end {
-                    let (ci, ri) = (s.centre[i], self.radius[i]);
-                    // Sphere `i` against link b's bounding sphere first: b's bounding sphere holds
-                    // every sphere of b, and `ep` bounds the growth of any two spheres of the pair.
-                    let reach = ri + lb.r + ep;
-                    if (ci - cb).norm_squared() > reach * reach {
+                    let ri = self.radius[i];
+                    let reach = ri + r_inner;
+                    if (self.centre[i] - g).norm_squared() > reach * reach {
                         continue;
                     }
-                    for j in lb.first..lb.end {
-                        let d2 = (ci - s.centre[j]).norm_squared();
-                        let r = ri + self.radius[j];
-                        if d2 <= r * r {
-                            return Check::Hit;
+                    // Sphere `i` in the inner body's frame.
+                    let u = mul3tv(&rot_i, &(mul3v(&rot_o, &self.centre[i]) + pos_o - pos_i));
+                    for rp in &self.run_pairs[run.pairs.clone()] {
+                        // Link b's bounding sphere holds all its spheres, and `ep` bounds the
+                        // growth of any two spheres of the pair.
+                        let ep = inf.filter(|_| GROW).map_or(0.0, |i| i.pair[rp.pair as usize]);
+                        let reach = ri + rp.r + ep;
+                        if (rp.c - u).norm_squared() > reach * reach {
+                            continue;
                         }
-                        if let Some(inf_now) = inf {
-                            let rp = r + ep;
-                            if d2 <= rp * rp {
-                                let re = r + self.pair_margin(i, j, stop, inf_now.step, s);
-                                if d2 <= re * re {
-                                    near = true;
-                                    inf = None;
+                        for j in rp.first as usize..rp.end as usize {
+                            let d2 = (self.centre[j] - u).norm_squared();
+                            let r = ri + self.radius[j];
+                            if d2 <= r * r {
+                                return true;
+                            }
+                            if let Some(inf_now) = inf.filter(|_| GROW) {
+                                let grown = r + ep;
+                                if d2 <= grown * grown {
+                                    let p = rp.pair as usize;
+                                    self.pose_link(a, s);
+                                    self.pose_link(rp.link as usize, s);
+                                    let stop = self.pair_common[p] as usize;
+                                    let re = r + self.pair_margin(i, j, stop, inf_now.step, s);
+                                    if d2 <= re * re {
+                                        *near = true;
+                                        *inf = None;
+                                    }
                                 }
                             }
                         }
@@ -715,7 +820,7 @@ impl SphereGeom {
                 }
             }
         }
-        if near { Check::Near } else { Check::Free }
+        false
     }
 }
 
