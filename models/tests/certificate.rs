@@ -372,3 +372,53 @@ fn certificate_catches_a_thin_plate_and_bad_input() {
     nan[2] = f64::NAN;
     assert!(!empty.motion_is_certified_free(&qa, &nan, 1e-4));
 }
+
+/// An arm whose second body carries two links side by side (fixed joints from the same parent,
+/// so not adjacent), `gap` apart between sphere surfaces: a self pair that never moves.
+fn arm_with_a_rigid_pair(gap: f64) -> Robot {
+    let ball =
+        |x: f64, y: f64, z: f64, r: f64| vec![PlacedShape::new(Isometry3::translation(x, y, z), Shape::sphere(r))];
+    let limits = JointLimits::new(-2.5, 2.5, 1.0, 2.0);
+    let mut b = RobotBuilder::new("rigid-pair");
+    let base = b.link("base", ball(0.0, 0.0, 0.05, 0.05));
+    let arm = b.link("arm", ball(0.0, 0.0, 0.3, 0.04));
+    let left = b.link("left", ball(0.0, 0.0, 0.0, 0.05));
+    let right = b.link("right", ball(0.0, 0.0, 0.0, 0.05));
+    let joint = |b: &mut RobotBuilder, name: &str, kind, parent, child, at: Isometry3<f64>| {
+        b.joint(name, kind, parent, child, at, Vector3::y(), 0.0, Isometry3::identity(), limits);
+    };
+    joint(&mut b, "j1", JointKind::Revolute, base, arm, Isometry3::translation(0.0, 0.0, 0.1));
+    joint(&mut b, "left", JointKind::Fixed, arm, left, Isometry3::translation(0.3, -(0.05 + gap / 2.0), 0.4));
+    joint(&mut b, "right", JointKind::Fixed, arm, right, Isometry3::translation(0.3, 0.05 + gap / 2.0, 0.4));
+    b.build().unwrap()
+}
+
+#[test]
+fn a_self_pair_on_one_body_is_answered_like_the_general_path() {
+    for (gap, always) in [(-0.01, true), (0.01, false)] {
+        let robot = arm_with_a_rigid_pair(gap);
+        let left = robot.links().iter().position(|l| l.name == "left").unwrap();
+        let right = robot.links().iter().position(|l| l.name == "right").unwrap();
+        let mut env = Environment::new();
+        env.add(Obstacle::new("post", Isometry3::translation(0.45, 0.0, 0.2), Shape::cuboid(0.03, 0.03, 0.2)));
+        let fast = CollisionModel::new(&robot, env);
+        assert!(fast.uses_sphere_path());
+        assert!(fast.self_collision_pairs().contains(&(left.min(right), left.max(right))));
+        let general = fast.clone().general_path_only();
+        let mut rng = Rng::new(7);
+        let mut hits = 0;
+        for _ in 0..400 {
+            let q = robot.random_configuration(&mut rng);
+            let c = fast.collides(&q);
+            assert_eq!(c, general.collides(&q), "gap {gap}, q = {q:?}");
+            hits += c as usize;
+        }
+        if always {
+            assert_eq!(hits, 400, "overlapping rigid pair: every configuration collides");
+            assert!(!fast.motion_is_certified_free(&[0.0], &[0.1], 1e-4));
+        } else {
+            assert!(hits > 0 && hits < 400, "gap {gap}: {hits} of 400 collide");
+            assert!(fast.motion_is_certified_free(&[-2.0], &[-1.9], 1e-4));
+        }
+    }
+}

@@ -2,11 +2,18 @@
 //! MotionBenchMaker, VAMP and cuRobo).
 //!
 //! Everything a query touches is flat and prepared at construction: body transforms as rotation
-//! matrices (no quaternions: a revolute joint costs one `sin_cos` and Rodrigues' formula),
-//! sphere centres in their body frames, link bounding spheres, and obstacles in closed forms
-//! that answer "how far is this point from the solid" (squared, no square root for boxes).
-//! A query poses the bodies, then the link bounding spheres, and poses a link's spheres only
-//! when its bounding sphere survives the broad phase.
+//! matrices (no quaternions: each body frame is turned so that its joint spins about z, and a
+//! revolute joint costs one `sin_cos` and a two-column mix), sphere centres in their body
+//! frames, link and body (group) bounding spheres, and obstacles in closed forms that answer
+//! "how far is this point from the solid" (squared, no square root for boxes).
+//!
+//! A query poses the bodies and the group spheres. Against obstacles it poses a link's
+//! bounding sphere, then its spheres, only when the group sphere survives the broad phase.
+//! Self pairs are tested without posing anything in the world: per pair of bodies, the inner
+//! body's group centre is taken into the outer body's frame and the outer spheres are tested
+//! against it as stored; the few that reach it are taken into the inner body's frame and
+//! tested against the inner links' bounding spheres and spheres as stored. Pairs of links on
+//! one body never move relative to each other and are answered once, at construction.
 //!
 //! The same pass answers the *inflated* question the motion certificate needs (see
 //! [`super::CollisionModel::motion_is_certified_free`]): are the spheres free even when every
@@ -125,6 +132,9 @@ pub(crate) struct SphereGeom {
     runs: Vec<Run>,
     /// Self pairs, grouped by group pair, then by outer link.
     run_pairs: Vec<RunPair>,
+    /// The answer of the self pairs whose two links ride on one body (constant): `Hit` makes
+    /// every query `Hit`, `Near` every inflated one at least `Near`.
+    fixed: Check,
     /// Per-sphere lever arms of the motion certificate, and how the pose at a sub-interval's
     /// midpoint tightens them: see [`arms`].
     arms: arms::Arms,
@@ -500,7 +510,33 @@ impl SphereGeom {
             .collect();
         let (bodies, centre, links) = turn_to_z(bodies, centre, links);
         arms.use_turned_axes(&bodies);
-        let Grouping { groups, group_links, group_pairs, runs, run_pairs } = group_by_body(&links, &g.self_pairs);
+        let Grouping { groups, group_links, mut group_pairs, runs, run_pairs } = group_by_body(&links, &g.self_pairs);
+        // Pairs of links on one body never move relative to each other: answered once here.
+        let mut fixed = Check::Free;
+        group_pairs.retain(|gp| {
+            if gp.outer != gp.inner {
+                return true;
+            }
+            for run in &runs[gp.runs.clone()] {
+                let la = &links[run.outer];
+                for rp in &run_pairs[run.pairs.clone()] {
+                    for i in la.first..la.end {
+                        for j in rp.first as usize..rp.end as usize {
+                            let d2 = (centre[i] - centre[j]).norm_squared();
+                            let r = radius[i] + radius[j];
+                            // As the query would: an exact contact, or within the slack of
+                            // a pair margin (nothing moves between the two links).
+                            if d2 <= r * r {
+                                fixed = Check::Hit;
+                            } else if d2 <= (r + 2e-12) * (r + 2e-12) && fixed == Check::Free {
+                                fixed = Check::Near;
+                            }
+                        }
+                    }
+                }
+            }
+            false
+        });
         Some(SphereGeom {
             base_r: mat(&g.base.rotation),
             base_t: g.base.translation.vector,
@@ -516,6 +552,7 @@ impl SphereGeom {
             run_pairs,
             pair_common,
             arms,
+            fixed,
         })
     }
 
@@ -671,6 +708,14 @@ impl SphereGeom {
         // exact contact matters, so the rest of the query runs without margins.
         let mut inf = if GROW { inflation } else { None };
         let mut near = false;
+        match self.fixed {
+            Check::Hit => return Check::Hit,
+            Check::Near if inf.is_some() => {
+                near = true;
+                inf = None;
+            }
+            _ => {}
+        }
         // The largest link margin of each group.
         if let Some(i) = inf {
             for (g, e) in self.groups.iter().zip(s.group_e.iter_mut()) {
