@@ -46,6 +46,10 @@ pub(crate) enum Check {
 struct Body {
     parent: usize,
     pre_r: Matrix3<f64>,
+    /// `pre_r` as a signed permutation, when it is exactly one (every entry 0 or ±1): then
+    /// `R * pre_r` is a reordering of `R`'s columns with signs, no products (the UR5's base,
+    /// elbow and last two wrist joints, whose URDF rotations are exact).
+    pre_perm: Option<([usize; 3], [f64; 3])>,
     pre_t: Vector3<f64>,
     /// The joint axis in this body's (turned) frame: `e_z` for a revolute joint; for a prismatic
     /// joint, in the frame after `pre`.
@@ -342,6 +346,32 @@ impl SphereScratch {
     }
 }
 
+/// `m` as a signed permutation: for each column, the row of its one nonzero entry and that
+/// entry (±1); `None` unless every entry is exactly 0 or ±1, one nonzero per column.
+fn signed_permutation(m: &Matrix3<f64>) -> Option<([usize; 3], [f64; 3])> {
+    let mut perm = [0; 3];
+    let mut sign = [0.0; 3];
+    for c in 0..3 {
+        let mut found = false;
+        for r in 0..3 {
+            let v = m[(r, c)];
+            if v == 0.0 {
+                continue;
+            }
+            if found || v.abs() != 1.0 {
+                return None;
+            }
+            found = true;
+            perm[c] = r;
+            sign[c] = v;
+        }
+        if !found {
+            return None;
+        }
+    }
+    Some((perm, sign))
+}
+
 /// A rotation whose third column is the unit vector `a` (right-handed).
 fn frame_with_z(a: &Vector3<f64>) -> Matrix3<f64> {
     // Start from the world axis least aligned with `a`.
@@ -494,6 +524,7 @@ impl SphereGeom {
             .map(|b| Body {
                 parent: b.parent,
                 pre_r: mat(&b.pre.rotation),
+                pre_perm: None,
                 pre_t: b.pre.translation.vector,
                 axis: b.axis.into_inner(),
                 prismatic: b.prismatic,
@@ -508,7 +539,10 @@ impl SphereGeom {
             .iter()
             .map(|&(a, b)| super::common_body(&g.bodies, links[a as usize].body, links[b as usize].body) as u32)
             .collect();
-        let (bodies, centre, links) = turn_to_z(bodies, centre, links);
+        let (mut bodies, centre, links) = turn_to_z(bodies, centre, links);
+        for b in &mut bodies {
+            b.pre_perm = signed_permutation(&b.pre_r);
+        }
         arms.use_turned_axes(&bodies);
         let Grouping { groups, group_links, mut group_pairs, runs, run_pairs } = group_by_body(&links, &g.self_pairs);
         // Pairs of links on one body never move relative to each other: answered once here.
@@ -598,7 +632,15 @@ impl SphereGeom {
                 Value::Zero => 0.0,
             } + b.offset;
             let (pr, pp) = (rot[b.parent], pos[b.parent]);
-            let m = mul3(&pr, &b.pre_r);
+            let m = match &b.pre_perm {
+                // Exactly `mul3`: the other two products are zeros.
+                Some((perm, sign)) => Matrix3::from_columns(&[
+                    pr.column(perm[0]) * sign[0],
+                    pr.column(perm[1]) * sign[1],
+                    pr.column(perm[2]) * sign[2],
+                ]),
+                None => mul3(&pr, &b.pre_r),
+            };
             let (mut r, mut t) = if b.prismatic {
                 let a = b.axis * v;
                 (m, pr * b.pre_t + m * a + pp)
@@ -888,7 +930,28 @@ impl SphereGeom {
 
 #[cfg(test)]
 mod tests {
-    use super::sin_cos;
+    use super::{mul3, signed_permutation, sin_cos};
+    use nalgebra::{Matrix3, Rotation3, Vector3};
+
+    #[test]
+    fn signed_permutations_are_found_exactly_and_multiply_like_mul3() {
+        let p = Matrix3::new(0.0, -1.0, 0.0, 0.0, 0.0, 1.0, -1.0, 0.0, 0.0);
+        assert_eq!(signed_permutation(&p), Some(([2, 0, 1], [-1.0, -1.0, 1.0])));
+        assert_eq!(signed_permutation(&Matrix3::identity()), Some(([0, 1, 2], [1.0; 3])));
+        // 1.570796325 rad, as in the UR5's URDF: nearly, not exactly, a permutation.
+        let almost = *Rotation3::from_axis_angle(&Vector3::y_axis(), 1.570_796_325).matrix();
+        assert_eq!(signed_permutation(&almost), None);
+        assert_eq!(signed_permutation(&(p * 2.0)), None);
+        assert_eq!(signed_permutation(&Matrix3::new(1.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0)), None);
+        let a = *Rotation3::from_euler_angles(0.3, -1.2, 2.5).matrix();
+        let (perm, sign) = signed_permutation(&p).unwrap();
+        let by_columns = Matrix3::from_columns(&[
+            a.column(perm[0]) * sign[0],
+            a.column(perm[1]) * sign[1],
+            a.column(perm[2]) * sign[2],
+        ]);
+        assert_eq!(by_columns, mul3(&a, &p));
+    }
 
     fn ulps(a: f64, b: f64) -> f64 {
         let scale = a.abs().max(b.abs()).max(f64::MIN_POSITIVE);
