@@ -347,7 +347,7 @@ impl SphereScratch {
 }
 
 /// `m` as a signed permutation: for each column, the row of its one nonzero entry and that
-/// entry (±1); `None` unless every entry is exactly 0 or ±1, one nonzero per column.
+/// entry (±1); `None` unless every entry is exactly 0 or ±1, one nonzero per row and column.
 fn signed_permutation(m: &Matrix3<f64>) -> Option<([usize; 3], [f64; 3])> {
     let mut perm = [0; 3];
     let mut sign = [0.0; 3];
@@ -369,7 +369,7 @@ fn signed_permutation(m: &Matrix3<f64>) -> Option<([usize; 3], [f64; 3])> {
             return None;
         }
     }
-    Some((perm, sign))
+    (perm[0] != perm[1] && perm[1] != perm[2] && perm[0] != perm[2]).then_some((perm, sign))
 }
 
 /// A rotation whose third column is the unit vector `a` (right-handed).
