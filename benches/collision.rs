@@ -1,7 +1,7 @@
 //! Criterion benchmarks: collision checking.
 //!
 //! - `collides/ur5-table-pick/*`: the spherized UR5 of MotionBenchMaker (40 spheres) in the
-//!   `table_pick_ur5` scene 0001 (obstacles written out below), over fixed sets of free and random
+//!   `table_pick_ur5` scene 0001 (`benches/fixtures/`, read by `planner::moveit`), over fixed sets of free and random
 //!   configurations. Target: median <= 1 us per call.
 //! - `collides|distance/two-irp6-20-obstacles`: the two-arm IRp-6 cell among 20 boxes/cylinders.
 
@@ -14,140 +14,14 @@ use criterion::{Criterion, criterion_group, criterion_main};
 use embodied_models::collision::{
     CollisionModel, Environment, Obstacle, disable_always_colliding, disable_never_colliding,
 };
-use embodied_models::nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion};
+use embodied_models::nalgebra::Isometry3;
 use embodied_models::{Rng, Robot, Shape, builtin};
 
-/// A MoveIt collision object: object pose (xyz, quaternion xyzw) times primitive pose (xyz).
-fn moveit(name: &str, pose: [f64; 7], prim_xyz: [f64; 3], shape: Shape) -> Obstacle {
-    let q = UnitQuaternion::from_quaternion(Quaternion::new(pose[6], pose[3], pose[4], pose[5]));
-    let object = Isometry3::from_parts(Translation3::new(pose[0], pose[1], pose[2]), q);
-    Obstacle::new(name, object * Isometry3::translation(prim_xyz[0], prim_xyz[1], prim_xyz[2]), shape)
-}
-
-/// MoveIt `box` dimensions are full sizes; `cylinder` dimensions are [height, radius].
-fn bx(x: f64, y: f64, z: f64) -> Shape {
-    Shape::cuboid(x / 2.0, y / 2.0, z / 2.0)
-}
-fn cyl(height: f64, radius: f64) -> Shape {
-    Shape::cylinder(radius, height / 2.0)
-}
-
-/// `problems/table_pick_ur5/scene0001.yaml` of /work/shared/mbm/ur5/problems-public.tar.bz2.
+/// `problems/table_pick_ur5/scene0001.yaml` of /work/shared/mbm/ur5/problems-public.tar.bz2,
+/// copied unchanged to `benches/fixtures/`, read through the project's MoveIt loader.
 fn table_pick_scene0001() -> Environment {
-    let table = [
-        -0.08882545052091238,
-        -0.0838528117056479,
-        0.08705641176758652,
-        0.0,
-        0.0,
-        0.9972514405491772,
-        0.07409159414259424,
-    ];
-    let mut env = Environment::new();
-    env.add(moveit(
-        "Can1",
-        [
-            -0.06371788662107358,
-            -0.1102475820769556,
-            0.08705641176758652,
-            0.0,
-            0.0,
-            0.9972514405491772,
-            0.07409159414259425,
-        ],
-        [0.85, 0.0, 0.8],
-        cyl(0.12, 0.03),
-    ));
-    env.add(moveit(
-        "Cube",
-        [
-            -0.08791923452392993,
-            -0.08940951248661265,
-            0.08705641176758652,
-            0.0,
-            0.0,
-            0.9974531188710987,
-            0.07132514040868118,
-        ],
-        [0.75, 0.4, 0.85],
-        bx(0.25, 0.25, 0.25),
-    ));
-    env.add(moveit(
-        "Object1",
-        [
-            -0.7615492092843769,
-            -1.105577808942591,
-            0.08705641176758652,
-            0.0,
-            0.0,
-            0.8736437177567432,
-            0.4865661870950101,
-        ],
-        [1.35, 0.0, 0.85],
-        cyl(0.35, 0.05),
-    ));
-    env.add(moveit(
-        "Object2",
-        [
-            -0.4754801784139817,
-            0.979941530894374,
-            0.08705641176758652,
-            0.0,
-            0.0,
-            -0.8748279033106394,
-            0.4844338340672655,
-        ],
-        [1.05, -0.2, 0.9],
-        bx(0.2, 0.02, 0.4),
-    ));
-    env.add(moveit(
-        "Object3",
-        [
-            -0.432097732466474,
-            -0.7753937328216794,
-            0.08705641176758652,
-            0.0,
-            0.0,
-            0.8158325401727546,
-            0.5782882208685141,
-        ],
-        [0.65, 0.2, 0.9],
-        bx(0.02, 0.2, 0.4),
-    ));
-    env.add(moveit(
-        "Object4",
-        [
-            -0.7016326445863116,
-            -0.3798568368884329,
-            0.08705641176758652,
-            0.0,
-            0.0,
-            0.8220975726243217,
-            0.5693466264809149,
-        ],
-        [0.65, -0.2, 0.9],
-        bx(0.2, 0.05, 0.35),
-    ));
-    env.add(moveit(
-        "Object5",
-        [
-            -0.02201615875713062,
-            0.149141008133426,
-            0.08705641176758652,
-            0.0,
-            0.0,
-            -0.9999817664221317,
-            0.006038776637155595,
-        ],
-        [1.05, 0.2, 0.9],
-        bx(0.2, 0.05, 0.35),
-    ));
-    env.add(moveit("table_leg_left_back", table, [1.5, 0.85, 0.35], bx(0.05, 0.05, 0.7)));
-    env.add(moveit("table_leg_left_front", table, [0.6, 0.85, 0.35], bx(0.05, 0.05, 0.7)));
-    env.add(moveit("table_leg_right_back", table, [1.5, -0.85, 0.35], bx(0.05, 0.05, 0.7)));
-    env.add(moveit("table_leg_right_front", table, [0.6, -0.85, 0.35], bx(0.05, 0.05, 0.7)));
-    env.add(moveit("table_top", table, [1.05, 0.0, 0.7], bx(1.2, 2.0, 0.04)));
-    env
+    let file = Path::new(env!("CARGO_MANIFEST_DIR")).join("benches/fixtures/table_pick_ur5_scene0001.yaml");
+    embodied_planner::moveit::load_scene(&file).expect("table_pick scene").environment()
 }
 
 /// The spherized UR5 with the SRDF's disabled pairs, plus the sphere pairs that touch in every
