@@ -119,6 +119,12 @@ impl SphereGeom {
     #[inline(always)]
     fn rho(&self, b: usize, p: &Vector3<f64>, s: &SphereScratch) -> f64 {
         let body = &self.bodies[b];
+        if body.post.is_none() {
+            // The body's posed frame is the joint's: origin on the axis, z along it (turned).
+            let r = &s.rot[b];
+            let w = Vector3::new(r[(0, 2)], r[(1, 2)], r[(2, 2)]);
+            return (p - s.pos[b]).cross(&w).norm();
+        }
         let (r, t) = (&s.rot[body.parent], &s.pos[body.parent]);
         let o = r * body.pre_t + t;
         (p - o).cross(&(r * self.arms.axis[b])).norm()
