@@ -271,10 +271,15 @@ fn sin_cos(x: f64) -> (f64, f64) {
     let hz = 0.5 * r2;
     let w = 1.0 - hz;
     let cos = w + (((1.0 - w) - hz) + r4 * pc);
-    let q = (k as i64) & 3;
-    let (a, b) = if q & 1 == 0 { (sin, cos) } else { (cos, sin) };
-    let sin_x = if q & 2 == 0 { a } else { -a };
-    let cos_x = if (q + 1) & 2 == 0 { b } else { -b };
+    // The quadrant, without branches (random joint angles would mispredict them): swap sin
+    // and cos for odd `k`, flip sin's sign for k mod 4 in {2, 3} and cos's for {1, 2}.
+    let q = k as i64 as u64;
+    let swap = 0u64.wrapping_sub(q & 1);
+    let (sb, cb) = (sin.to_bits(), cos.to_bits());
+    let a = (sb & !swap) | (cb & swap);
+    let b = (cb & !swap) | (sb & swap);
+    let sin_x = f64::from_bits(a ^ ((q & 2) << 62));
+    let cos_x = f64::from_bits(b ^ ((q.wrapping_add(1) & 2) << 62));
     (sin_x, cos_x)
 }
 
