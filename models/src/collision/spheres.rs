@@ -126,6 +126,9 @@ pub(crate) struct SphereGeom {
     /// Sphere centres in their body frames and radii, grouped by link.
     centre: Vec<Vector3<f64>>,
     radius: Vec<f64>,
+    /// The same spheres packed as `[x, y, z, r]`, one record per sphere: the self pass reads
+    /// them in runs, as stored.
+    balls: Vec<[f64; 4]>,
     self_pairs: Vec<(u32, u32)>,
     /// The deepest body carrying both links of each self pair.
     pair_common: Vec<u32>,
@@ -377,6 +380,36 @@ fn signed_permutation(m: &Matrix3<f64>) -> Option<([usize; 3], [f64; 3])> {
     (perm[0] != perm[1] && perm[1] != perm[2] && perm[0] != perm[2]).then_some((perm, sign))
 }
 
+/// `m` as `p * Rz(g)`: a signed permutation `p` after a turn by `g` about z, when `m` maps z
+/// exactly onto a signed coordinate axis and so turns the rest about it (within 1e-12 per
+/// entry; `None` otherwise). A joint's pre-rotation of this form turns about the joint's own
+/// axis, so `g` joins the joint's offset and `p` costs no products (the UR5's shoulder lift
+/// and first wrist joints, whose URDF origins turn by 1.570796325 rad about their axes).
+fn split_about_z(m: &Matrix3<f64>) -> Option<(Matrix3<f64>, f64)> {
+    let k = (0..3).find(|&r| m[(r, 2)] != 0.0)?;
+    let sigma = m[(k, 2)];
+    if sigma.abs() != 1.0 || (0..3).any(|r| r != k && m[(r, 2)] != 0.0) || m[(k, 0)] != 0.0 || m[(k, 1)] != 0.0 {
+        return None;
+    }
+    let (a, b) = match k {
+        0 => (1, 2),
+        1 => (0, 2),
+        _ => (0, 1),
+    };
+    let mut p = Matrix3::zeros();
+    p[(a, 0)] = 1.0;
+    p[(b, 1)] = 1.0;
+    p[(k, 2)] = sigma;
+    if p.determinant() < 0.0 {
+        p[(b, 1)] = -1.0;
+    }
+    let t = p.transpose() * m;
+    let g = t[(1, 0)].atan2(t[(0, 0)]);
+    let (sn, cs) = g.sin_cos();
+    let rz = Matrix3::new(cs, -sn, 0.0, sn, cs, 0.0, 0.0, 0.0, 1.0);
+    ((t - rz).amax() <= 1e-12).then_some((p, g))
+}
+
 /// A rotation whose third column is the unit vector `a` (right-handed).
 fn frame_with_z(a: &Vector3<f64>) -> Matrix3<f64> {
     // Start from the world axis least aligned with `a`.
@@ -545,7 +578,15 @@ impl SphereGeom {
             .map(|&(a, b)| super::common_body(&g.bodies, links[a as usize].body, links[b as usize].body) as u32)
             .collect();
         let (mut bodies, centre, links) = turn_to_z(bodies, centre, links);
-        for b in &mut bodies {
+        for b in bodies.iter_mut().skip(1) {
+            // A turn about the joint's own axis before it joins the joint's offset.
+            if !b.prismatic
+                && signed_permutation(&b.pre_r).is_none()
+                && let Some((p, g)) = split_about_z(&b.pre_r)
+            {
+                b.pre_r = p;
+                b.offset += g;
+            }
             b.pre_perm = signed_permutation(&b.pre_r);
         }
         arms.use_turned_axes(&bodies);
@@ -576,6 +617,7 @@ impl SphereGeom {
             }
             false
         });
+        let balls = centre.iter().zip(&radius).map(|(c, &r)| [c.x, c.y, c.z, r]).collect();
         Some(SphereGeom {
             base_r: mat(&g.base.rotation),
             base_t: g.base.translation.vector,
@@ -583,6 +625,7 @@ impl SphereGeom {
             links,
             centre,
             radius,
+            balls,
             self_pairs: g.self_pairs.clone(),
             groups,
             group_links,
@@ -888,14 +931,16 @@ impl SphereGeom {
                 if (la.c - g).norm_squared() > reach * reach {
                     continue;
                 }
-                for i in la.first..la.end {
-                    let ri = self.radius[i];
-                    let reach = ri + r_inner;
-                    if (self.centre[i] - g).norm_squared() > reach * reach {
+                for (n, bi) in self.balls[la.first..la.end].iter().enumerate() {
+                    let (dx, dy, dz) = (bi[0] - g.x, bi[1] - g.y, bi[2] - g.z);
+                    let reach = bi[3] + r_inner;
+                    if dx * dx + dy * dy + dz * dz > reach * reach {
                         continue;
                     }
                     // Sphere `i` in the inner body's frame.
-                    let u = mul3tv(&rot_i, &(mul3v(&rot_o, &self.centre[i]) + pos_o - pos_i));
+                    let (i, ri) = (la.first + n, bi[3]);
+                    let ci = Vector3::new(bi[0], bi[1], bi[2]);
+                    let u = mul3tv(&rot_i, &(mul3v(&rot_o, &ci) + pos_o - pos_i));
                     for rp in &self.run_pairs[run.pairs.clone()] {
                         // Link b's bounding sphere holds all its spheres, and `ep` bounds the
                         // growth of any two spheres of the pair.
@@ -904,9 +949,11 @@ impl SphereGeom {
                         if (rp.c - u).norm_squared() > reach * reach {
                             continue;
                         }
-                        for j in rp.first as usize..rp.end as usize {
-                            let d2 = (self.centre[j] - u).norm_squared();
-                            let r = ri + self.radius[j];
+                        let first = rp.first as usize;
+                        for (m, bj) in self.balls[first..rp.end as usize].iter().enumerate() {
+                            let (dx, dy, dz) = (bj[0] - u.x, bj[1] - u.y, bj[2] - u.z);
+                            let d2 = dx * dx + dy * dy + dz * dz;
+                            let r = ri + bj[3];
                             if d2 <= r * r {
                                 return true;
                             }
@@ -917,7 +964,7 @@ impl SphereGeom {
                                     self.pose_link(a, s);
                                     self.pose_link(rp.link as usize, s);
                                     let stop = self.pair_common[p] as usize;
-                                    let re = r + self.pair_margin(i, j, stop, inf_now.step, s);
+                                    let re = r + self.pair_margin(i, first + m, stop, inf_now.step, s);
                                     if d2 <= re * re {
                                         *near = true;
                                         *inf = None;
@@ -935,7 +982,7 @@ impl SphereGeom {
 
 #[cfg(test)]
 mod tests {
-    use super::{mul3, signed_permutation, sin_cos};
+    use super::{mul3, signed_permutation, sin_cos, split_about_z};
     use nalgebra::{Matrix3, Rotation3, Vector3};
 
     #[test]
@@ -956,6 +1003,27 @@ mod tests {
             a.column(perm[2]) * sign[2],
         ]);
         assert_eq!(by_columns, mul3(&a, &p));
+    }
+
+    #[test]
+    fn a_turn_about_the_axis_splits_off_exactly_and_nothing_else_does() {
+        // The UR5's shoulder lift: Ry(1.570796325) about the joint's own axis, in turned frames.
+        for (k, g) in [(1usize, 1.570_796_325f64), (0, -0.4), (2, 2.9)] {
+            let axis = Vector3::ith_axis(k);
+            let m = *Rotation3::from_axis_angle(&axis, g).matrix();
+            // Turned so that the axis is the frame's z: m * T with T e_z = axis.
+            let t = super::frame_with_z(&axis.into_inner());
+            let turned = m * t;
+            let (p, got) = split_about_z(&turned).unwrap();
+            assert!(signed_permutation(&p).is_some());
+            assert!((p.determinant() - 1.0).abs() < 1e-15);
+            let rz = *Rotation3::from_axis_angle(&Vector3::z_axis(), got).matrix();
+            assert!((p * rz - turned).amax() < 1e-15, "{k} {g}: {}", (p * rz - turned).amax());
+        }
+        // A turn about another axis does not split.
+        let tilt = *Rotation3::from_euler_angles(0.3, 0.0, 0.0).matrix();
+        assert!(split_about_z(&tilt).is_none());
+        assert!(split_about_z(Rotation3::from_euler_angles(0.0, 0.2, 1.0).matrix()).is_none());
     }
 
     fn ulps(a: f64, b: f64) -> f64 {
