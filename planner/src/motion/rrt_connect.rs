@@ -11,6 +11,7 @@
 
 use embodied_models::{ConfigSpace, Rng};
 
+use super::shortcut::{OutOfTime, farthest_visible};
 use super::validity::{Budget, Validity};
 use super::{MotionSettings, MotionStats, Search};
 
@@ -273,14 +274,10 @@ fn certify_path(
     while i + 1 < path.len() {
         let mut next = i + 1;
         if greedy {
-            for j in (i + 2..path.len()).rev() {
-                if budget.spend(1) {
-                    return Certified::OutOfTime;
-                }
-                if validity.segment_free(&path[i], &path[j]) {
-                    next = j;
-                    break;
-                }
+            match farthest_visible(&path, i, validity, budget) {
+                Ok(Some(j)) => next = j,
+                Ok(None) => {}
+                Err(OutOfTime) => return Certified::OutOfTime,
             }
         }
         if next == i + 1 && !certified[i] {

@@ -66,16 +66,8 @@ fn greedy_pass(path: Vec<Vec<f64>>, validity: &mut Validity<'_>, budget: &mut Bu
     let mut i = 0;
     let mut greedy = vec![path[0].clone()];
     while i + 1 < path.len() {
-        let mut next = i + 1;
-        for j in (i + 2..path.len()).rev() {
-            if budget.spend(1) {
-                break;
-            }
-            if validity.segment_free(&path[i], &path[j]) {
-                next = j;
-                break;
-            }
-        }
+        // Out of time: the rest of the path as it is.
+        let next = farthest_visible(&path, i, validity, budget).ok().flatten().unwrap_or(i + 1);
         greedy.push(path[next].clone());
         i = next;
         if path.len() > 12 {
@@ -85,4 +77,27 @@ fn greedy_pass(path: Vec<Vec<f64>>, validity: &mut Validity<'_>, budget: &mut Bu
         }
     }
     greedy
+}
+
+/// The budget ran out.
+pub(crate) struct OutOfTime;
+
+/// The greedy pass's step from vertex `i`: the farthest vertex `j > i + 1` whose straight
+/// segment from `path[i]` is free, tried farthest first (a failing segment stops at its first
+/// hit and costs a few checks); `None` when none is.
+pub(crate) fn farthest_visible(
+    path: &[Vec<f64>],
+    i: usize,
+    validity: &mut Validity<'_>,
+    budget: &mut Budget<'_>,
+) -> Result<Option<usize>, OutOfTime> {
+    for j in (i + 2..path.len()).rev() {
+        if budget.spend(1) {
+            return Err(OutOfTime);
+        }
+        if validity.segment_free(&path[i], &path[j]) {
+            return Ok(Some(j));
+        }
+    }
+    Ok(None)
 }
