@@ -13,7 +13,8 @@ use embodied_models::Robot;
 ///
 /// Between consecutive samples the acceleration is constant (the samples include every knot
 /// where it changes), so [`Trajectory::sample`] is exact for trajectories built by
-/// [`time_parameterize`].
+/// [`time_parameterize`], except where samples closer than 10 µs were merged (there the
+/// interval's acceleration is the average over it, within the limits).
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Trajectory {
     pub joint_names: Vec<String>,
@@ -121,10 +122,36 @@ fn profile(delta: &[f64], robot: &Robot) -> Option<Profile> {
     }
 }
 
+/// Samples of one segment closer together than this (s) are merged.
+const MIN_GAP: f64 = 1e-5;
+
+/// The positive times of sorted `times` (the last one the segment's end), thinned so that
+/// consecutive ones, and the first and the segment's start, are at least `gap` apart; the end
+/// is always kept (it replaces the time before it when the two are too close). A velocity
+/// difference over a sliver of time turns the velocities' rounding into an acceleration over
+/// the limit (a grid sample 1e-8 s from a profile knot read 1.6e-9 over, relative); over any
+/// interval the velocity difference is the average acceleration, so merging keeps every
+/// sampled acceleration within the limits.
+fn spread(times: &[f64], gap: f64) -> Vec<f64> {
+    let mut kept: Vec<f64> = Vec::with_capacity(times.len());
+    let positive: Vec<f64> = times.iter().copied().filter(|&t| t > 0.0).collect();
+    for (k, &t) in positive.iter().enumerate() {
+        if t - kept.last().copied().unwrap_or(0.0) < gap {
+            if k + 1 < positive.len() {
+                continue;
+            }
+            kept.pop();
+        }
+        kept.push(t);
+    }
+    kept
+}
+
 /// Time-parameterise `path` for `robot`: rest-to-rest synchronised trapezoids per segment,
 /// within every joint's velocity and acceleration limit, passing exactly through every
 /// waypoint. Sampled every `sample_dt` seconds plus every knot (waypoints and profile switch
-/// points); `sample_dt <= 0` or NaN gives the knots only. Continuous joints move the short way
+/// points, merged where closer than 10 µs or a quarter of `sample_dt`); `sample_dt <= 0` or
+/// NaN gives the knots only. Continuous joints move the short way
 /// and stay unwrapped. Repeated waypoints are skipped.
 pub fn time_parameterize(path: &[Vec<f64>], robot: &Robot, sample_dt: f64) -> Trajectory {
     let joint_names = robot.joint_names();
@@ -133,6 +160,7 @@ pub fn time_parameterize(path: &[Vec<f64>], robot: &Robot, sample_dt: f64) -> Tr
     let dof = first.len();
     let space = robot.config_space();
     let dt = if sample_dt.is_finite() && sample_dt > 0.0 { sample_dt } else { f64::INFINITY };
+    let gap = MIN_GAP.min(0.25 * dt);
     let mut current = first.clone();
     traj.t.push(0.0);
     traj.q.push(current.clone());
@@ -152,11 +180,9 @@ pub fn time_parameterize(path: &[Vec<f64>], robot: &Robot, sample_dt: f64) -> Tr
         times.extend([p.t_acc, p.t_dec, p.t_end]);
         times.sort_by(f64::total_cmp);
         times.dedup_by(|a, b| (*a - *b).abs() < 1e-12);
+        let times = spread(&times, gap);
         let end: Vec<f64> = (0..dof).map(|i| current[i] + delta[i]).collect();
         for &t in &times {
-            if t <= 0.0 {
-                continue;
-            }
             let (s, sd) = p.at(t);
             if (t - p.t_end).abs() < 1e-12 {
                 traj.t.push(t0 + p.t_end);
@@ -172,4 +198,24 @@ pub fn time_parameterize(path: &[Vec<f64>], robot: &Robot, sample_dt: f64) -> Tr
         current = end;
     }
     traj
+}
+
+#[cfg(test)]
+mod tests {
+    use super::spread;
+
+    #[test]
+    fn samples_closer_than_the_gap_are_merged_and_the_end_is_kept() {
+        let gap = 1e-5;
+        // A grid time 1e-8 s before a knot: the knot is dropped, not the grid time.
+        assert_eq!(spread(&[0.0, 0.001, 0.002 - 1e-8, 0.002, 0.003], gap), vec![0.001, 0.002 - 1e-8, 0.003]);
+        // The end replaces the time just before it.
+        assert_eq!(spread(&[0.001, 0.002, 0.002 + 1e-9], gap), vec![0.001, 0.002 + 1e-9]);
+        // A first time too close to the start goes; a segment shorter than the gap keeps its end.
+        assert_eq!(spread(&[1e-7, 0.001], gap), vec![0.001]);
+        assert_eq!(spread(&[1e-7, 2e-7], gap), vec![2e-7]);
+        let out = spread(&[0.0, 1e-6, 5e-6, 1.2e-5, 2e-5, 3.5e-5, 3.6e-5], gap);
+        assert_eq!(out.last(), Some(&3.6e-5));
+        assert!(out.windows(2).all(|w| w[1] - w[0] >= gap), "{out:?}");
+    }
 }
