@@ -850,6 +850,11 @@ impl SphereGeom {
                     for k in link.first..link.end {
                         let p = &s.centre[k];
                         let r = self.radius[k];
+                        // The obstacle's box first (it holds the obstacle): cheaper than the
+                        // exact distance to a turned box or cylinder, and most spheres miss it.
+                        if !sphere_hits_aabb(&Point3::from(*p), r + el, o) {
+                            continue;
+                        }
                         match dist2(solid, p) {
                             Some(d2) => {
                                 if d2 <= r * r {
