@@ -847,6 +847,8 @@ impl SphereGeom {
                         continue;
                     }
                     self.pose_link(l, s);
+                    // The link's midpoint margin, once a sphere needs more than the static one.
+                    let mut ml = f64::INFINITY;
                     for k in link.first..link.end {
                         let p = &s.centre[k];
                         let r = self.radius[k];
@@ -865,6 +867,13 @@ impl SphereGeom {
                                     // only when the loose one touches.
                                     let rel = r + el;
                                     if d2 <= rel * rel {
+                                        if ml == f64::INFINITY {
+                                            ml = self.link_margin(l, i.step, s);
+                                        }
+                                        let rl = r + ml;
+                                        if d2 > rl * rl {
+                                            continue;
+                                        }
                                         let re = r + self.margin(k, 0, i.step, Some(s));
                                         if d2 <= re * re {
                                             near = true;

@@ -168,6 +168,29 @@ impl SphereGeom {
         m
     }
 
+    /// A bound on [`Self::margin`] against the world for every sphere of link `l`, from the
+    /// link's bounding sphere at the midpoint pose (`l`'s centre posed in `s`): a sphere's
+    /// distance from a joint's axis is at most the bounding centre's plus the bounding radius,
+    /// so walking the chain once with that distance bounds each sphere's walk term by term.
+    /// A filter: a sphere farther than this from an obstacle needs no walk of its own.
+    #[inline]
+    pub(super) fn link_margin(&self, l: usize, step: &[f64], s: &SphereScratch) -> f64 {
+        let link = &self.links[l];
+        let c = s.link_c[l];
+        let mut b = link.body;
+        let mut m = 0.0;
+        while b != 0 {
+            let body = &self.bodies[b];
+            let d = Self::joint_step(body.value, step);
+            if d > 0.0 {
+                let arm = if body.prismatic { 1.0 } else { self.rho(b, &c, s) + link.r + m };
+                m += arm * d;
+            }
+            b = body.parent;
+        }
+        m + 1e-12
+    }
+
     /// How far sphere `k`'s centre can move relative to body `stop` (one of its body's
     /// ancestors, or 0 for the world) when the joints move by at most `step` (already scaled)
     /// either side of the pose in `at` (with `k` posed), or of any pose without `at`.

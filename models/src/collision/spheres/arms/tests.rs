@@ -163,8 +163,17 @@ fn check_span(
         }
     }
     let mut out = Vec::new();
-    for lk in &fast.links {
+    for (l, lk) in fast.links.iter().enumerate() {
+        fast.link_centre(l, &mut at);
+        let link_bound = fast.link_margin(l, &step, &at);
         for k in lk.first..lk.end {
+            // The link's midpoint margin bounds each of its spheres' against the world.
+            let (world_moved, world_tight) = (length[k][length[k].len() - 1], fast.margin(k, 0, &step, Some(&at)));
+            prop_assert!(
+                world_moved <= link_bound && world_tight <= link_bound * (1.0 + 1e-12) + 1e-12,
+                "{}: sphere {k} moves {world_moved} over [{t0}, {t1}], margin {world_tight}, link {l}'s bound {link_bound}",
+                robot.name()
+            );
             // The frames: each body up the chain, then the world (stop 0 again, as the world).
             let mut b = lk.body;
             let mut frames = Vec::new();
