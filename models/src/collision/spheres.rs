@@ -847,7 +847,8 @@ impl SphereGeom {
                         continue;
                     }
                     self.pose_link(l, s);
-                    // The link's midpoint margin, once a sphere needs more than the static one.
+                    // The link's midpoint margin, once a sphere needs more than the static one
+                    // (infinite: not computed yet; an `Option` here cost 0.8% of planning).
                     let mut ml = f64::INFINITY;
                     for k in link.first..link.end {
                         let p = &s.centre[k];
