@@ -47,11 +47,31 @@ fn mimic_arm() -> Robot {
     b.build().unwrap()
 }
 
+/// A snake of 14 revolute links (axes alternating z and y), one sphere each: self-collision
+/// pairs whose chains below their common body are longer than `DEEP` (pair margins fall back
+/// to the sum of the two spheres' margins) and shorter (tightened).
+fn snake() -> Robot {
+    let mut b = RobotBuilder::new("snake");
+    let lim = JointLimits::new(-1.5, 1.5, 1.0, 1.0);
+    let id = Isometry3::identity();
+    let mut parent = b.link("base", vec![]);
+    for k in 0..14 {
+        let shapes = vec![PlacedShape::new(Isometry3::translation(0.06, 0.0, 0.0), Shape::sphere(0.03))];
+        let link = b.link(format!("s{k}"), shapes);
+        let axis = if k % 2 == 0 { Vector3::z() } else { Vector3::y() };
+        let at = Isometry3::translation(if k == 0 { 0.0 } else { 0.12 }, 0.0, 0.0);
+        b.joint(format!("j{k}"), JointKind::Revolute, parent, link, at, axis, 0.0, id, lim);
+        parent = link;
+    }
+    b.build().unwrap()
+}
+
 fn robots() -> Vec<Robot> {
     let mut v = vec![ur5()];
     v.extend(["two-irp6", "polycrank", "irp6-on-track"].iter().map(|n| crate::builtin(n).unwrap()));
     v.push(load_urdf(&fixture("tiny_gripper.urdf"), Some(&fixture("tiny_gripper.srdf"))).unwrap());
     v.push(mimic_arm());
+    v.push(snake());
     v
 }
 
@@ -326,7 +346,7 @@ proptest! {
     /// up its chain) than its margin at the midpoint, which is no larger than the static one;
     /// no pair of spheres of a self-collision pair gets closer than their pair margin allows.
     #[test]
-    fn segment_arms_bound_the_sampled_motion(which in 0usize..6, seed in any::<u64>(), scale in 0.005f64..1.0) {
+    fn segment_arms_bound_the_sampled_motion(which in 0usize..7, seed in any::<u64>(), scale in 0.005f64..1.0) {
         let robots = robots();
         let robot = &robots[which];
         let g = sphere_geom(robot);
@@ -427,4 +447,27 @@ fn tightness() {
             );
         }
     }
+}
+
+/// The snake of the property test has self-collision pairs on both sides of `DEEP` (moving
+/// joints from a sphere up to the pair's common body), so both the tightened pair margin and
+/// its fallback are exercised.
+#[test]
+fn the_snake_has_pairs_deeper_than_deep_and_shallower() {
+    let robot = snake();
+    let fast = SphereGeom::new(&sphere_geom(&robot)).unwrap();
+    let step = vec![0.1; robot.dof()];
+    let depths: Vec<usize> = (0..fast.self_pairs.len())
+        .flat_map(|p| {
+            let (a, b) = fast.self_pairs[p];
+            let stop = fast.pair_common[p] as usize;
+            [a, b].map(|l| {
+                let mut n = 0;
+                fast.walk(fast.links[l as usize].first, stop, &step, None, |_, _, _| n += 1);
+                n
+            })
+        })
+        .collect();
+    assert!(depths.iter().any(|&n| n > super::DEEP), "{depths:?}");
+    assert!(depths.iter().any(|&n| (2..=super::DEEP).contains(&n)), "{depths:?}");
 }
