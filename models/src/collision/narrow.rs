@@ -10,7 +10,7 @@
 
 use nalgebra::{Isometry3, Point3, UnitQuaternion, Vector3};
 use parry3d_f64::query::{self, ClosestPoints};
-use parry3d_f64::shape::{Ball, Capsule, ConvexPolyhedron, Cuboid, Cylinder, Shape as ParryShape};
+use parry3d_f64::shape::{Ball, Capsule, ConvexPolyhedron, Cuboid, Cylinder, Segment, Shape as ParryShape};
 
 use crate::geometry::Shape;
 
@@ -245,8 +245,87 @@ pub(crate) fn separation(a: &View, b: &View) -> Separation {
         (Cuboid { iso, half }, Sphere { c, r }) => sphere_box(c, *r, iso, half).flipped(),
         (Sphere { c, r }, Cylinder { iso, r: rc, hh }) => sphere_cylinder(c, *r, iso, *rc, *hh),
         (Cylinder { iso, r: rc, hh }, Sphere { c, r }) => sphere_cylinder(c, *r, iso, *rc, *hh).flipped(),
+        (Capsule { a: p, b: q, r }, other) => rounded_segment(p, q, *r, other),
+        (other, Capsule { a: p, b: q, r }) => rounded_segment(p, q, *r, other).flipped(),
         _ => parry_separation(a, b),
     }
+}
+
+/// A capsule (segment `p`-`q` grown by `r`) against a box, cylinder or mesh: parry's distance
+/// from the *segment*, less `r`, with the capsule's witness `r` along the normal. GJK converges
+/// on a polytope pair in finitely many steps, but only to a tolerance on a curved support map
+/// such as parry's capsule, whose witness points can sit 1e-5 m inside the capsule (seen against
+/// a box). The distance between a Minkowski sum and a convex shape is the distance from its
+/// core less the radius, overlaps included, as long as the core stays outside the shape; when
+/// the segment itself enters the other shape, parry's contact depth for the segment, less `r`.
+fn rounded_segment(p: &Point3<f64>, q: &Point3<f64>, r: f64, other: &View) -> Separation {
+    if let View::Cylinder { iso, r: rc, hh } = *other
+        && let Some(s) = segment_cylinder(p, q, r, iso, rc, hh)
+    {
+        return s;
+    }
+    let (io, so) = to_parry(other);
+    let segment = Segment::new(*p, *q);
+    let id = Isometry3::identity();
+    match query::closest_points(&id, &segment, &io, so.shape(), f64::MAX) {
+        Ok(ClosestPoints::WithinMargin(ps, po)) => {
+            let gap = (po - ps).norm();
+            // A zero gap means touching: no normal to grow along; the capsule reaches r into it.
+            let n = if gap > 0.0 { (po - ps) / gap } else { Vector3::zeros() };
+            Separation { distance: gap - r, point_a: ps + n * r, point_b: po }
+        }
+        Ok(ClosestPoints::Intersecting) => match query::contact(&id, &segment, &io, so.shape(), 0.0) {
+            // `normal1` points from the segment into the other shape.
+            Ok(Some(c)) => Separation {
+                distance: c.dist.min(0.0) - r,
+                point_a: c.point1 + c.normal1.into_inner() * r,
+                point_b: c.point2,
+            },
+            _ => parry_separation(&View::Capsule { a: *p, b: *q, r }, other),
+        },
+        Ok(ClosestPoints::Disjoint) | Err(_) => parry_separation(&View::Capsule { a: *p, b: *q, r }, other),
+    }
+}
+
+/// A capsule against a cylinder whose axis-parallel side is round, so GJK would stop at a
+/// tolerance (1.6e-6 m too far, seen): the signed distance from a point to the (convex)
+/// cylinder is convex along the capsule's segment, so a golden-section search over the segment
+/// with the exact point distance finds the closest point. `None` when the segment enters the
+/// cylinder (the capsule's depth is then not a point's).
+fn segment_cylinder(
+    p: &Point3<f64>,
+    q: &Point3<f64>,
+    r: f64,
+    iso: &Isometry3<f64>,
+    rc: f64,
+    hh: f64,
+) -> Option<Separation> {
+    let at = |t: f64| sphere_cylinder(&(p + (q - p) * t), 0.0, iso, rc, hh);
+    const G: f64 = 0.618_033_988_749_894_8;
+    let (mut lo, mut hi) = (0.0, 1.0);
+    let (mut t1, mut t2) = (hi - G * (hi - lo), lo + G * (hi - lo));
+    let (mut f1, mut f2) = (at(t1).distance, at(t2).distance);
+    // 0.618^80 of the segment: far below a nanometre for any robot link.
+    for _ in 0..80 {
+        if f1 <= f2 {
+            hi = t2;
+            (t2, f2) = (t1, f1);
+            t1 = hi - G * (hi - lo);
+            f1 = at(t1).distance;
+        } else {
+            lo = t1;
+            (t1, f1) = (t2, f2);
+            t2 = lo + G * (hi - lo);
+            f2 = at(t2).distance;
+        }
+    }
+    let best = [at(0.0), at(1.0), at(0.5 * (lo + hi))].into_iter().min_by(|a, b| a.distance.total_cmp(&b.distance))?;
+    // Touching, inside, or NaN: not a point's distance.
+    if best.distance.is_nan() || best.distance <= 0.0 {
+        return None;
+    }
+    let n = (best.point_b - best.point_a) / best.distance;
+    Some(Separation { distance: best.distance - r, point_a: best.point_a + n * r, point_b: best.point_b })
 }
 
 /// A parry shape built on the stack from a view (no allocation; meshes are borrowed).
