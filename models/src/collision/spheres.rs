@@ -838,8 +838,8 @@ impl SphereGeom {
                 if !sphere_hits_aabb(&Point3::from(s.group_c[gi]), g.r + eg, o) {
                     continue;
                 }
-                for &l in &self.group_links[g.first..g.end] {
-                    let l = l as usize;
+                for gl in g.first..g.end {
+                    let l = self.group_links[gl] as usize;
                     let link = &self.links[l];
                     let el = inf.map_or(0.0, |i| i.link[l]);
                     let c = self.link_centre(l, s);
@@ -850,10 +850,9 @@ impl SphereGeom {
                     // The link's midpoint margin, once a sphere needs more than the static one
                     // (infinite: not computed yet; an `Option` here cost 0.8% of planning).
                     let mut ml = f64::INFINITY;
-                    // One range check per link, none per sphere.
-                    let (world, radii) = (&s.centre[link.first..link.end], &self.radius[link.first..link.end]);
-                    for (n, (p, &r)) in world.iter().zip(radii).enumerate() {
-                        let k = link.first + n;
+                    for k in link.first..link.end {
+                        let p = &s.centre[k];
+                        let r = self.radius[k];
                         // The obstacle's box first (it holds the obstacle): cheaper than the
                         // exact distance to a turned box or cylinder, and most spheres miss it.
                         if !sphere_hits_aabb(&Point3::from(*p), r + el, o) {
