@@ -1103,10 +1103,10 @@ impl CollisionModel {
     /// segment cut into up to 8 equal pieces, so that no shape grows by more than
     /// [`CERTIFY_START_MARGIN`], and halves only the sub-intervals that cannot be certified,
     /// breadth first (a collision is usually found after few checks); far from obstacles a few
-    /// checks certify a long motion. On the sphere fast path the margins of the spheres a query actually tests
-    /// are tighter, from the pose at the sub-interval's midpoint (each joint counts the sphere's
-    /// distance from its axis there, plus how far the joints below can move it), and a
-    /// self-collision pair counts how much the distance between two spheres can shrink rather
+    /// checks certify a long motion. On the sphere fast path the margins of the spheres a query
+    /// actually tests are tighter, from the pose at the sub-interval's midpoint (each joint
+    /// counts the sphere's distance from its axis there, plus how far the joints below can move
+    /// it), and a self-collision pair counts how much the distance between two spheres can shrink rather
     /// than how far each moves (see `spheres::arms` in the source); the link bounds stay the
     /// pre-filter. A sub-interval that still cannot be certified when its margin is below
     /// `tolerance` (m) makes the answer `false`: motions that pass closer than about

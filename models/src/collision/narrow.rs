@@ -287,11 +287,11 @@ fn rounded_segment(p: &Point3<f64>, q: &Point3<f64>, r: f64, other: &View) -> Se
     }
 }
 
-/// A capsule against a cylinder whose axis-parallel side is round, so GJK would stop at a
-/// tolerance (1.6e-6 m too far, seen): the signed distance from a point to the (convex)
-/// cylinder is convex along the capsule's segment, so a golden-section search over the segment
-/// with the exact point distance finds the closest point. `None` when the segment enters the
-/// cylinder (the capsule's depth is then not a point's).
+/// A capsule against a cylinder. The cylinder's side is curved, so GJK, even from the capsule's
+/// core segment, stops at a tolerance (1.6e-6 m too far, seen). The signed distance from a point
+/// to the (convex) cylinder is convex along the segment, so a golden-section search over the
+/// segment with the exact point distance finds the closest point. `None` when the segment
+/// enters the cylinder (the capsule's depth is then not a point's).
 fn segment_cylinder(
     p: &Point3<f64>,
     q: &Point3<f64>,
