@@ -50,6 +50,9 @@ struct Body {
     /// `R * pre_r` is a reordering of `R`'s columns with signs, no products (the UR5's base,
     /// elbow and last two wrist joints, whose URDF rotations are exact).
     pre_perm: Option<([usize; 3], [f64; 3])>,
+    /// `pre_perm` again when the body is revolute with no `post`, the UR5's every joint: `pose`
+    /// then takes its shortest form.
+    turn_perm: Option<([usize; 3], [f64; 3])>,
     pre_t: Vector3<f64>,
     /// The joint axis in this body's (turned) frame: `e_z` for a revolute joint; for a prismatic
     /// joint, in the frame after `pre`.
@@ -58,6 +61,16 @@ struct Body {
     offset: f64,
     post: Option<(Matrix3<f64>, Vector3<f64>)>,
     value: Value,
+}
+
+/// A body's joint value as `(q[dof] * scale + add) + offset`: a degree of freedom (scale 1, add
+/// 0), a mimic joint, or none (scale 0, `dof` 0).
+#[derive(Debug, Clone, Copy)]
+struct Angle {
+    dof: usize,
+    scale: f64,
+    add: f64,
+    offset: f64,
 }
 
 #[derive(Debug, Clone)]
@@ -122,6 +135,8 @@ pub(crate) struct SphereGeom {
     base_r: Matrix3<f64>,
     base_t: Vector3<f64>,
     bodies: Vec<Body>,
+    /// How each moving body's joint value follows from `q` (bodies 1.., in order).
+    angles: Vec<Angle>,
     links: Vec<Link>,
     /// Sphere centres in their body frames and radii, grouped by link.
     centre: Vec<Vector3<f64>>,
@@ -235,16 +250,27 @@ fn dist2(solid: &Solid, p: &Vector3<f64>) -> Option<f64> {
 /// 2 ulp of libm for |x| < 2^20 (tested); libm beyond, and for NaN.
 #[inline(always)]
 fn sin_cos(x: f64) -> (f64, f64) {
+    if x.is_nan() || x.abs() >= SIN_COS_RANGE {
+        return x.sin_cos();
+    }
+    sin_cos_kernel(x)
+}
+
+/// Where [`sin_cos_kernel`] holds: `|x|` below 2^20.
+const SIN_COS_RANGE: f64 = 1_048_576.0;
+
+/// [`sin_cos`] for `|x|` below [`SIN_COS_RANGE`] (not NaN), without a branch, so that a loop
+/// over several angles runs in vector registers.
+#[inline(always)]
+fn sin_cos_kernel(x: f64) -> (f64, f64) {
     // π/2 in three parts: the first two have trailing zero bits, so that k times each is exact.
     const PIO2_1: f64 = 1.570_796_326_734_125_6; // 0x3FF921FB54400000
     const PIO2_2: f64 = 6.077_100_506_303_966e-11; // 0x3DD0B4611A600000
     const PIO2_2T: f64 = 2.022_266_248_795_950_6e-21; // π/2 - PIO2_1 - PIO2_2
     // Adding and subtracting 1.5 * 2^52 rounds to the nearest integer (round to nearest even).
     const ROUND: f64 = 6_755_399_441_055_744.0;
-    if x.is_nan() || x.abs() >= 1_048_576.0 {
-        return x.sin_cos();
-    }
-    let k = (x * std::f64::consts::FRAC_2_PI + ROUND) - ROUND;
+    let shifted = x * std::f64::consts::FRAC_2_PI + ROUND;
+    let k = shifted - ROUND;
     let r = ((x - k * PIO2_1) - k * PIO2_2) - k * PIO2_2T;
     let r2 = r * r;
     // The kernels' coefficients of fdlibm (k_sin.c, k_cos.c; Sun Microsystems, 1993): minimax
@@ -275,8 +301,10 @@ fn sin_cos(x: f64) -> (f64, f64) {
     let w = 1.0 - hz;
     let cos = w + (((1.0 - w) - hz) + r4 * pc);
     // The quadrant, without branches (random joint angles would mispredict them): swap sin
-    // and cos for odd `k`, flip sin's sign for k mod 4 in {2, 3} and cos's for {1, 2}.
-    let q = k as i64 as u64;
+    // and cos for odd `k`, flip sin's sign for k mod 4 in {2, 3} and cos's for {1, 2}. The
+    // low bits of `shifted`'s mantissa are those of `k + 2^51`, so `k mod 4` (no conversion
+    // to an integer, which vector registers lack).
+    let q = shifted.to_bits();
     let swap = 0u64.wrapping_sub(q & 1);
     let (sb, cb) = (sin.to_bits(), cos.to_bits());
     let a = (sb & !swap) | (cb & swap);
@@ -326,6 +354,10 @@ fn mul3tv(a: &Matrix3<f64>, v: &Vector3<f64>) -> Vector3<f64> {
 pub(crate) struct SphereScratch {
     rot: Vec<Matrix3<f64>>,
     pos: Vec<Vector3<f64>>,
+    /// Per body: the joint value (offset included) and its sine and cosine.
+    angle: Vec<f64>,
+    sin: Vec<f64>,
+    cos: Vec<f64>,
     link_c: Vec<Vector3<f64>>,
     centre: Vec<Vector3<f64>>,
     posed: Vec<u32>,
@@ -343,6 +375,9 @@ impl SphereScratch {
         Self {
             rot: Vec::new(),
             pos: Vec::new(),
+            angle: Vec::new(),
+            sin: Vec::new(),
+            cos: Vec::new(),
             link_c: Vec::new(),
             centre: Vec::new(),
             posed: Vec::new(),
@@ -563,6 +598,7 @@ impl SphereGeom {
                 parent: b.parent,
                 pre_r: mat(&b.pre.rotation),
                 pre_perm: None,
+                turn_perm: None,
                 pre_t: b.pre.translation.vector,
                 axis: b.axis.into_inner(),
                 prismatic: b.prismatic,
@@ -588,8 +624,21 @@ impl SphereGeom {
                 b.offset += g;
             }
             b.pre_perm = signed_permutation(&b.pre_r);
+            b.turn_perm = b.pre_perm.filter(|_| !b.prismatic && b.post.is_none());
         }
         arms.use_turned_axes(&bodies);
+        let angles = bodies
+            .iter()
+            .skip(1)
+            .map(|b| {
+                let (dof, scale, add) = match b.value {
+                    Value::Dof(d) => (d, 1.0, 0.0),
+                    Value::Mimic(d, m, o) => (d, m, o),
+                    Value::Zero => (0, 0.0, 0.0),
+                };
+                Angle { dof, scale, add, offset: b.offset }
+            })
+            .collect();
         let Grouping { groups, group_links, mut group_pairs, runs, run_pairs } = group_by_body(&links, &g.self_pairs);
         // Pairs of links on one body never move relative to each other: answered once here.
         let mut fixed = Check::Free;
@@ -622,6 +671,7 @@ impl SphereGeom {
             base_r: mat(&g.base.rotation),
             base_t: g.base.translation.vector,
             bodies,
+            angles,
             links,
             centre,
             radius,
@@ -642,6 +692,9 @@ impl SphereGeom {
         if s.rot.len() != self.bodies.len() {
             s.rot.resize(self.bodies.len(), Matrix3::identity());
             s.pos.resize(self.bodies.len(), Vector3::zeros());
+            s.angle.resize(self.angles.len(), 0.0);
+            s.sin.resize(self.angles.len(), 0.0);
+            s.cos.resize(self.angles.len(), 1.0);
         }
         if s.link_c.len() != self.links.len() {
             s.link_c.resize(self.links.len(), Vector3::zeros());
@@ -672,14 +725,46 @@ impl SphereGeom {
         s.rot[0] = self.base_r;
         s.pos[0] = self.base_t;
         let n = self.bodies.len();
+        // Every joint value first, then their sines and cosines in one branch-free loop (in
+        // vector registers), then the frames.
+        let m = self.angles.len();
+        let (angle, sin, cos) = (&mut s.angle[..m], &mut s.sin[..m], &mut s.cos[..m]);
+        let mut most = 0.0f64;
+        for (a, v) in self.angles.iter().zip(angle.iter_mut()) {
+            // (As cheap as an index's bounds check; 0 for a robot with no degree of freedom.)
+            let x = q.get(a.dof).copied().unwrap_or(0.0);
+            *v = (x * a.scale + a.add) + a.offset;
+            most = most.max(v.abs());
+        }
+        // False for NaN too (`max` skips a NaN, so test the values again then).
+        let in_range = most < SIN_COS_RANGE && !angle.iter().any(|v| v.is_nan());
+        if in_range {
+            for ((v, sn), cs) in angle.iter().zip(sin.iter_mut()).zip(cos.iter_mut()) {
+                (*sn, *cs) = sin_cos_kernel(*v);
+            }
+        } else {
+            for ((v, sn), cs) in angle.iter().zip(sin.iter_mut()).zip(cos.iter_mut()) {
+                (*sn, *cs) = sin_cos(*v);
+            }
+        }
         let (rot, pos) = (&mut s.rot[..n], &mut s.pos[..n]);
         for (i, b) in self.bodies.iter().enumerate().skip(1) {
-            let v = match b.value {
-                Value::Dof(d) => q[d],
-                Value::Mimic(d, m, o) => q[d] * m + o,
-                Value::Zero => 0.0,
-            } + b.offset;
-            let (pr, pp) = (rot[b.parent], pos[b.parent]);
+            let (v, sn, cs) = (angle[i - 1], sin[i - 1], cos[i - 1]);
+            let (pr, pp) = (&rot[b.parent], pos[b.parent]);
+            if let Some((cols, sign)) = &b.turn_perm {
+                // pr * P * Rz(v), P a signed permutation: the columns are the parent's columns
+                // `cols` with signs, the first two mixed by the joint's cosine and sine.
+                let col = |k: usize| Vector3::new(pr[(0, k)], pr[(1, k)], pr[(2, k)]);
+                let (a, bb, c) = (col(cols[0]), col(cols[1]), col(cols[2]));
+                let (k0, k1, k2, k3) = (sign[0] * cs, sign[1] * sn, sign[1] * cs, sign[0] * sn);
+                let x = a * k0 + bb * k1;
+                let y = bb * k2 - a * k3;
+                let z = c * sign[2];
+                pos[i] = mul3v(pr, &b.pre_t) + pp;
+                rot[i] = Matrix3::from_columns(&[x, y, z]);
+                continue;
+            }
+            let pr = *pr;
             let m = match &b.pre_perm {
                 // Exactly `mul3`: the other two products are zeros.
                 Some((perm, sign)) => Matrix3::from_columns(&[
@@ -694,7 +779,6 @@ impl SphereGeom {
                 (m, pr * b.pre_t + m * a + pp)
             } else {
                 // m * Rz(v): only the first two columns change.
-                let (sn, cs) = sin_cos(v);
                 let mut r = m;
                 for row in 0..3 {
                     let (c0, c1) = (m[(row, 0)], m[(row, 1)]);
