@@ -102,8 +102,12 @@ struct Group {
 struct GroupPair {
     outer: usize,
     inner: usize,
-    /// Sum of the two group radii.
+    /// The two groups' bodies.
+    body_o: usize,
+    body_i: usize,
+    /// Sum of the two group radii, and the inner group's radius.
     rr: f64,
+    r_inner: f64,
     /// Range into [`SphereGeom::runs`].
     runs: std::ops::Range<usize>,
     /// Range into [`SphereGeom::run_pairs`] (all pairs of the group pair).
@@ -121,12 +125,19 @@ struct RunPair {
     end: u32,
 }
 
-/// The self pairs of one group pair that share their outer link.
+/// The self pairs of one group pair that share their outer link, with that link's bounding
+/// sphere (body frame) and spheres.
 #[derive(Debug, Clone)]
 struct Run {
     outer: usize,
+    c: Vector3<f64>,
+    r: f64,
+    /// The outer link's first sphere.
+    first: usize,
     /// Range into [`SphereGeom::run_pairs`].
     pairs: std::ops::Range<usize>,
+    /// One past the outer link's last sphere.
+    end: usize,
 }
 
 /// A sphere robot prepared for the fast path (built from [`RobotGeom`] when every shape is a sphere).
@@ -557,13 +568,25 @@ fn group_by_body(links: &[Link], self_pairs: &[(u32, u32)]) -> Grouping {
                 let l = &links[b as usize];
                 RunPair { c: l.c, r: l.r, pair: p, link: b, first: l.first as u32, end: l.end as u32 }
             }));
-            grouping.runs.push(Run { outer: run[0].0 as usize, pairs: first..grouping.run_pairs.len() });
+            let outer = run[0].0 as usize;
+            let la = &links[outer];
+            grouping.runs.push(Run {
+                outer,
+                c: la.c,
+                r: la.r,
+                first: la.first,
+                pairs: first..grouping.run_pairs.len(),
+                end: la.end,
+            });
         }
         let rr = grouping.groups[outer].r + grouping.groups[inner].r;
         grouping.group_pairs.push(GroupPair {
             outer,
             inner,
+            body_o: grouping.groups[outer].body,
+            body_i: grouping.groups[inner].body,
             rr,
+            r_inner: grouping.groups[inner].r,
             runs: runs_first..grouping.runs.len(),
             pairs: pairs_first..grouping.run_pairs.len(),
         });
@@ -1007,44 +1030,46 @@ impl SphereGeom {
         if !GROW {
             *inf = None;
         }
+        // (Group pairs within one group were answered at construction: `outer != inner`.)
         for gp in &self.group_pairs {
-            let eg = inf.filter(|_| GROW).map_or(0.0, |i| {
-                self.run_pairs[gp.pairs.clone()].iter().map(|rp| i.pair[rp.pair as usize]).fold(0.0, f64::max)
-            });
+            let eg = if GROW {
+                inf.map_or(0.0, |i| {
+                    self.run_pairs[gp.pairs.clone()].iter().map(|rp| i.pair[rp.pair as usize]).fold(0.0, f64::max)
+                })
+            } else {
+                0.0
+            };
             let c_inner = s.group_c[gp.inner];
-            let rr = gp.rr + eg;
-            if gp.outer != gp.inner && (s.group_c[gp.outer] - c_inner).norm_squared() > rr * rr {
+            let rr = if GROW { gp.rr + eg } else { gp.rr };
+            if (s.group_c[gp.outer] - c_inner).norm_squared() > rr * rr {
                 continue;
             }
             // Any sphere that can touch (grown) a sphere of an inner link reaches this far from
             // the inner group's centre: the group sphere holds every inner sphere.
-            let r_inner = self.groups[gp.inner].r + eg;
-            let (body_o, body_i) = (self.groups[gp.outer].body, self.groups[gp.inner].body);
-            let (rot_o, pos_o) = (s.rot[body_o], s.pos[body_o]);
-            let (rot_i, pos_i) = (s.rot[body_i], s.pos[body_i]);
+            let r_inner = if GROW { gp.r_inner + eg } else { gp.r_inner };
+            let (rot_o, pos_o) = (s.rot[gp.body_o], s.pos[gp.body_o]);
             let g = mul3tv(&rot_o, &(c_inner - pos_o));
             for run in &self.runs[gp.runs.clone()] {
-                let a = run.outer;
-                let la = &self.links[a];
-                let reach = la.r + r_inner;
-                if (la.c - g).norm_squared() > reach * reach {
+                let reach = run.r + r_inner;
+                if (run.c - g).norm_squared() > reach * reach {
                     continue;
                 }
-                for (n, bi) in self.balls[la.first..la.end].iter().enumerate() {
+                for (n, bi) in self.balls[run.first..run.end].iter().enumerate() {
                     let (dx, dy, dz) = (bi[0] - g.x, bi[1] - g.y, bi[2] - g.z);
                     let reach = bi[3] + r_inner;
                     if dx * dx + dy * dy + dz * dz > reach * reach {
                         continue;
                     }
                     // Sphere `i` in the inner body's frame.
-                    let (i, ri) = (la.first + n, bi[3]);
+                    let (i, ri) = (run.first + n, bi[3]);
                     let ci = Vector3::new(bi[0], bi[1], bi[2]);
+                    let (rot_i, pos_i) = (s.rot[gp.body_i], s.pos[gp.body_i]);
                     let u = mul3tv(&rot_i, &(mul3v(&rot_o, &ci) + pos_o - pos_i));
                     for rp in &self.run_pairs[run.pairs.clone()] {
                         // Link b's bounding sphere holds all its spheres, and `ep` bounds the
                         // growth of any two spheres of the pair.
-                        let ep = inf.filter(|_| GROW).map_or(0.0, |i| i.pair[rp.pair as usize]);
-                        let reach = ri + rp.r + ep;
+                        let ep = if GROW { inf.map_or(0.0, |i| i.pair[rp.pair as usize]) } else { 0.0 };
+                        let reach = if GROW { ri + rp.r + ep } else { ri + rp.r };
                         if (rp.c - u).norm_squared() > reach * reach {
                             continue;
                         }
@@ -1056,11 +1081,11 @@ impl SphereGeom {
                             if d2 <= r * r {
                                 return true;
                             }
-                            if let Some(inf_now) = inf.filter(|_| GROW) {
+                            if GROW && let Some(inf_now) = *inf {
                                 let grown = r + ep;
                                 if d2 <= grown * grown {
                                     let p = rp.pair as usize;
-                                    self.pose_link(a, s);
+                                    self.pose_link(run.outer, s);
                                     self.pose_link(rp.link as usize, s);
                                     let stop = self.pair_common[p] as usize;
                                     let re = r + self.pair_margin(i, first + m, stop, inf_now.step, s);
