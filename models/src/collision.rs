@@ -645,8 +645,14 @@ pub struct CollisionModel {
 
 impl CollisionModel {
     pub fn new(robot: &Robot, env: Environment) -> Self {
+        Self::build(robot, env, true)
+    }
+
+    /// [`Self::new`]; `prove_cells`: whether the sphere path proves its self-collision cells
+    /// (see `spheres::table`), which pays only for a model that answers many queries.
+    fn build(robot: &Robot, env: Environment, prove_cells: bool) -> Self {
         let geom = Arc::new(RobotGeom::new(robot));
-        let fast = SphereGeom::new(&geom).map(Arc::new);
+        let fast = SphereGeom::new(&geom, prove_cells).map(Arc::new);
         let obstacles: Vec<ObstacleGeom> = env.obstacles().iter().map(ObstacleGeom::new).collect();
         let solids = obstacles.iter().map(|o| Solid::new(&o.world)).collect();
         Self { robot: Arc::new(robot.clone()), geom, fast, env, obstacles, solids }
@@ -1272,7 +1278,7 @@ pub fn disable_always_colliding(robot: &mut Robot, samples: usize, seed: u64) ->
     if samples == 0 {
         return Vec::new();
     }
-    let model = CollisionModel::new(robot, Environment::new());
+    let model = CollisionModel::build(robot, Environment::new(), false);
     let g = &*model.geom;
     let mut counts = vec![0usize; g.self_pairs.len()];
     let mut rng = Rng::new(seed);
@@ -1316,7 +1322,7 @@ pub fn disable_always_colliding(robot: &mut Robot, samples: usize, seed: u64) ->
 /// certificate when the pair keeps a few millimetres apart (the spherized UR5's `base_link`
 /// and `upper_arm_link` stay 2.5 mm apart whatever the arm does): proving it once saves them.
 pub fn disable_never_colliding(robot: &mut Robot, max_relative_dofs: usize, max_checks: usize) -> Vec<(usize, usize)> {
-    let model = CollisionModel::new(robot, Environment::new());
+    let model = CollisionModel::build(robot, Environment::new(), false);
     let g = &*model.geom;
     let dof = g.dof;
     let mut s = model.scratch();

@@ -27,6 +27,7 @@ use super::narrow::{self, View};
 use super::{Inflation, ObstacleGeom, RobotGeom, Value, World, sphere_hits_aabb};
 
 mod arms;
+mod table;
 
 /// The answer of one (possibly inflated) query.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -171,6 +172,9 @@ pub(crate) struct SphereGeom {
     /// Per-sphere lever arms of the motion certificate, and how the pose at a sub-interval's
     /// midpoint tightens them: see [`arms`].
     arms: arms::Arms,
+    /// Per group pair, the cells of its relative joints proven free, if it has a table: see
+    /// [`table`].
+    tables: Vec<Option<std::sync::Arc<table::CellTable>>>,
 }
 
 /// An obstacle in the closed form the sphere test needs.
@@ -595,8 +599,9 @@ fn group_by_body(links: &[Link], self_pairs: &[(u32, u32)]) -> Grouping {
 }
 
 impl SphereGeom {
-    /// The fast form of `g`, or `None` when some shape is not a sphere.
-    pub(crate) fn new(g: &RobotGeom) -> Option<SphereGeom> {
+    /// The fast form of `g`, or `None` when some shape is not a sphere; with its self-collision
+    /// cell tables when `prove_cells` (see [`table`]).
+    pub(crate) fn new(g: &RobotGeom, prove_cells: bool) -> Option<SphereGeom> {
         let mut centre = Vec::new();
         let mut radius = Vec::new();
         let mut links = Vec::new();
@@ -690,7 +695,7 @@ impl SphereGeom {
             false
         });
         let balls = centre.iter().zip(&radius).map(|(c, &r)| [c.x, c.y, c.z, r]).collect();
-        Some(SphereGeom {
+        let mut fast = SphereGeom {
             base_r: mat(&g.base.rotation),
             base_t: g.base.translation.vector,
             bodies,
@@ -708,7 +713,12 @@ impl SphereGeom {
             pair_common,
             arms,
             fixed,
-        })
+            tables: Vec::new(),
+        };
+        if prove_cells {
+            fast.build_tables(&g.pair_lever, g.dof);
+        }
+        Some(fast)
     }
 
     fn begin(&self, s: &mut SphereScratch) {
@@ -1007,7 +1017,7 @@ impl SphereGeom {
                 }
             }
         }
-        if self.self_pass::<GROW>(&mut inf, &mut near, s) {
+        if self.self_pass::<GROW>(q, &mut inf, &mut near, s) {
             return Check::Hit;
         }
         if near { Check::Near } else { Check::Free }
@@ -1023,6 +1033,7 @@ impl SphereGeom {
     #[inline(never)]
     fn self_pass<const GROW: bool>(
         &self,
+        q: &[f64],
         inf: &mut Option<Inflation<'_>>,
         near: &mut bool,
         s: &mut SphereScratch,
@@ -1031,7 +1042,7 @@ impl SphereGeom {
             *inf = None;
         }
         // (Group pairs within one group were answered at construction: `outer != inner`.)
-        for gp in &self.group_pairs {
+        for (k, gp) in self.group_pairs.iter().enumerate() {
             let eg = if GROW {
                 inf.map_or(0.0, |i| {
                     self.run_pairs[gp.pairs.clone()].iter().map(|rp| i.pair[rp.pair as usize]).fold(0.0, f64::max)
@@ -1042,6 +1053,13 @@ impl SphereGeom {
             let c_inner = s.group_c[gp.inner];
             let rr = if GROW { gp.rr + eg } else { gp.rr };
             if (s.group_c[gp.outer] - c_inner).norm_squared() > rr * rr {
+                continue;
+            }
+            // The group pair's relative joints in a cell proven free (exact queries).
+            if !GROW
+                && let Some(Some(table)) = self.tables.get(k)
+                && table.proves(q)
+            {
                 continue;
             }
             // Any sphere that can touch (grown) a sphere of an inner link reaches this far from

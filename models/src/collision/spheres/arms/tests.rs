@@ -88,7 +88,7 @@ fn sphere_geom(robot: &Robot) -> RobotGeom {
 /// A collision model of `robot`'s spherized geometry among `env`.
 fn sphere_model(robot: &Robot, env: Environment) -> CollisionModel {
     let g = sphere_geom(robot);
-    let fast = SphereGeom::new(&g).map(Arc::new);
+    let fast = SphereGeom::new(&g, false).map(Arc::new);
     assert!(fast.is_some());
     let mut m = CollisionModel::new(robot, Environment::new());
     m.geom = Arc::new(g);
@@ -350,7 +350,7 @@ proptest! {
         let robots = robots();
         let robot = &robots[which];
         let g = sphere_geom(robot);
-        let fast = SphereGeom::new(&g).unwrap();
+        let fast = SphereGeom::new(&g, false).unwrap();
         let (qa, qb) = segment(robot, seed, scale);
         let mut spans = vec![(0.0, 1.0)];
         for level in 1..4 {
@@ -420,7 +420,7 @@ fn certified_segments_are_free_when_sampled_finely() {
 fn tightness() {
     let robot = ur5();
     let g = sphere_geom(&robot);
-    let fast = SphereGeom::new(&g).unwrap();
+    let fast = SphereGeom::new(&g, false).unwrap();
     for scale in [0.02, 0.1, 0.3] {
         for level in [0, 2, 4, 6] {
             let (mut tight, mut loose) = (Vec::new(), Vec::new());
@@ -455,7 +455,7 @@ fn tightness() {
 #[test]
 fn the_snake_has_pairs_deeper_than_deep_and_shallower() {
     let robot = snake();
-    let fast = SphereGeom::new(&sphere_geom(&robot)).unwrap();
+    let fast = SphereGeom::new(&sphere_geom(&robot), false).unwrap();
     let step = vec![0.1; robot.dof()];
     let depths: Vec<usize> = (0..fast.self_pairs.len())
         .flat_map(|p| {

@@ -1,0 +1,329 @@
+//! Certified-free cells of a group pair's relative joints.
+//!
+//! The distance between two bodies' spheres depends only on the joints between the bodies
+//! (those with a nonzero pair lever arm: the joints above their common body move both alike).
+//! When there are at most three of them and all are revolute, the pair's answer is a
+//! 2π-periodic function of those joint values alone, and a grid over them can hold, per cell,
+//! a proof that no sphere pair of the group pair touches anywhere in the cell: the pair
+//! certificate of the motion check (each sphere pair's distance at the cell's centre exceeds
+//! the sum of the radii by more than the distance can shrink over the cell). A query whose
+//! relative joints fall in a proven cell skips the group pair; any other query tests it as
+//! before, so answers do not change. Cells are proven coarse to fine: a cell that cannot be
+//! proven is split, down to the finest level; tables that prove too little are dropped.
+
+use std::sync::{Arc, Mutex};
+
+use super::{SphereGeom, SphereScratch};
+use crate::collision::Value;
+
+/// At most this many relative joints per table.
+const MAX_JOINTS: usize = 3;
+/// Cells per joint at the coarsest level (as a power of two).
+const START_LEVEL: u32 = 2;
+/// A table is kept only if at least this share of its volume is proven free.
+const MIN_PROVEN: f64 = 0.2;
+/// How many robots' tables [`PROVEN`] keeps.
+const CACHED_ROBOTS: usize = 8;
+
+/// The tables of the last [`CACHED_ROBOTS`] prepared models, by their `Debug` form.
+type Tables = Vec<Option<Arc<CellTable>>>;
+static PROVEN: Mutex<Vec<(String, Tables)>> = Mutex::new(Vec::new());
+
+/// Joint values beyond this (rad) are not looked up (the cell index would lose precision).
+const MAX_ANGLE: f64 = 1000.0;
+
+/// Proven-free cells over the relative joints of one group pair.
+#[derive(Debug, Clone)]
+pub(super) struct CellTable {
+    joints: Vec<usize>,
+    /// Cells per joint, as a power of two.
+    level: u32,
+    /// Cells per radian (cells per joint / 2π).
+    scale: f64,
+    /// One bit per cell, the first joint most significant.
+    proven: Vec<u64>,
+}
+
+/// Cells per joint at the finest level (as a power of two), by the number of joints: 256, 64, 32.
+fn finest_level(joints: usize) -> u32 {
+    match joints {
+        1 => 8,
+        2 => 6,
+        _ => 5,
+    }
+}
+
+impl CellTable {
+    /// The cell holding `q`'s relative joints, or `None` when a value is NaN or too large.
+    #[inline(always)]
+    fn cell(&self, q: &[f64]) -> Option<usize> {
+        // Adding and subtracting 1.5 * 2^52 rounds to the nearest integer: of `t - 0.5`, the
+        // floor of `t` (at an exact integer the cell below, whose closed box holds it too).
+        const ROUND: f64 = 6_755_399_441_055_744.0;
+        let mask = (1i64 << self.level) - 1;
+        let mut index = 0usize;
+        for &j in &self.joints {
+            let v = *q.get(j)?;
+            let in_range = v.abs() < MAX_ANGLE; // false for NaN
+            if !in_range {
+                return None;
+            }
+            let k = ((v * self.scale - 0.5 + ROUND) - ROUND) as i64;
+            index = (index << self.level) | (k & mask) as usize;
+        }
+        Some(index)
+    }
+
+    /// Whether `q`'s cell is proven free.
+    #[inline(always)]
+    pub(super) fn proves(&self, q: &[f64]) -> bool {
+        match self.cell(q) {
+            Some(i) => self.proven.get(i >> 6).is_some_and(|w| (w >> (i & 63)) & 1 != 0),
+            None => false,
+        }
+    }
+
+    /// The share of cells proven free.
+    fn proven_share(&self) -> f64 {
+        let cells = 1usize << (self.level as usize * self.joints.len());
+        self.proven.iter().map(|w| w.count_ones() as usize).sum::<usize>() as f64 / cells as f64
+    }
+}
+
+impl SphereGeom {
+    /// A table for every group pair that can have one and for which it proves enough: at most
+    /// [`MAX_JOINTS`] relative joints (`pair_lever[p * dof + i] > 0` for one of its pairs), each a
+    /// revolute DOF that no mimic joint follows. Proving takes a while (0.15 s for the spherized
+    /// UR5), so the tables of the last few robots are kept for the process, keyed by the whole
+    /// prepared model (its `Debug` form: every number exactly), and shared.
+    pub(super) fn build_tables(&mut self, pair_lever: &[f64], dof: usize) {
+        let key = format!("{self:?}{pair_lever:?}");
+        if let Ok(cache) = PROVEN.lock()
+            && let Some((_, tables)) = cache.iter().find(|(k, _)| *k == key)
+        {
+            self.tables = tables.clone();
+            return;
+        }
+        let mut s = SphereScratch::new();
+        let home = vec![0.0; dof];
+        let revolute = |i: usize| {
+            self.bodies.iter().all(|b| match b.value {
+                Value::Dof(d) => d != i || !b.prismatic,
+                Value::Mimic(d, _, _) => d != i,
+                Value::Zero => true,
+            })
+        };
+        let mut tables = Vec::with_capacity(self.group_pairs.len());
+        for k in 0..self.group_pairs.len() {
+            let gp = &self.group_pairs[k];
+            let joints: Vec<usize> = (0..dof)
+                .filter(|&i| {
+                    self.run_pairs[gp.pairs.clone()].iter().any(|rp| pair_lever[rp.pair as usize * dof + i] > 0.0)
+                })
+                .collect();
+            let table = if joints.is_empty() || joints.len() > MAX_JOINTS || !joints.iter().all(|&i| revolute(i)) {
+                None
+            } else {
+                Some(self.prove_cells(k, joints, &home, &mut s))
+                    .filter(|t| t.proven_share() >= MIN_PROVEN)
+                    .map(Arc::new)
+            };
+            tables.push(table);
+        }
+        if let Ok(mut cache) = PROVEN.lock() {
+            if cache.len() >= CACHED_ROBOTS {
+                cache.remove(0);
+            }
+            cache.push((key, tables.clone()));
+        }
+        self.tables = tables;
+    }
+
+    /// Prove the cells of group pair `k` over `joints`, coarse to fine.
+    fn prove_cells(&self, k: usize, joints: Vec<usize>, home: &[f64], s: &mut SphereScratch) -> CellTable {
+        let n = joints.len();
+        let level = finest_level(n);
+        let cells = 1usize << (level as usize * n);
+        let mut table = CellTable {
+            level,
+            scale: (1u64 << level) as f64 / std::f64::consts::TAU,
+            proven: vec![0; cells.div_ceil(64)],
+            joints,
+        };
+        let mut q = home.to_vec();
+        let mut step = vec![0.0; home.len()];
+        // (level, cell coordinates at that level)
+        let mut todo: Vec<(u32, [usize; MAX_JOINTS])> = Vec::new();
+        let start = 1usize << START_LEVEL;
+        for c in 0..start.pow(n as u32) {
+            let mut at = [0; MAX_JOINTS];
+            for (d, a) in at.iter_mut().enumerate().take(n) {
+                *a = (c >> (START_LEVEL as usize * (n - 1 - d))) & (start - 1);
+            }
+            todo.push((START_LEVEL, at));
+        }
+        while let Some((l, at)) = todo.pop() {
+            let w = std::f64::consts::TAU / (1u64 << l) as f64;
+            for (d, &j) in table.joints.iter().enumerate() {
+                q[j] = (at[d] as f64 + 0.5) * w;
+                // A hair more than half a cell: a value on a cell's edge may be looked up in
+                // either neighbour, and its multiples of 2π differ by rounding.
+                step[j] = 0.5 * w * (1.0 + 1e-9) + 1e-12;
+            }
+            if self.group_pair_proven(k, &q, &step, s) {
+                // Every finest cell inside.
+                let shift = level - l;
+                let span = 1usize << shift;
+                for c in 0..span.pow(n as u32) {
+                    let mut index = 0usize;
+                    for (d, a) in at.iter().enumerate().take(n) {
+                        let sub = (c >> (shift as usize * (n - 1 - d))) & (span - 1);
+                        index = (index << level) | ((a << shift) + sub);
+                    }
+                    table.proven[index >> 6] |= 1 << (index & 63);
+                }
+            } else if l < level {
+                for c in 0..(1usize << n) {
+                    let mut child = [0; MAX_JOINTS];
+                    for d in 0..n {
+                        child[d] = 2 * at[d] + ((c >> (n - 1 - d)) & 1);
+                    }
+                    todo.push((l + 1, child));
+                }
+            }
+        }
+        table
+    }
+
+    /// Whether no sphere pair of group pair `k` can touch when the joints move by at most
+    /// `step` either side of `q`: link pairs whose bounding spheres stay apart by more than
+    /// both links' motion bounds are skipped, the rest sphere by sphere with the pair margin.
+    fn group_pair_proven(&self, k: usize, q: &[f64], step: &[f64], s: &mut SphereScratch) -> bool {
+        self.pose(q, s);
+        let gp = &self.group_pairs[k];
+        for run in &self.runs[gp.runs.clone()] {
+            let a = run.outer;
+            let ca = self.link_centre(a, s);
+            let ma = self.link_margin(a, step, s);
+            self.pose_link(a, s);
+            for rp in &self.run_pairs[run.pairs.clone()] {
+                let b = rp.link as usize;
+                let cb = self.link_centre(b, s);
+                let mb = self.link_margin(b, step, s);
+                let reach = run.r + rp.r + ma + mb;
+                if (ca - cb).norm_squared() > reach * reach {
+                    continue;
+                }
+                self.pose_link(b, s);
+                let stop = self.pair_common[rp.pair as usize] as usize;
+                let la = &self.links[a];
+                for i in la.first..la.end {
+                    for j in rp.first as usize..rp.end as usize {
+                        let d2: f64 = (s.centre[i] - s.centre[j]).norm_squared();
+                        let r = self.radius[i] + self.radius[j];
+                        let re = r + self.pair_margin(i, j, stop, step, s);
+                        // (A NaN distance proves nothing.)
+                        if d2.partial_cmp(&(re * re)) != Some(std::cmp::Ordering::Greater) {
+                            return false;
+                        }
+                    }
+                }
+            }
+        }
+        true
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+
+    use std::f64::consts::TAU;
+    use std::path::PathBuf;
+
+    use super::super::super::{Environment, RobotGeom, disable_always_colliding};
+    use super::super::{Check, SphereGeom, SphereScratch};
+    use super::CellTable;
+    use crate::rng::Rng;
+    use crate::urdf::load_urdf;
+
+    fn ur5_geom() -> (crate::robot::Robot, RobotGeom) {
+        let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures");
+        let mut robot = load_urdf(&dir.join("ur5_spherized.urdf"), Some(&dir.join("ur5.srdf"))).unwrap();
+        disable_always_colliding(&mut robot, 300, 3);
+        let g = RobotGeom::new(&robot);
+        (robot, g)
+    }
+
+    #[test]
+    fn a_value_falls_in_the_cell_that_holds_it_modulo_a_turn() {
+        let level = 6;
+        let t = CellTable { joints: vec![1, 0], level, scale: 64.0 / TAU, proven: vec![0; 64] };
+        let w = TAU / 64.0;
+        // First joint listed (q[1]) most significant; -0.001 rad is in the last cell of the turn.
+        assert_eq!(t.cell(&[TAU + 0.001, -0.001]), Some(63 << level));
+        assert_eq!(t.cell(&[2.5 * w, 1.5 * w - 2.0 * TAU]), Some((1 << level) | 2));
+        assert_eq!(t.cell(&[f64::NAN, 0.1]), None);
+        assert_eq!(t.cell(&[0.1, 2000.0]), None);
+        assert_eq!(t.cell(&[0.1]), None);
+        let mut rng = Rng::new(3);
+        for _ in 0..100_000 {
+            let v = rng.range(-20.0, 20.0);
+            let k = t.cell(&[0.0, v]).unwrap() >> level;
+            let base = v.rem_euclid(TAU);
+            // (base may round to exactly TAU: the last cell's upper edge.)
+            assert!(k as f64 * w <= base + 1e-12 && base <= (k + 1) as f64 * w + 1e-12, "{v}: cell {k}");
+        }
+    }
+
+    /// Every query a table proves free has its group pair's spheres apart, also on the cell edges
+    /// of every table (multiples of 2π/256), and the tables change no answer of the model.
+    #[test]
+    fn proven_cells_hold_no_contact_and_change_no_answer() {
+        let (robot, g) = ur5_geom();
+        let with = SphereGeom::new(&g, true).unwrap();
+        let without = SphereGeom::new(&g, false).unwrap();
+        let tables = with.tables.iter().filter(|t| t.is_some()).count();
+        assert!(tables >= 5, "only {tables} tables");
+        let (mut s, mut s2) = (SphereScratch::new(), SphereScratch::new());
+        let mut rng = Rng::new(11);
+        let (mut proven, mut hits) = (0usize, 0usize);
+        let env = Environment::new();
+        assert!(env.obstacles().is_empty());
+        for n in 0..20_000 {
+            let mut q = robot.random_configuration(&mut rng);
+            if n % 2 == 0 {
+                for v in &mut q {
+                    *v = (*v / (TAU / 256.0)).round() * (TAU / 256.0);
+                }
+            }
+            let answer = with.check(&q, &[], &[], None, &mut s);
+            assert_eq!(answer, without.check(&q, &[], &[], None, &mut s2), "q = {q:?}");
+            hits += (answer == Check::Hit) as usize;
+            with.pose(&q, &mut s);
+            for (k, gp) in with.group_pairs.iter().enumerate() {
+                let Some(Some(table)) = with.tables.get(k) else { continue };
+                if !table.proves(&q) {
+                    continue;
+                }
+                proven += 1;
+                for run in &with.runs[gp.runs.clone()] {
+                    with.pose_link(run.outer, &mut s);
+                    for rp in &with.run_pairs[run.pairs.clone()] {
+                        with.pose_link(rp.link as usize, &mut s);
+                        let la = &with.links[run.outer];
+                        for i in la.first..la.end {
+                            for j in rp.first as usize..rp.end as usize {
+                                let d = (s.centre[i] - s.centre[j]).norm();
+                                assert!(d > with.radius[i] + with.radius[j], "{q:?}: group pair {k}, spheres {i}, {j}");
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        // Both answers occur, and the tables prove most group pairs they are asked about.
+        assert!(hits > 1_000 && hits < 19_000, "{hits} of 20000 collide");
+        assert!(proven > 40_000, "only {proven} proofs used");
+    }
+}
