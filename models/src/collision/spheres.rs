@@ -1055,12 +1055,16 @@ impl SphereGeom {
             if (s.group_c[gp.outer] - c_inner).norm_squared() > rr * rr {
                 continue;
             }
-            // The group pair's relative joints in a cell proven free (exact queries).
-            if !GROW
-                && let Some(Some(table)) = self.tables.get(k)
-                && table.proves(q)
-            {
-                continue;
+            // The group pair's relative joints in a cell proven free (exact queries), or all
+            // their values over the sub-interval in cells proven free (inflated ones).
+            if let Some(Some(table)) = self.tables.get(k) {
+                let proven = match *inf {
+                    Some(i) if GROW => table.proves_box(q, i.step),
+                    _ => table.proves(q),
+                };
+                if proven {
+                    continue;
+                }
             }
             // Any sphere that can touch (grown) a sphere of an inner link reaches this far from
             // the inner group's centre: the group sphere holds every inner sphere.

@@ -83,6 +83,45 @@ impl CellTable {
         }
     }
 
+    /// Whether every cell of the box `q ± step` (over the relative joints) is proven free, the
+    /// box spanning at most two cells per joint (else `false`).
+    #[inline]
+    pub(super) fn proves_box(&self, q: &[f64], step: &[f64]) -> bool {
+        // As in `cell`: the floor of `t` (or, at an exact integer, the cell below: a box edge on
+        // a cell edge is in both closed cells).
+        const ROUND: f64 = 6_755_399_441_055_744.0;
+        let floor = |t: f64| ((t - 0.5 + ROUND) - ROUND) as i64;
+        let mask = (1i64 << self.level) - 1;
+        let mut lo = [0i64; MAX_JOINTS];
+        let mut two = [false; MAX_JOINTS];
+        for (d, &j) in self.joints.iter().enumerate() {
+            let (Some(&v), Some(&e)) = (q.get(j), step.get(j)) else { return false };
+            let in_range = v.abs() + e < MAX_ANGLE; // false for NaN
+            if !in_range {
+                return false;
+            }
+            let (a, b) = (floor((v - e) * self.scale), floor((v + e) * self.scale));
+            if b - a > 1 {
+                return false;
+            }
+            lo[d] = a;
+            two[d] = b > a;
+        }
+        let n = self.joints.len();
+        (0..1usize << n).all(|c| {
+            let mut index = 0usize;
+            for d in 0..n {
+                let up = (c >> d) & 1 == 1;
+                if up && !two[d] {
+                    // This corner repeats another.
+                    return true;
+                }
+                index = (index << self.level) | ((lo[d] + up as i64) & mask) as usize;
+            }
+            self.proven.get(index >> 6).is_some_and(|w| (w >> (index & 63)) & 1 != 0)
+        })
+    }
+
     /// The share of cells proven free.
     fn proven_share(&self) -> f64 {
         let cells = 1usize << (self.level as usize * self.joints.len());
@@ -276,6 +315,34 @@ mod tests {
         }
     }
 
+    #[test]
+    fn a_box_is_proven_when_every_cell_it_touches_is() {
+        let level = 6;
+        let w = TAU / 64.0;
+        let mut t = CellTable { joints: vec![0, 2], level, scale: 64.0 / TAU, proven: vec![0; 64] };
+        let mut prove = |a: usize, b: usize| {
+            let i = (a << level) | b;
+            t.proven[i >> 6] |= 1 << (i & 63);
+        };
+        // Cells (63, 0), (0, 0) and (0, 1) of the (q[0], q[2]) grid.
+        prove(63, 0);
+        prove(0, 0);
+        prove(0, 1);
+        let step = [0.1 * w, 9.0, 0.1 * w];
+        // Inside cell (0, 0); across q[2]'s edge into (0, 1); across q[0]'s wrap into (63, 0).
+        assert!(t.proves_box(&[0.5 * w, 7.0, 0.5 * w], &step));
+        assert!(t.proves_box(&[0.5 * w, 7.0, 0.95 * w], &step));
+        assert!(t.proves_box(&[0.05 * w - TAU, 7.0, 0.5 * w], &step));
+        // Across q[2]'s edge into (0, 63), not proven; into (63, 1), not proven.
+        assert!(!t.proves_box(&[0.5 * w, 7.0, 0.05 * w], &step));
+        assert!(!t.proves_box(&[0.05 * w, 7.0, 0.95 * w], &step));
+        // More than two cells per joint; NaN; the single cell of a zero step.
+        assert!(!t.proves_box(&[0.5 * w, 0.0, 1.0 * w], &[0.1 * w, 0.0, 1.2 * w]));
+        assert!(!t.proves_box(&[f64::NAN, 0.0, 0.5 * w], &step));
+        assert!(t.proves_box(&[0.5 * w, 0.0, 1.5 * w], &[0.0; 3]));
+        assert!(!t.proves_box(&[0.5 * w, 0.0, 2.5 * w], &[0.0; 3]));
+    }
+
     /// Every query a table proves free has its group pair's spheres apart, also on the cell edges
     /// of every table (multiples of 2π/256), and the tables change no answer of the model.
     #[test]
@@ -322,6 +389,37 @@ mod tests {
                 }
             }
         }
+        // Boxes: every configuration sampled in a proven box has the group pair's spheres apart.
+        let mut boxes = 0usize;
+        for _ in 0..3_000 {
+            let q = robot.random_configuration(&mut rng);
+            let step: Vec<f64> = q.iter().map(|_| rng.range(0.0, 0.1)).collect();
+            for (k, gp) in with.group_pairs.iter().enumerate() {
+                let Some(Some(table)) = with.tables.get(k) else { continue };
+                if !table.proves_box(&q, &step) {
+                    continue;
+                }
+                boxes += 1;
+                for _ in 0..20 {
+                    let p: Vec<f64> = q.iter().zip(&step).map(|(v, e)| v + rng.range(-e, *e)).collect();
+                    with.pose(&p, &mut s);
+                    for run in &with.runs[gp.runs.clone()] {
+                        with.pose_link(run.outer, &mut s);
+                        for rp in &with.run_pairs[run.pairs.clone()] {
+                            with.pose_link(rp.link as usize, &mut s);
+                            let la = &with.links[run.outer];
+                            for i in la.first..la.end {
+                                for j in rp.first as usize..rp.end as usize {
+                                    let d = (s.centre[i] - s.centre[j]).norm();
+                                    assert!(d > with.radius[i] + with.radius[j], "{p:?} in a proven box of {k}");
+                                }
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        assert!(boxes > 3_000, "only {boxes} boxes proven");
         // Both answers occur, and the tables prove most group pairs they are asked about.
         assert!(hits > 1_000 && hits < 19_000, "{hits} of 20000 collide");
         assert!(proven > 40_000, "only {proven} proofs used");
