@@ -22,6 +22,10 @@ const MAX_JOINTS: usize = 3;
 const START_LEVEL: u32 = 2;
 /// A table is kept only if at least this share of its volume is proven free.
 const MIN_PROVEN: f64 = 0.2;
+/// At most this many cell proofs per prepared model (the spherized UR5 takes 35,440, about
+/// 0.15 s): a robot with many group pairs stops proving there, with every table sound as far as
+/// it got.
+const MAX_PROOFS: usize = 100_000;
 /// How many robots' tables [`PROVEN`] keeps.
 const CACHED_ROBOTS: usize = 8;
 
@@ -143,6 +147,18 @@ impl SphereGeom {
             self.tables = tables.clone();
             return;
         }
+        let tables = self.prove_tables(pair_lever, dof, MAX_PROOFS);
+        if let Ok(mut cache) = PROVEN.lock() {
+            if cache.len() >= CACHED_ROBOTS {
+                cache.remove(0);
+            }
+            cache.push((key, tables.clone()));
+        }
+        self.tables = tables;
+    }
+
+    /// The tables of [`Self::build_tables`], with at most `budget` cell proofs in all.
+    fn prove_tables(&self, pair_lever: &[f64], dof: usize, budget: usize) -> Tables {
         let mut s = SphereScratch::new();
         let home = vec![0.0; dof];
         let revolute = |i: usize| {
@@ -153,6 +169,7 @@ impl SphereGeom {
             })
         };
         let mut tables = Vec::with_capacity(self.group_pairs.len());
+        let mut budget = budget;
         for k in 0..self.group_pairs.len() {
             let gp = &self.group_pairs[k];
             let joints: Vec<usize> = (0..dof)
@@ -163,23 +180,25 @@ impl SphereGeom {
             let table = if joints.is_empty() || joints.len() > MAX_JOINTS || !joints.iter().all(|&i| revolute(i)) {
                 None
             } else {
-                Some(self.prove_cells(k, joints, &home, &mut s))
+                Some(self.prove_cells(k, joints, &home, &mut budget, &mut s))
                     .filter(|t| t.proven_share() >= MIN_PROVEN)
                     .map(Arc::new)
             };
             tables.push(table);
         }
-        if let Ok(mut cache) = PROVEN.lock() {
-            if cache.len() >= CACHED_ROBOTS {
-                cache.remove(0);
-            }
-            cache.push((key, tables.clone()));
-        }
-        self.tables = tables;
+        tables
     }
 
-    /// Prove the cells of group pair `k` over `joints`, coarse to fine.
-    fn prove_cells(&self, k: usize, joints: Vec<usize>, home: &[f64], s: &mut SphereScratch) -> CellTable {
+    /// Prove the cells of group pair `k` over `joints`, coarse to fine, at most `budget` proofs
+    /// (counted down).
+    fn prove_cells(
+        &self,
+        k: usize,
+        joints: Vec<usize>,
+        home: &[f64],
+        budget: &mut usize,
+        s: &mut SphereScratch,
+    ) -> CellTable {
         let n = joints.len();
         let level = finest_level(n);
         let cells = 1usize << (level as usize * n);
@@ -202,6 +221,10 @@ impl SphereGeom {
             todo.push((START_LEVEL, at));
         }
         while let Some((l, at)) = todo.pop() {
+            if *budget == 0 {
+                break;
+            }
+            *budget -= 1;
             let w = std::f64::consts::TAU / (1u64 << l) as f64;
             for (d, &j) in table.joints.iter().enumerate() {
                 q[j] = (at[d] as f64 + 0.5) * w;
@@ -341,6 +364,26 @@ mod tests {
         assert!(!t.proves_box(&[f64::NAN, 0.0, 0.5 * w], &step));
         assert!(t.proves_box(&[0.5 * w, 0.0, 1.5 * w], &[0.0; 3]));
         assert!(!t.proves_box(&[0.5 * w, 0.0, 2.5 * w], &[0.0; 3]));
+    }
+
+    /// A budget cut short proves a subset of the cells the full build proves (the same proofs,
+    /// in the same order), and later group pairs get no table.
+    #[test]
+    fn a_small_budget_proves_a_subset() {
+        let (_, g) = ur5_geom();
+        let fast = SphereGeom::new(&g, false).unwrap();
+        let full = fast.prove_tables(&g.pair_lever, g.dof, usize::MAX);
+        let cut = fast.prove_tables(&g.pair_lever, g.dof, 3_000);
+        let count = |t: &super::Tables| -> usize {
+            t.iter().flatten().map(|t| t.proven.iter().map(|w| w.count_ones() as usize).sum::<usize>()).sum()
+        };
+        assert!(count(&cut) > 0 && count(&cut) < count(&full), "{} of {}", count(&cut), count(&full));
+        assert!(cut.iter().flatten().count() < full.iter().flatten().count());
+        for (a, b) in cut.iter().zip(&full) {
+            if let (Some(a), Some(b)) = (a, b) {
+                assert!(a.proven.iter().zip(&b.proven).all(|(x, y)| x & !y == 0));
+            }
+        }
     }
 
     /// Every query a table proves free has its group pair's spheres apart, also on the cell edges
