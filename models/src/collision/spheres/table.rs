@@ -366,6 +366,23 @@ mod tests {
         assert!(!t.proves_box(&[0.5 * w, 0.0, 2.5 * w], &[0.0; 3]));
     }
 
+    /// Asserts that no sphere pair of group pair `gp` touches in the pose of `s`.
+    fn assert_apart(fast: &SphereGeom, gp: &super::super::GroupPair, s: &mut SphereScratch, what: &str) {
+        for run in &fast.runs[gp.runs.clone()] {
+            fast.pose_link(run.outer, s);
+            for rp in &fast.run_pairs[run.pairs.clone()] {
+                fast.pose_link(rp.link as usize, s);
+                let la = &fast.links[run.outer];
+                for i in la.first..la.end {
+                    for j in rp.first as usize..rp.end as usize {
+                        let d = (s.centre[i] - s.centre[j]).norm();
+                        assert!(d > fast.radius[i] + fast.radius[j], "{what}: spheres {i}, {j}");
+                    }
+                }
+            }
+        }
+    }
+
     /// A budget cut short proves a subset of the cells the full build proves (the same proofs,
     /// in the same order), and later group pairs get no table.
     #[test]
@@ -417,19 +434,7 @@ mod tests {
                     continue;
                 }
                 proven += 1;
-                for run in &with.runs[gp.runs.clone()] {
-                    with.pose_link(run.outer, &mut s);
-                    for rp in &with.run_pairs[run.pairs.clone()] {
-                        with.pose_link(rp.link as usize, &mut s);
-                        let la = &with.links[run.outer];
-                        for i in la.first..la.end {
-                            for j in rp.first as usize..rp.end as usize {
-                                let d = (s.centre[i] - s.centre[j]).norm();
-                                assert!(d > with.radius[i] + with.radius[j], "{q:?}: group pair {k}, spheres {i}, {j}");
-                            }
-                        }
-                    }
-                }
+                assert_apart(&with, gp, &mut s, &format!("{q:?}: group pair {k}"));
             }
         }
         // Boxes: every configuration sampled in a proven box has the group pair's spheres apart.
@@ -446,19 +451,7 @@ mod tests {
                 for _ in 0..20 {
                     let p: Vec<f64> = q.iter().zip(&step).map(|(v, e)| v + rng.range(-e, *e)).collect();
                     with.pose(&p, &mut s);
-                    for run in &with.runs[gp.runs.clone()] {
-                        with.pose_link(run.outer, &mut s);
-                        for rp in &with.run_pairs[run.pairs.clone()] {
-                            with.pose_link(rp.link as usize, &mut s);
-                            let la = &with.links[run.outer];
-                            for i in la.first..la.end {
-                                for j in rp.first as usize..rp.end as usize {
-                                    let d = (s.centre[i] - s.centre[j]).norm();
-                                    assert!(d > with.radius[i] + with.radius[j], "{p:?} in a proven box of {k}");
-                                }
-                            }
-                        }
-                    }
+                    assert_apart(&with, gp, &mut s, &format!("{p:?} in a proven box of {k}"));
                 }
             }
         }
