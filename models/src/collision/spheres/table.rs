@@ -36,6 +36,10 @@ static PROVEN: Mutex<Vec<(String, Tables)>> = Mutex::new(Vec::new());
 /// Joint values beyond this (rad) are not looked up (the cell index would lose precision).
 const MAX_ANGLE: f64 = 1000.0;
 
+/// Adding and subtracting 1.5 * 2^52 rounds to the nearest integer; of `t - 0.5`, that is the
+/// floor of `t` (at an exact integer, the cell below, whose closed box holds the value too).
+const ROUND: f64 = 6_755_399_441_055_744.0;
+
 /// Proven-free cells over the relative joints of one group pair.
 #[derive(Debug, Clone)]
 pub(super) struct CellTable {
@@ -61,9 +65,6 @@ impl CellTable {
     /// The cell holding `q`'s relative joints, or `None` when a value is NaN or too large.
     #[inline(always)]
     fn cell(&self, q: &[f64]) -> Option<usize> {
-        // Adding and subtracting 1.5 * 2^52 rounds to the nearest integer: of `t - 0.5`, the
-        // floor of `t` (at an exact integer the cell below, whose closed box holds it too).
-        const ROUND: f64 = 6_755_399_441_055_744.0;
         let mask = (1i64 << self.level) - 1;
         let mut index = 0usize;
         for &j in &self.joints {
@@ -91,9 +92,7 @@ impl CellTable {
     /// box spanning at most two cells per joint (else `false`).
     #[inline]
     pub(super) fn proves_box(&self, q: &[f64], step: &[f64]) -> bool {
-        // As in `cell`: the floor of `t` (or, at an exact integer, the cell below: a box edge on
-        // a cell edge is in both closed cells).
-        const ROUND: f64 = 6_755_399_441_055_744.0;
+        // As in `cell` (a box edge on a cell edge is in both closed cells).
         let floor = |t: f64| ((t - 0.5 + ROUND) - ROUND) as i64;
         let mask = (1i64 << self.level) - 1;
         let mut lo = [0i64; MAX_JOINTS];
