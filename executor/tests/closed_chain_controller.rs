@@ -328,6 +328,23 @@ fn closed_grasp_stays_closed_while_carrying() {
     assert!(worst < 1e-4, "relative pose error reached {worst}");
 }
 
+/// A previous speed far above the velocity limit with a small acceleration step (3.82 rad/s
+/// against 0.01 rad/s, 1e-5 rad/s per step): `3.82 - 1e-5` rounds 4e-16 away, and the step must
+/// still not exceed the acceleration limit as computed.
+#[test]
+fn hardest_deceleration_never_exceeds_the_acceleration_limit_by_rounding() {
+    let (prev, amax, dt) = (3.820_704_946_486_966, 0.1, 1e-4);
+    let limits = [JointLimits::new(0.0, 0.01, 0.01, amax)];
+    let (mut lo, mut hi) = ([0.0], [0.0]);
+    for p in [prev, -prev, 1.0 + 1e-9, 123.456] {
+        step_bounds(&[0.0], &[p], &limits, dt, &mut lo, &mut hi);
+        assert!(lo[0] <= hi[0]);
+        for v in [lo[0], hi[0]] {
+            assert!((v - p).abs() <= amax * dt, "{p}: {v} changes by {}", (v - p).abs());
+        }
+    }
+}
+
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(500))]
 
