@@ -762,15 +762,13 @@ impl SphereGeom {
         // vector registers), then the frames.
         let m = self.angles.len();
         let (angle, sin, cos) = (&mut s.angle[..m], &mut s.sin[..m], &mut s.cos[..m]);
-        let mut most = 0.0f64;
+        let mut in_range = true;
         for (a, v) in self.angles.iter().zip(angle.iter_mut()) {
             // (As cheap as an index's bounds check; 0 for a robot with no degree of freedom.)
             let x = q.get(a.dof).copied().unwrap_or(0.0);
             *v = (x * a.scale + a.add) + a.offset;
-            most = most.max(v.abs());
+            in_range &= v.abs() < SIN_COS_RANGE; // false for NaN
         }
-        // False for NaN too (`max` skips a NaN, so test the values again then).
-        let in_range = most < SIN_COS_RANGE && !angle.iter().any(|v| v.is_nan());
         if in_range {
             for ((v, sn), cs) in angle.iter().zip(sin.iter_mut()).zip(cos.iter_mut()) {
                 (*sn, *cs) = sin_cos_kernel(*v);

@@ -79,13 +79,16 @@ impl CellTable {
         Some(index)
     }
 
+    /// Whether cell `index` is proven free.
+    #[inline(always)]
+    fn is_proven(&self, index: usize) -> bool {
+        self.proven.get(index >> 6).is_some_and(|w| (w >> (index & 63)) & 1 != 0)
+    }
+
     /// Whether `q`'s cell is proven free.
     #[inline(always)]
     pub(super) fn proves(&self, q: &[f64]) -> bool {
-        match self.cell(q) {
-            Some(i) => self.proven.get(i >> 6).is_some_and(|w| (w >> (i & 63)) & 1 != 0),
-            None => false,
-        }
+        self.cell(q).is_some_and(|i| self.is_proven(i))
     }
 
     /// Whether every cell of the box `q ± step` (over the relative joints) is proven free, the
@@ -121,7 +124,7 @@ impl CellTable {
                 }
                 index = (index << self.level) | ((lo[d] + up as i64) & mask) as usize;
             }
-            self.proven.get(index >> 6).is_some_and(|w| (w >> (index & 63)) & 1 != 0)
+            self.is_proven(index)
         })
     }
 
