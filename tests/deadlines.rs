@@ -36,10 +36,12 @@ fn small_deadline_bench_is_consistent() {
     assert!(table.contains("deadline"));
     let json = serde_json::to_string(&report).expect("json");
     assert!(json.contains("delivered_share"));
-    let svg = std::env::temp_dir().join(format!("deadlines-{}.svg", std::process::id()));
+    let dir = std::env::temp_dir().join(format!("embodied-deadlines-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("temporary folder");
+    let svg = dir.join("deadlines.svg");
     plot_svg(&report, &svg).expect("plot");
     assert!(std::fs::read_to_string(&svg).expect("svg").contains("<svg"));
-    let _ = std::fs::remove_file(&svg);
+    let _ = std::fs::remove_dir_all(&dir);
 }
 
 #[test]

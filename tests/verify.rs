@@ -2,7 +2,7 @@
 #![allow(clippy::unwrap_used)]
 
 mod common;
-use common::embodied;
+use common::{TempDir, embodied};
 
 use std::path::{Path, PathBuf};
 
@@ -16,10 +16,8 @@ use embodied_planner::carry::{CarriedObject, ClosedChainSpan};
 use embodied_planner::trajectory::Trajectory;
 use embodied_planner::verify::certified::{CheckSettings, Finding, check_closure, check_collisions, check_trajectory};
 
-fn temp_dir(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("embodied-verify-{}-{name}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
+fn temp_dir(name: &str) -> TempDir {
+    TempDir::new(name)
 }
 
 fn plan_of(name: &str) -> PlanFile {
