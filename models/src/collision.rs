@@ -521,6 +521,16 @@ fn self_collision_pairs(robot: &Robot, slots: &[LinkGeom]) -> Vec<(u32, u32)> {
 // ---------------------------------------------------------------------------------------------
 // Scratch.
 
+/// A sub-interval `t0..t1` of the motion certificate still to check and, on the sphere path,
+/// the range of `spheres.items` listing what was near over the sub-interval holding it (`None`:
+/// test everything).
+#[derive(Debug, Clone, Copy)]
+struct Span {
+    t0: f64,
+    t1: f64,
+    within: Option<(usize, usize)>,
+}
+
 /// Per-thread working memory of a query (link poses, world shapes, candidate lists). Reuse one
 /// per thread to keep queries allocation-free; it adapts itself to whichever model uses it.
 #[derive(Debug, Clone)]
@@ -535,7 +545,7 @@ pub struct CollisionScratch {
     candidates: Vec<u32>,
     q: Vec<f64>,
     intervals: Vec<(u32, u32)>,
-    spans: Vec<(f64, f64)>,
+    spans: Vec<Span>,
     steps: Vec<f64>,
     step: Vec<f64>,
     inflation: Vec<f64>,
@@ -1114,9 +1124,11 @@ impl CollisionModel {
     /// counts the sphere's distance from its axis there, plus how far the joints below can move
     /// it), and a self-collision pair counts how much the distance between two spheres can shrink rather
     /// than how far each moves (see `spheres::arms` in the source); the link bounds stay the
-    /// pre-filter. A sub-interval that still cannot be certified when its margin is below
-    /// `tolerance` (m) makes the answer `false`: motions that pass closer than about
-    /// `tolerance` to contact are rejected, never let through.
+    /// pre-filter. There, too, the halves of a sub-interval that could not be certified are
+    /// checked against only what was near over the whole (sphere-obstacle and sphere-sphere
+    /// pairs): everything else is already certified free over both. A sub-interval that still
+    /// cannot be certified when its margin is below `tolerance` (m) makes the answer `false`:
+    /// motions that pass closer than about `tolerance` to contact are rejected, never let through.
     ///
     /// Configurations of the wrong length, non-finite values, or a `tolerance` that is not
     /// positive and finite give `false`.
@@ -1161,6 +1173,20 @@ impl CollisionModel {
         qb: &[f64],
         tolerance: f64,
         check_ends: bool,
+        s: &mut CollisionScratch,
+    ) -> (bool, u32) {
+        self.certify_in(qa, qb, tolerance, check_ends, true, s)
+    }
+
+    /// [`Self::certify`]; `listed` false checks every sub-interval in full on the sphere path
+    /// too (for tests that compare the two).
+    pub(crate) fn certify_in(
+        &self,
+        qa: &[f64],
+        qb: &[f64],
+        tolerance: f64,
+        check_ends: bool,
+        listed: bool,
         s: &mut CollisionScratch,
     ) -> (bool, u32) {
         let g = &*self.geom;
@@ -1208,11 +1234,16 @@ impl CollisionModel {
         while pieces < 1 << CERTIFY_START_LEVELS && most * 0.5 / pieces as f64 > CERTIFY_START_MARGIN {
             pieces *= 2;
         }
-        spans.extend((0..pieces).map(|i| (i as f64 / pieces as f64, (i + 1) as f64 / pieces as f64)));
+        spans.extend((0..pieces).map(|i| Span {
+            t0: i as f64 / pieces as f64,
+            t1: (i + 1) as f64 / pieces as f64,
+            within: None,
+        }));
+        s.spheres.items.clear();
         let mut free = true;
         let mut head = 0;
         while head < spans.len() {
-            let (t0, t1) = spans[head];
+            let Span { t0, t1, within } = spans[head];
             head += 1;
             let half = 0.5 * (t1 - t0);
             let tm = t0 + half;
@@ -1227,7 +1258,17 @@ impl CollisionModel {
             g.cspace.interpolate_into(qa, qb, tm, &mut q);
             checks += 1;
             let inflation = Inflation { link: &margins[..slots], pair: &margins[slots..], step: &step };
-            match self.check(&q, Some(inflation), s) {
+            // On the sphere path, a half is checked against only what was near over the whole.
+            let first_item = s.spheres.items.len();
+            let answer = match &self.fast {
+                Some(fast) if listed => {
+                    let within = within.map(|(a, b)| a..b);
+                    fast.check_listed(&q, &self.obstacles, &self.solids, inflation, within, &mut s.spheres)
+                }
+                _ => self.check(&q, Some(inflation), s),
+            };
+            let near_items = Some((first_item, s.spheres.items.len())).filter(|_| listed && self.fast.is_some());
+            match answer {
                 Check::Free => {}
                 Check::Hit => {
                     free = false;
@@ -1238,8 +1279,8 @@ impl CollisionModel {
                     break;
                 }
                 Check::Near => {
-                    spans.push((t0, tm));
-                    spans.push((tm, t1));
+                    spans.push(Span { t0, t1: tm, within: near_items });
+                    spans.push(Span { t0: tm, t1, within: near_items });
                 }
             }
         }

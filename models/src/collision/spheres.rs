@@ -383,6 +383,22 @@ pub(crate) struct SphereScratch {
     /// Per check: the largest link margin of each group (inflated queries).
     group_e: Vec<f64>,
     stamp: u32,
+    /// The near items of the motion certificate's sub-intervals (see [`Item`]), in the order
+    /// the checks found them: each sub-interval's own is a range of this.
+    pub(crate) items: Vec<Item>,
+}
+
+/// One thing an inflated query found *near*: its grown shapes touch, its exact ones do not. A
+/// query that lists them ([`SphereGeom::check_listed`]) certifies everything else free over
+/// its whole sub-interval, so a check of a part of that sub-interval need test these alone.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Item {
+    /// Sphere `k` of link `l` against obstacle `o`.
+    Obstacle { k: u32, l: u32, o: u32 },
+    /// Spheres `i` (of link `li`) and `j` (of link `lj`) of self pair `p`.
+    Pair { i: u32, j: u32, p: u32, li: u32, lj: u32 },
+    /// The self pairs of links on one body (constant, never in contact, but within a hair).
+    Fixed,
 }
 
 impl SphereScratch {
@@ -400,6 +416,7 @@ impl SphereScratch {
             link_posed: Vec::new(),
             group_e: Vec::new(),
             stamp: 0,
+            items: Vec::new(),
         }
     }
 }
@@ -856,6 +873,15 @@ impl SphereGeom {
         }
     }
 
+    /// World centre of sphere `k` of link `l`, into `s.centre[k]` (the link is not marked posed).
+    #[inline(always)]
+    fn pose_sphere(&self, k: usize, l: usize, s: &mut SphereScratch) -> Vector3<f64> {
+        let b = self.links[l].body;
+        let c = mul3v(&s.rot[b], &self.centre[k]) + s.pos[b];
+        s.centre[k] = c;
+        c
+    }
+
     /// Self-collision pair `p` alone, each sphere grown by its motion relative to the pair's
     /// common body when the joints move by at most `step`.
     pub(crate) fn pair_check(&self, q: &[f64], p: usize, step: &[f64], s: &mut SphereScratch) -> Check {
@@ -893,14 +919,110 @@ impl SphereGeom {
         s: &mut SphereScratch,
     ) -> Check {
         match inflation {
-            Some(_) => self.check_impl::<true>(q, obstacles, solids, inflation, s),
-            None => self.check_impl::<false>(q, obstacles, solids, None, s),
+            Some(_) => self.check_impl::<true, false>(q, obstacles, solids, inflation, s),
+            None => self.check_impl::<false, false>(q, obstacles, solids, None, s),
         }
     }
 
-    /// [`Self::check`], compiled separately for exact queries (`GROW` = false).
+    /// An inflated query of the motion certificate that lists what it finds near (see
+    /// [`Item`]) at the end of `s.items`. `within`: the items of a sub-interval holding this
+    /// one, the only things that can be near or in contact here (a range of `s.items`); `None`
+    /// tests everything. The answer is [`Self::check`]'s, but for things certified free over a
+    /// larger sub-interval, which stay free even where the smaller one's bounds would not say so.
+    pub(crate) fn check_listed(
+        &self,
+        q: &[f64],
+        obstacles: &[ObstacleGeom],
+        solids: &[Solid],
+        inflation: Inflation<'_>,
+        within: Option<std::ops::Range<usize>>,
+        s: &mut SphereScratch,
+    ) -> Check {
+        match within {
+            None => self.check_impl::<true, true>(q, obstacles, solids, Some(inflation), s),
+            Some(range) => self.check_items(q, obstacles, solids, inflation, range, s),
+        }
+    }
+
+    /// [`Self::check_listed`] of the items `range` of `s.items` alone.
+    fn check_items(
+        &self,
+        q: &[f64],
+        obstacles: &[ObstacleGeom],
+        solids: &[Solid],
+        inf: Inflation<'_>,
+        range: std::ops::Range<usize>,
+        s: &mut SphereScratch,
+    ) -> Check {
+        self.pose(q, s);
+        let mut near = false;
+        for n in range {
+            let item = s.items[n];
+            match item {
+                Item::Fixed => near = true,
+                Item::Obstacle { k, l, o } => {
+                    let (k, l, o) = (k as usize, l as usize, o as usize);
+                    let p = self.pose_sphere(k, l, s);
+                    let r = self.radius[k];
+                    match dist2(&solids[o], &p) {
+                        Some(d2) => {
+                            if d2 <= r * r {
+                                return Check::Hit;
+                            }
+                            let rel = r + inf.link[l];
+                            if d2 > rel * rel {
+                                continue;
+                            }
+                            let re = if near { f64::INFINITY } else { r + self.margin(k, 0, inf.step, Some(s)) };
+                            if d2 > re * re {
+                                continue;
+                            }
+                        }
+                        None => {
+                            let sep =
+                                narrow::separation(&View::Sphere { c: Point3::from(p), r }, &obstacles[o].world.view());
+                            if sep.distance <= 0.0 {
+                                return Check::Hit;
+                            }
+                            if !near && sep.distance > self.margin(k, 0, inf.step, Some(s)) {
+                                continue;
+                            }
+                        }
+                    }
+                    near = true;
+                }
+                Item::Pair { i, j, p, li, lj } => {
+                    let (i, j, p) = (i as usize, j as usize, p as usize);
+                    let d2 = (self.pose_sphere(i, li as usize, s) - self.pose_sphere(j, lj as usize, s)).norm_squared();
+                    let r = self.radius[i] + self.radius[j];
+                    if d2 <= r * r {
+                        return Check::Hit;
+                    }
+                    let grown = r + inf.pair[p];
+                    if d2 > grown * grown {
+                        continue;
+                    }
+                    let re = if near {
+                        f64::INFINITY
+                    } else {
+                        r + self.pair_margin(i, j, self.pair_common[p] as usize, inf.step, s)
+                    };
+                    if d2 > re * re {
+                        continue;
+                    }
+                    near = true;
+                }
+            }
+            s.items.push(item);
+        }
+        if near { Check::Near } else { Check::Free }
+    }
+
+    /// [`Self::check`], compiled separately for exact queries (`GROW` = false), and for the
+    /// inflated ones that list every near item rather than stop growing at the first
+    /// (`COLLECT`, see [`Self::check_listed`]).
     #[inline]
-    fn check_impl<const GROW: bool>(
+    fn check_impl<const GROW: bool, const COLLECT: bool>(
         &self,
         q: &[f64],
         obstacles: &[ObstacleGeom],
@@ -917,7 +1039,11 @@ impl SphereGeom {
             Check::Hit => return Check::Hit,
             Check::Near if inf.is_some() => {
                 near = true;
-                inf = None;
+                if COLLECT {
+                    s.items.push(Item::Fixed);
+                } else {
+                    inf = None;
+                }
             }
             _ => {}
         }
@@ -943,7 +1069,7 @@ impl SphereGeom {
                 }
             }
         }
-        for (o, solid) in obstacles.iter().zip(solids) {
+        for (oi, (o, solid)) in obstacles.iter().zip(solids).enumerate() {
             if o.lo.x > hi[0] || o.hi.x < lo[0] || o.lo.y > hi[1] || o.hi.y < lo[1] || o.lo.z > hi[2] || o.hi.z < lo[2]
             {
                 continue;
@@ -983,6 +1109,11 @@ impl SphereGeom {
                                     // only when the loose one touches.
                                     let rel = r + el;
                                     if d2 <= rel * rel {
+                                        if COLLECT && near {
+                                            // Already near: listed on the link's bound.
+                                            s.items.push(Item::Obstacle { k: k as u32, l: l as u32, o: oi as u32 });
+                                            continue;
+                                        }
                                         if ml == f64::INFINITY {
                                             ml = self.link_margin(l, i.step, s);
                                         }
@@ -993,7 +1124,11 @@ impl SphereGeom {
                                         let re = r + self.margin(k, 0, i.step, Some(s));
                                         if d2 <= re * re {
                                             near = true;
-                                            inf = None;
+                                            if COLLECT {
+                                                s.items.push(Item::Obstacle { k: k as u32, l: l as u32, o: oi as u32 });
+                                            } else {
+                                                inf = None;
+                                            }
                                         }
                                     }
                                 }
@@ -1004,10 +1139,14 @@ impl SphereGeom {
                                     return Check::Hit;
                                 }
                                 if let Some(i) = inf
-                                    && sep.distance <= self.margin(k, 0, i.step, Some(s))
+                                    && ((COLLECT && near) || sep.distance <= self.margin(k, 0, i.step, Some(s)))
                                 {
                                     near = true;
-                                    inf = None;
+                                    if COLLECT {
+                                        s.items.push(Item::Obstacle { k: k as u32, l: l as u32, o: oi as u32 });
+                                    } else {
+                                        inf = None;
+                                    }
                                 }
                             }
                         }
@@ -1015,7 +1154,7 @@ impl SphereGeom {
                 }
             }
         }
-        if self.self_pass::<GROW>(q, &mut inf, &mut near, s) {
+        if self.self_pass::<GROW, COLLECT>(q, &mut inf, &mut near, s) {
             return Check::Hit;
         }
         if near { Check::Near } else { Check::Free }
@@ -1029,7 +1168,7 @@ impl SphereGeom {
     /// it are taken into the inner body's frame, where the inner links' bounding spheres and
     /// spheres are tested as stored.
     #[inline(never)]
-    fn self_pass<const GROW: bool>(
+    fn self_pass<const GROW: bool, const COLLECT: bool>(
         &self,
         q: &[f64],
         inf: &mut Option<Inflation<'_>>,
@@ -1105,13 +1244,34 @@ impl SphereGeom {
                                 let grown = r + ep;
                                 if d2 <= grown * grown {
                                     let p = rp.pair as usize;
+                                    if COLLECT && *near {
+                                        // Already near: listed on the pair's bound.
+                                        s.items.push(Item::Pair {
+                                            i: i as u32,
+                                            j: (first + m) as u32,
+                                            p: p as u32,
+                                            li: run.outer as u32,
+                                            lj: rp.link,
+                                        });
+                                        continue;
+                                    }
                                     self.pose_link(run.outer, s);
                                     self.pose_link(rp.link as usize, s);
                                     let stop = self.pair_common[p] as usize;
                                     let re = r + self.pair_margin(i, first + m, stop, inf_now.step, s);
                                     if d2 <= re * re {
                                         *near = true;
-                                        *inf = None;
+                                        if COLLECT {
+                                            s.items.push(Item::Pair {
+                                                i: i as u32,
+                                                j: (first + m) as u32,
+                                                p: p as u32,
+                                                li: run.outer as u32,
+                                                lj: rp.link,
+                                            });
+                                        } else {
+                                            *inf = None;
+                                        }
                                     }
                                 }
                             }
