@@ -615,12 +615,14 @@ thread_local! {
 /// in half a piece) is at most this many metres, or into `2^CERTIFY_START_LEVELS` pieces. A
 /// sub-interval whose shapes grow by more is all but never free among the obstacles of an arm's
 /// workspace, and testing it only to split it cost the planner about 10% of its instructions on
-/// the MotionBenchMaker UR5 problems (0.3 m and 8 pieces measured best of 0.05-1.0 m and 8-64).
-/// In open space it costs up to 8 checks where one would do.
+/// the MotionBenchMaker UR5 problems. 0.3 m and 16 pieces measured best of 0.08-1.0 m and 4-32
+/// pieces (since halves are checked against only what was near over the whole; 8 pieces before:
+/// 16 take 4% fewer instructions, 4 take 20% more). In open space it costs up to 16 checks where
+/// one would do.
 pub const CERTIFY_START_MARGIN: f64 = 0.3;
 
 /// See [`CERTIFY_START_MARGIN`].
-pub const CERTIFY_START_LEVELS: u32 = 3;
+pub const CERTIFY_START_LEVELS: u32 = 4;
 
 /// Margins of an inflated query: `link[slot]` against obstacles, `pair[p]` for self-collision
 /// pair `p` (the two links together).
@@ -1116,7 +1118,7 @@ impl CollisionModel {
     /// configuration-independent bound from the kinematic chain). So if, at the midpoint of a
     /// sub-interval, every shape grown by the distance its points can travel in half that
     /// sub-interval is free, the whole sub-interval is free. The check starts with the whole
-    /// segment cut into up to 8 equal pieces, so that no shape grows by more than
+    /// segment cut into up to 16 equal pieces, so that no shape grows by more than
     /// [`CERTIFY_START_MARGIN`], and halves only the sub-intervals that cannot be certified,
     /// breadth first (a collision is usually found after few checks); far from obstacles a few
     /// checks certify a long motion. On the sphere fast path the margins of the spheres a query

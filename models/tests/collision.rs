@@ -444,7 +444,8 @@ fn collides_and_motion_agree_with_a_brute_force_scan() {
 /// The certificate starts from pieces whose largest margin is at most `CERTIFY_START_MARGIN`:
 /// turning the IRp-6 about its column by 2 rad (every link travels up to metres) in an empty
 /// world takes one check on each of the 8 pieces, and nothing more (the turn moves no pair of
-/// links relative to each other); a 0.01 rad turn takes a single check.
+/// links relative to each other); twice as far takes 16, the most; a 0.01 rad turn takes a
+/// single check.
 #[test]
 fn the_certificate_starts_from_pieces_small_enough_to_be_free() {
     use embodied_models::collision::{CERTIFY_START_LEVELS, CERTIFY_START_MARGIN};
@@ -459,7 +460,9 @@ fn the_certificate_starts_from_pieces_small_enough_to_be_free() {
     };
     let most = model.travel_bounds(&qa, &turned(2.0)).iter().map(|&(_, t)| t).fold(0.0, f64::max);
     assert!(most * 0.5 / 4.0 > CERTIFY_START_MARGIN && most * 0.5 / 8.0 <= CERTIFY_START_MARGIN, "{most}");
-    assert_eq!(CERTIFY_START_LEVELS, 3);
+    assert_eq!(CERTIFY_START_LEVELS, 4);
     assert_eq!(model.certify(&qa, &turned(2.0), 1e-4, false, &mut s), (true, 8));
+    assert_eq!(model.certify(&qa, &turned(4.0), 1e-4, false, &mut s), (true, 16));
+    assert_eq!(model.certify(&qa, &turned(6.0), 1e-4, false, &mut s), (true, 16));
     assert_eq!(model.certify(&qa, &turned(0.01), 1e-4, false, &mut s), (true, 1));
 }
