@@ -1236,10 +1236,13 @@ impl CollisionModel {
         while pieces < 1 << CERTIFY_START_LEVELS && most * 0.5 / pieces as f64 > CERTIFY_START_MARGIN {
             pieces *= 2;
         }
-        spans.extend((0..pieces).map(|i| Span {
-            t0: i as f64 / pieces as f64,
-            t1: (i + 1) as f64 / pieces as f64,
-            within: None,
+        // Middle first, then the quarters, the eighths...: the ends are free, so a collision is
+        // likeliest in the middle, and a segment that collides is refused after fewer checks.
+        // (Piece `k` of the bit-reversed order, turned so that the first piece comes last.)
+        let bits = pieces.trailing_zeros();
+        spans.extend((1..=pieces).map(|k| {
+            let i = (k % pieces).reverse_bits().checked_shr(usize::BITS - bits).unwrap_or(0);
+            Span { t0: i as f64 / pieces as f64, t1: (i + 1) as f64 / pieces as f64, within: None }
         }));
         s.spheres.items.clear();
         let mut free = true;

@@ -465,4 +465,19 @@ fn the_certificate_starts_from_pieces_small_enough_to_be_free() {
     assert_eq!(model.certify(&qa, &turned(4.0), 1e-4, false, &mut s), (true, 16));
     assert_eq!(model.certify(&qa, &turned(6.0), 1e-4, false, &mut s), (true, 16));
     assert_eq!(model.certify(&qa, &turned(0.01), 1e-4, false, &mut s), (true, 1));
+
+    // The pieces are checked middle first: with the last link's shapes, posed where the middle
+    // piece's midpoint puts them (1.125 rad of the 2 rad turn), as obstacles, one check refuses
+    // the turn (left to right it took four).
+    let mut env = Environment::new();
+    let last = robot.links().len() - 1;
+    for o in model.link_shapes_world(&turned(2.0 * 0.5625)) {
+        if o.name.starts_with(robot.links()[last].name.as_str()) {
+            env.add(o);
+        }
+    }
+    assert!(!env.is_empty());
+    let blocked = CollisionModel::new(&robot, env);
+    assert!(!blocked.collides(&qa) && !blocked.collides(&turned(2.0)));
+    assert_eq!(blocked.certify(&qa, &turned(2.0), 1e-4, false, &mut s), (false, 1));
 }
