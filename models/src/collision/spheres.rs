@@ -1094,6 +1094,7 @@ impl SphereGeom {
                     for k in link.first..link.end {
                         let p = &s.centre[k];
                         let r = self.radius[k];
+                        let item = Item::Obstacle { k: k as u32, l: l as u32, o: oi as u32 };
                         // The obstacle's box first (it holds the obstacle): cheaper than the
                         // exact distance to a turned box or cylinder, and most spheres miss it.
                         if !sphere_hits_aabb(&Point3::from(*p), r + el, o) {
@@ -1111,7 +1112,7 @@ impl SphereGeom {
                                     if d2 <= rel * rel {
                                         if COLLECT && near {
                                             // Already near: listed on the link's bound.
-                                            s.items.push(Item::Obstacle { k: k as u32, l: l as u32, o: oi as u32 });
+                                            s.items.push(item);
                                             continue;
                                         }
                                         if ml == f64::INFINITY {
@@ -1125,7 +1126,7 @@ impl SphereGeom {
                                         if d2 <= re * re {
                                             near = true;
                                             if COLLECT {
-                                                s.items.push(Item::Obstacle { k: k as u32, l: l as u32, o: oi as u32 });
+                                                s.items.push(item);
                                             } else {
                                                 inf = None;
                                             }
@@ -1143,7 +1144,7 @@ impl SphereGeom {
                                 {
                                     near = true;
                                     if COLLECT {
-                                        s.items.push(Item::Obstacle { k: k as u32, l: l as u32, o: oi as u32 });
+                                        s.items.push(item);
                                     } else {
                                         inf = None;
                                     }
@@ -1244,15 +1245,16 @@ impl SphereGeom {
                                 let grown = r + ep;
                                 if d2 <= grown * grown {
                                     let p = rp.pair as usize;
+                                    let item = Item::Pair {
+                                        i: i as u32,
+                                        j: (first + m) as u32,
+                                        p: p as u32,
+                                        li: run.outer as u32,
+                                        lj: rp.link,
+                                    };
                                     if COLLECT && *near {
                                         // Already near: listed on the pair's bound.
-                                        s.items.push(Item::Pair {
-                                            i: i as u32,
-                                            j: (first + m) as u32,
-                                            p: p as u32,
-                                            li: run.outer as u32,
-                                            lj: rp.link,
-                                        });
+                                        s.items.push(item);
                                         continue;
                                     }
                                     self.pose_link(run.outer, s);
@@ -1262,13 +1264,7 @@ impl SphereGeom {
                                     if d2 <= re * re {
                                         *near = true;
                                         if COLLECT {
-                                            s.items.push(Item::Pair {
-                                                i: i as u32,
-                                                j: (first + m) as u32,
-                                                p: p as u32,
-                                                li: run.outer as u32,
-                                                lj: rp.link,
-                                            });
+                                            s.items.push(item);
                                         } else {
                                             *inf = None;
                                         }

@@ -367,6 +367,31 @@ proptest! {
     }
 }
 
+/// A segment with both ends free: from a random configuration a random share in `lo..hi` of
+/// the way to another.
+fn free_ends(robot: &Robot, model: &CollisionModel, rng: &mut Rng, lo: f64, hi: f64) -> (Vec<f64>, Vec<f64>) {
+    let space = robot.config_space();
+    loop {
+        let qa = robot.random_configuration(rng);
+        let far = robot.random_configuration(rng);
+        let qb = space.interpolate(&qa, &far, rng.range(lo, hi));
+        if !model.collides(&qa) && !model.collides(&qb) {
+            return (qa, qb);
+        }
+    }
+}
+
+/// No configuration of the segment `qa`-`qb` sampled every 1e-3 rad (or m) collides.
+fn assert_free_when_sampled_finely(robot: &Robot, model: &CollisionModel, qa: &[f64], qb: &[f64]) {
+    let space = robot.config_space();
+    let n = (space.max_joint_step(qa, qb) / 1e-3).ceil() as usize;
+    let mut q = qa.to_vec();
+    for k in 1..n {
+        space.interpolate_into(qa, qb, k as f64 / n as f64, &mut q);
+        assert!(!model.collides(&q), "{}: certified but collides at {q:?}", robot.name());
+    }
+}
+
 /// Segments the certificate passes are free when sampled every 1e-3 rad (or m), on the
 /// spherized UR5 in the table-pick scene plus clutter, and on a small arm with prismatic and
 /// mimic joints among clutter. (Sphere versions of the built-in robots make the certificate
@@ -382,25 +407,13 @@ fn certified_segments_are_free_when_sampled_finely() {
             }
         }
         let model = sphere_model(robot, env);
-        let space = robot.config_space();
         let mut rng = Rng::new(17 + which as u64);
-        let (mut certified, mut refused, mut tried) = (0, 0, 0);
-        while tried < 30 {
-            let qa = robot.random_configuration(&mut rng);
-            let far = robot.random_configuration(&mut rng);
-            let qb = space.interpolate(&qa, &far, rng.range(0.02, 0.25));
-            if model.collides(&qa) || model.collides(&qb) {
-                continue;
-            }
-            tried += 1;
+        let (mut certified, mut refused) = (0, 0);
+        for _ in 0..30 {
+            let (qa, qb) = free_ends(robot, &model, &mut rng, 0.02, 0.25);
             if model.motion_is_certified_free(&qa, &qb, 1e-4) {
                 certified += 1;
-                let n = (space.max_joint_step(&qa, &qb) / 1e-3).ceil() as usize;
-                let mut q = qa.clone();
-                for k in 1..n {
-                    space.interpolate_into(&qa, &qb, k as f64 / n as f64, &mut q);
-                    assert!(!model.collides(&q), "{}: certified but collides at {q:?}", robot.name());
-                }
+                assert_free_when_sampled_finely(robot, &model, &qa, &qb);
             } else {
                 refused += 1;
             }
@@ -486,18 +499,11 @@ fn listed_certificate_passes_what_the_full_one_does_and_stays_sound() {
             }
         }
         let model = sphere_model(robot, env);
-        let space = robot.config_space();
         let mut s = model.scratch();
         let mut rng = Rng::new(91 + which as u64);
-        let (mut both, mut only_listed, mut refused, mut tried) = (0, 0, 0, 0);
-        while tried < 100 {
-            let qa = robot.random_configuration(&mut rng);
-            let far = robot.random_configuration(&mut rng);
-            let qb = space.interpolate(&qa, &far, rng.range(0.05, 0.8));
-            if model.collides(&qa) || model.collides(&qb) {
-                continue;
-            }
-            tried += 1;
+        let (mut both, mut only_listed, mut refused) = (0, 0, 0);
+        for _ in 0..100 {
+            let (qa, qb) = free_ends(robot, &model, &mut rng, 0.05, 0.8);
             let (full, _) = model.certify_in(&qa, &qb, 1e-4, false, false, &mut s);
             let (listed, _) = model.certify_in(&qa, &qb, 1e-4, false, true, &mut s);
             assert!(listed || !full, "{}: the full certificate passes {qa:?} -> {qb:?}, the listed not", robot.name());
@@ -507,12 +513,7 @@ fn listed_certificate_passes_what_the_full_one_does_and_stays_sound() {
                 (false, false) => refused += 1,
             }
             if listed {
-                let n = (space.max_joint_step(&qa, &qb) / 1e-3).ceil() as usize;
-                let mut q = qa.clone();
-                for k in 1..n {
-                    space.interpolate_into(&qa, &qb, k as f64 / n as f64, &mut q);
-                    assert!(!model.collides(&q), "{}: certified but collides at {q:?}", robot.name());
-                }
+                assert_free_when_sampled_finely(robot, &model, &qa, &qb);
             }
         }
         eprintln!("{}: {both} both, {only_listed} listed only, {refused} neither", robot.name());
