@@ -36,9 +36,18 @@ static PROVEN: Mutex<Vec<(String, Tables)>> = Mutex::new(Vec::new());
 /// Joint values beyond this (rad) are not looked up (the cell index would lose precision).
 const MAX_ANGLE: f64 = 1000.0;
 
-/// Adding and subtracting 1.5 * 2^52 rounds to the nearest integer; of `t - 0.5`, that is the
-/// floor of `t` (at an exact integer, the cell below, whose closed box holds the value too).
+/// Adding 1.5 * 2^52 rounds to the nearest integer; of `t - 0.5`, that is the floor of `t` (at an
+/// exact integer, the cell below, whose closed box holds the value too). See [`floor_bits`].
 const ROUND: f64 = 6_755_399_441_055_744.0;
+
+/// The floor of `t` (|t| < 2^50), plus a constant that is a multiple of 2^52: the bits of
+/// `t - 0.5 + ROUND`, whose low mantissa bits hold the integer, negative ones in two's
+/// complement. Differences and low bits are exact, with no float-to-integer conversion (which
+/// costs a saturation check each time).
+#[inline(always)]
+fn floor_bits(t: f64) -> i64 {
+    (t - 0.5 + ROUND).to_bits() as i64
+}
 
 /// Proven-free cells over the relative joints of one group pair.
 #[derive(Debug, Clone)]
@@ -73,8 +82,7 @@ impl CellTable {
             if !in_range {
                 return None;
             }
-            let k = ((v * self.scale - 0.5 + ROUND) - ROUND) as i64;
-            index = (index << self.level) | (k & mask) as usize;
+            index = (index << self.level) | (floor_bits(v * self.scale) & mask) as usize;
         }
         Some(index)
     }
@@ -96,7 +104,7 @@ impl CellTable {
     #[inline]
     pub(super) fn proves_box(&self, q: &[f64], step: &[f64]) -> bool {
         // As in `cell` (a box edge on a cell edge is in both closed cells).
-        let floor = |t: f64| ((t - 0.5 + ROUND) - ROUND) as i64;
+        let floor = floor_bits;
         let mask = (1i64 << self.level) - 1;
         let mut lo = [0i64; MAX_JOINTS];
         let mut two = [false; MAX_JOINTS];
