@@ -259,12 +259,6 @@ fn dist2_point_aabb(p: &Point3<f64>, lo: &Point3<f64>, hi: &Point3<f64>) -> f64 
     dx * dx + dy * dy + dz * dz
 }
 
-/// The larger of `a` and `b` (`b` if either is NaN).
-#[inline(always)]
-pub(crate) fn larger(a: f64, b: f64) -> f64 {
-    if a > b { a } else { b }
-}
-
 #[inline]
 fn sphere_hits_aabb(c: &Point3<f64>, r: f64, o: &ObstacleGeom) -> bool {
     dist2_point_aabb(c, &o.lo, &o.hi) <= r * r

@@ -24,7 +24,7 @@
 use nalgebra::{Matrix3, Point3, Vector3};
 
 use super::narrow::{self, View};
-use super::{Inflation, ObstacleGeom, RobotGeom, Value, World, larger, sphere_hits_aabb};
+use super::{Inflation, ObstacleGeom, RobotGeom, Value, World, sphere_hits_aabb};
 
 mod arms;
 mod table;
@@ -234,13 +234,7 @@ fn dist2(solid: &Solid, p: &Vector3<f64>) -> Option<f64> {
             let d = ((p - c).norm() - r).max(0.0);
             d * d
         }
-        Solid::Cuboid { rt, t, half } => {
-            let l = rt * (p - t);
-            let dx = (l.x.abs() - half.x).max(0.0);
-            let dy = (l.y.abs() - half.y).max(0.0);
-            let dz = (l.z.abs() - half.z).max(0.0);
-            dx * dx + dy * dy + dz * dz
-        }
+        Solid::Cuboid { rt, t, half } => box_dist2(&(rt * (p - t)), half),
         Solid::Cylinder { rt, t, r, hh } => {
             let l = rt * (p - t);
             let dr = ((l.x * l.x + l.y * l.y).sqrt() - r).max(0.0);
@@ -258,6 +252,15 @@ fn dist2(solid: &Solid, p: &Vector3<f64>) -> Option<f64> {
     })
 }
 
+/// Squared distance from `l` to the box of half extents `half` about the origin (0 inside).
+#[inline(always)]
+fn box_dist2(l: &Vector3<f64>, half: &Vector3<f64>) -> f64 {
+    let dx = (l.x.abs() - half.x).max(0.0);
+    let dy = (l.y.abs() - half.y).max(0.0);
+    let dz = (l.z.abs() - half.z).max(0.0);
+    dx * dx + dy * dy + dz * dz
+}
+
 /// Whether a sphere at `c` of radius `r` may touch the solid (of obstacle `o`): exact for balls
 /// and boxes, the box around a cylinder in its own frame, else the obstacle's world box. Tighter
 /// than the world box at the same cost (a box turned 49° about z, as in MotionBenchMaker's
@@ -266,13 +269,7 @@ fn dist2(solid: &Solid, p: &Vector3<f64>) -> Option<f64> {
 fn may_touch(solid: &Solid, o: &ObstacleGeom, c: &Vector3<f64>, r: f64) -> bool {
     match solid {
         Solid::Ball { .. } | Solid::Cuboid { .. } => dist2(solid, c).is_none_or(|d2| d2 <= r * r),
-        Solid::Cylinder { rt, t, r: rc, hh } => {
-            let l = rt * (c - t);
-            let dx = larger(l.x.abs() - rc, 0.0);
-            let dy = larger(l.y.abs() - rc, 0.0);
-            let dz = larger(l.z.abs() - hh, 0.0);
-            dx * dx + dy * dy + dz * dz <= r * r
-        }
+        Solid::Cylinder { rt, t, r: rc, hh } => box_dist2(&(rt * (c - t)), &Vector3::new(*rc, *rc, *hh)) <= r * r,
         _ => sphere_hits_aabb(&Point3::from(*c), r, o),
     }
 }
