@@ -1,5 +1,7 @@
 //! Criterion benchmarks: forward kinematics (all links, and one end effector) and the geometric
-//! Jacobian of the first end effector, per built-in robot, over random configurations.
+//! Jacobian of the first end effector, per built-in robot, over random configurations; inverse
+//! kinematics of the IRp-6 on its postument, closed form against the numerical solver, for tool
+//! poses reached at random configurations (seeded at the home pose).
 
 #![allow(clippy::unwrap_used)]
 
@@ -7,7 +9,7 @@ use std::hint::black_box;
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use embodied_models::nalgebra::Isometry3;
-use embodied_models::{BUILTIN_NAMES, Rng, builtin};
+use embodied_models::{BUILTIN_NAMES, IkOptions, Rng, builtin};
 
 fn kinematics(c: &mut Criterion) {
     for name in BUILTIN_NAMES {
@@ -40,5 +42,27 @@ fn kinematics(c: &mut Criterion) {
     }
 }
 
-criterion_group!(benches, kinematics);
+fn inverse_kinematics(c: &mut Criterion) {
+    let robot = builtin("irp6-postument").unwrap();
+    let mut rng = Rng::new(9);
+    let targets: Vec<Isometry3<f64>> =
+        (0..64).map(|_| robot.end_effector_poses(&robot.random_configuration(&mut rng), 0).1).collect();
+    let home = robot.home().to_vec();
+    let mut i = 0;
+    c.bench_function("ik-closed-form-all/irp6-postument", |b| {
+        b.iter(|| {
+            i = (i + 1) % targets.len();
+            black_box(robot.inverse_kinematics_all(0, black_box(&targets[i]), &home).unwrap().len())
+        })
+    });
+    let numerical = IkOptions { closed_form: false, ..IkOptions::default() };
+    c.bench_function("ik-numerical/irp6-postument", |b| {
+        b.iter(|| {
+            i = (i + 1) % targets.len();
+            black_box(robot.inverse_kinematics(0, black_box(&targets[i]), &home, &numerical).is_ok())
+        })
+    });
+}
+
+criterion_group!(benches, kinematics, inverse_kinematics);
 criterion_main!(benches);

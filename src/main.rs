@@ -40,6 +40,14 @@ enum Command {
         /// Joint values, comma separated, in the robot's joint order (default: the home pose).
         #[arg(long, allow_hyphen_values = true)]
         q: Option<String>,
+        /// Inverse kinematics: every joint solution placing the tool at X,Y,Z (m, world frame) with
+        /// roll, pitch, yaw ROLL,PITCH,YAW (rad, as in scenario files), seeded at --q. Closed form
+        /// where the arm has one (IRp-6), else the numerical solver. Exit status 1 if none exists.
+        #[arg(long, allow_hyphen_values = true, value_name = "X,Y,Z,ROLL,PITCH,YAW")]
+        ik: Option<String>,
+        /// The end effector for --ik, by name (default: the robot's first).
+        #[arg(long, requires = "ik")]
+        ee: Option<String>,
         /// Print one JSON object instead of text.
         #[arg(long)]
         json: bool,
@@ -193,18 +201,24 @@ fn to_json<T: serde::Serialize>(value: &T) -> Result<String, AppError> {
 
 fn run(cli: Cli) -> Result<(), AppError> {
     match cli.command {
-        Command::Model { robot, srdf, q, json } => {
+        Command::Model { robot, srdf, q, ik, ee, json } => {
             let robot = load_robot(&robot, srdf.as_deref())?;
             let q = match q {
                 Some(text) => parse_q(&robot, &text)?,
                 None => robot.home().to_vec(),
             };
-            let report = model_report(&robot, &q);
+            let mut report = model_report(&robot, &q);
+            if let Some(text) = ik {
+                report.ik = Some(embodied::model_report::ik_report(&robot, &q, &text, ee.as_deref())?);
+            }
             if json {
                 let text = serde_json::to_string(&report).map_err(|e| AppError::Failed(e.to_string()))?;
                 println!("{text}");
             } else {
                 print!("{}", render_text(&report));
+            }
+            if report.ik.as_ref().is_some_and(|r| r.solutions.is_empty()) {
+                std::process::exit(1);
             }
             Ok(())
         }

@@ -3,7 +3,7 @@
 use std::path::Path;
 
 use embodied_models::collision::{CollisionModel, Environment};
-use embodied_models::nalgebra::Isometry3;
+use embodied_models::nalgebra::{self, Isometry3};
 use embodied_models::{Robot, builtin};
 use serde::Serialize;
 
@@ -98,6 +98,90 @@ pub struct ModelReport {
     pub min_distance: f64,
     pub closest_pair: CollisionPairJson,
     pub provenance: String,
+    /// `--ik`: the solutions for a tool pose.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub ik: Option<IkReport>,
+}
+
+/// One inverse-kinematics solution of `embodied model --ik`.
+#[derive(Debug, Serialize)]
+pub struct IkSolutionJson {
+    pub q: Vec<f64>,
+    /// Whether the robot collides with itself there.
+    pub self_collision: bool,
+}
+
+/// The `--ik` part of `embodied model`: solutions nearest the seed first.
+#[derive(Debug, Serialize)]
+pub struct IkReport {
+    pub end_effector: String,
+    /// `closed-form` (every solution within the limits) or `numerical` (one, from the seed).
+    pub method: &'static str,
+    pub target: PoseJson,
+    pub solutions: Vec<IkSolutionJson>,
+    /// Why there is none, when `solutions` is empty.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub failure: Option<String>,
+}
+
+/// Parse `X,Y,Z,ROLL,PITCH,YAW` (metres, radians; roll-pitch-yaw as in scenario files).
+pub fn parse_pose(text: &str) -> Result<Isometry3<f64>, AppError> {
+    let parts: Vec<&str> = text.split(',').map(str::trim).collect();
+    let expected = "expected 6 comma-separated numbers X,Y,Z,ROLL,PITCH,YAW (m, rad)";
+    if parts.len() != 6 {
+        return Err(AppError::Usage(format!("--ik: got {} values; {expected}", parts.len())));
+    }
+    let mut v = [0.0; 6];
+    for (i, part) in parts.iter().enumerate() {
+        v[i] = part.parse::<f64>().ok().filter(|x| x.is_finite()).ok_or_else(|| {
+            AppError::Usage(format!("--ik: value {} (`{part}`) is not a finite number; {expected}", i + 1))
+        })?;
+    }
+    Ok(Isometry3::from_parts(
+        nalgebra::Translation3::new(v[0], v[1], v[2]),
+        nalgebra::UnitQuaternion::from_euler_angles(v[3], v[4], v[5]),
+    ))
+}
+
+/// Solve `--ik` for `robot`, seeded at `q`: every closed-form solution, or the numerical one.
+pub fn ik_report(robot: &Robot, q: &[f64], pose: &str, ee: Option<&str>) -> Result<IkReport, AppError> {
+    let target = parse_pose(pose)?;
+    let index = match ee {
+        None => 0,
+        Some(name) => robot.end_effectors().iter().position(|e| e.name == name).ok_or_else(|| {
+            let known: Vec<&str> = robot.end_effectors().iter().map(|e| e.name.as_str()).collect();
+            AppError::Usage(format!(
+                "--ee: robot `{}` has no end effector `{name}`; it has: {}",
+                robot.name(),
+                known.join(", ")
+            ))
+        })?,
+    };
+    let Some(effector) = robot.end_effectors().get(index) else {
+        return Err(AppError::Usage(format!("--ik: robot `{}` has no end effector", robot.name())));
+    };
+    let (method, solved) = if robot.closed_form(index).is_some() {
+        ("closed-form", robot.inverse_kinematics_all(index, &target, q).map_err(|e| e.to_string()))
+    } else {
+        let options = embodied_models::IkOptions::default();
+        ("numerical", robot.inverse_kinematics(index, &target, q, &options).map(|s| vec![s]).map_err(|e| e.to_string()))
+    };
+    let (solutions, failure) = match solved {
+        Ok(s) if s.is_empty() => (s, Some("out of reach, or every solution breaks a joint limit".to_string())),
+        Ok(s) => (s, None),
+        Err(e) => (Vec::new(), Some(e)),
+    };
+    let collision = CollisionModel::new(robot, Environment::new());
+    Ok(IkReport {
+        end_effector: effector.name.clone(),
+        method,
+        target: (&target).into(),
+        solutions: solutions
+            .into_iter()
+            .map(|s| IkSolutionJson { self_collision: collision.collides(&s), q: s })
+            .collect(),
+        failure,
+    })
 }
 
 /// Build the report of `robot` at `q` (already checked).
@@ -149,6 +233,7 @@ pub fn model_report(robot: &Robot, q: &[f64]) -> ModelReport {
         min_distance: dist.distance,
         closest_pair: CollisionPairJson { a: dist.a.to_string(), b: dist.b.to_string() },
         provenance: robot.provenance().to_string(),
+        ik: None,
     }
 }
 
@@ -193,5 +278,26 @@ pub fn render_text(r: &ModelReport) -> String {
         }
     }
     let _ = writeln!(s, "minimum distance: {:.4} m ({} and {})", r.min_distance, r.closest_pair.a, r.closest_pair.b);
+    if let Some(ik) = &r.ik {
+        let t = ik.target.translation;
+        let _ = writeln!(
+            s,
+            "inverse kinematics of {} for tool at ({:+.4}, {:+.4}, {:+.4}), {}: {} solution(s), nearest the seed first",
+            ik.end_effector,
+            t[0],
+            t[1],
+            t[2],
+            ik.method,
+            ik.solutions.len()
+        );
+        for sol in &ik.solutions {
+            let q: Vec<String> = sol.q.iter().map(|v| format!("{v:+.4}")).collect();
+            let note = if sol.self_collision { "  (self-collision)" } else { "" };
+            let _ = writeln!(s, "  q = [{}]{note}", q.join(", "));
+        }
+        if let Some(why) = &ik.failure {
+            let _ = writeln!(s, "  none: {why}");
+        }
+    }
     s
 }

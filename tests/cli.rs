@@ -59,6 +59,73 @@ fn model_bad_input_is_a_clear_error() {
     }
 }
 
+/// The tool pose of `model --json` at `q` as `X,Y,Z,ROLL,PITCH,YAW` (roll-pitch-yaw from the quaternion).
+fn tool_pose_arg(robot: &str, q: &str, ee: usize) -> String {
+    let (code, out, err) = embodied(&["model", robot, "--q", q, "--json"]);
+    assert_eq!(code, 0, "{err}");
+    let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+    let tool = &v["end_effectors"][ee]["tool"];
+    let t: Vec<f64> = tool["translation"].as_array().unwrap().iter().map(|x| x.as_f64().unwrap()).collect();
+    let r: Vec<f64> = tool["quaternion_xyzw"].as_array().unwrap().iter().map(|x| x.as_f64().unwrap()).collect();
+    let (x, y, z, w) = (r[0], r[1], r[2], r[3]);
+    let roll = (2.0 * (w * x + y * z)).atan2(1.0 - 2.0 * (x * x + y * y));
+    let pitch = (2.0 * (w * y - z * x)).clamp(-1.0, 1.0).asin();
+    let yaw = (2.0 * (w * z + x * y)).atan2(1.0 - 2.0 * (y * y + z * z));
+    format!("{},{},{},{roll},{pitch},{yaw}", t[0], t[1], t[2])
+}
+
+#[test]
+fn model_ik_lists_the_configuration_a_pose_came_from() {
+    let q = [0.4, -1.3, 0.2, 0.5, 2.0, -0.7];
+    let q_text: Vec<String> = q.iter().map(f64::to_string).collect();
+    let pose = tool_pose_arg("irp6-postument", &q_text.join(","), 0);
+    let (code, out, err) = embodied(&["model", "irp6-postument", "--ik", &pose, "--json"]);
+    assert_eq!(code, 0, "{err}");
+    let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+    assert_eq!(v["ik"]["method"], "closed-form");
+    assert_eq!(v["ik"]["end_effector"], "irp6p");
+    let solutions = v["ik"]["solutions"].as_array().unwrap();
+    let found = solutions.iter().any(|s| {
+        let got: Vec<f64> = s["q"].as_array().unwrap().iter().map(|x| x.as_f64().unwrap()).collect();
+        got.iter().zip(&q).all(|(a, b)| (a - b).abs() < 1e-6)
+    });
+    assert!(found, "{q:?} not among {solutions:?}");
+    // Text output, and the second arm of the cell by name.
+    let pose = tool_pose_arg("two-irp6", "0.3,0,-1.4,0.1,0.3,1.0,0.2,0.5,-1.2,0.1,-0.2,-1.0,0.4", 1);
+    let (code, out, err) = embodied(&["model", "two-irp6", "--ik", &pose, "--ee", "irp6p"]);
+    assert_eq!(code, 0, "{err}");
+    assert!(out.contains("inverse kinematics of irp6p") && out.contains("closed-form"), "{out}");
+    assert!(out.contains("+0.5000, -1.2000, +0.1000, -0.2000, -1.0000, +0.4000]"), "{out}");
+}
+
+#[test]
+fn model_ik_out_of_reach_exits_1_and_bad_poses_exit_2() {
+    let (code, out, _) = embodied(&["model", "irp6-postument", "--ik", "3,0,1,0,0,0", "--json"]);
+    assert_eq!(code, 1);
+    let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+    assert_eq!(v["ik"]["solutions"].as_array().map(Vec::len), Some(0));
+    assert!(v["ik"]["failure"].as_str().unwrap().contains("out of reach"));
+    // No closed form: the numerical solver, from the seed.
+    let pose = tool_pose_arg("polycrank", "0.3,0.2,-0.4,0.5,0.1,0.2,0.3", 0);
+    let (code, out, err) =
+        embodied(&["model", "polycrank", "--q", "0.25,0.25,-0.35,0.45,0.1,0.25,0.3", "--ik", &pose, "--json"]);
+    assert_eq!(code, 0, "{err}");
+    let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+    assert_eq!(v["ik"]["method"], "numerical");
+    assert_eq!(v["ik"]["solutions"].as_array().map(Vec::len), Some(1));
+    let cases: [(&[&str], &str); 4] = [
+        (&["model", "irp6-postument", "--ik", "1,2,3"], "got 3 values; expected 6"),
+        (&["model", "irp6-postument", "--ik", "1,0,1,x,0,0"], "value 4 (`x`) is not a finite number"),
+        (&["model", "irp6-postument", "--ik", "1,0,1,0,0,inf"], "value 6 (`inf`) is not a finite number"),
+        (&["model", "irp6-postument", "--ik", "1,0,1,0,0,0", "--ee", "left"], "no end effector `left`; it has: irp6p"),
+    ];
+    for (args, expected) in cases {
+        let (code, _, err) = embodied(args);
+        assert_eq!(code, 2, "{args:?}: {err}");
+        assert!(err.contains(expected), "{args:?}: `{err}` lacks `{expected}`");
+    }
+}
+
 #[test]
 fn model_help_names_every_source() {
     let (code, out, _) = embodied(&["model", "--help"]);

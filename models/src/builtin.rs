@@ -9,6 +9,7 @@ use nalgebra::{Isometry3, Vector3};
 
 use crate::error::ModelError;
 use crate::geometry::{PlacedShape, Shape};
+use crate::ik::{ClosedForm, Irp6Lengths};
 use crate::joint::{Dh, JointKind, JointLimits};
 use crate::robot::{Robot, RobotBuilder};
 
@@ -111,6 +112,9 @@ const IRP6_DH: [Dh; 6] = [
     Dh::new(0.0, 0.0, 0.0, 0.0),
 ];
 
+/// The lengths of [`IRP6_DH`] that the IRp-6's closed-form inverse kinematics needs.
+pub(crate) const IRP6_LENGTHS: Irp6Lengths = Irp6Lengths { a2: IRP6_DH[1].a, a3: IRP6_DH[2].a, d5: IRP6_DH[4].d };
+
 /// MRROC++ joint-space limits (README 1.5) with the assumed 1.5 rad/s, 7 rad/s^2.
 fn irp6_arm_limits() -> [JointLimits; 6] {
     let d = PI / 180.0;
@@ -182,6 +186,7 @@ pub fn irp6_postument() -> Result<Robot, ModelError> {
     let base = b.link("base", irp6_column_shapes(0.0));
     add_irp6_arm(&mut b, base, tz(0.95), "");
     b.end_effector("irp6p", "link6", tz(0.25));
+    b.closed_form_ik("irp6p", ClosedForm::Irp6);
     b.home(IRP6_FRONT.to_vec());
     b.build()
 }
@@ -213,6 +218,7 @@ pub fn irp6_on_track() -> Result<Robot, ModelError> {
     let (_, carriage) = add_track(&mut b, "");
     add_irp6_arm(&mut b, carriage, tz(0.95), "");
     b.end_effector("irp6ot", "link6", tz(0.25));
+    b.closed_form_ik("irp6ot", ClosedForm::Irp6);
     let mut home = vec![0.0];
     home.extend(IRP6_FRONT);
     b.home(home);
@@ -251,6 +257,8 @@ pub fn two_irp6() -> Result<Robot, ModelError> {
     add_irp6_arm(&mut b, pbase, tz(0.95), "p_");
     b.end_effector("irp6ot", "ot_link6", tz(0.25));
     b.end_effector("irp6p", "p_link6", tz(0.25));
+    b.closed_form_ik("irp6ot", ClosedForm::Irp6);
+    b.closed_form_ik("irp6p", ClosedForm::Irp6);
     let mut home = vec![0.0];
     home.extend(IRP6_FRONT);
     home.extend(IRP6_FRONT);

@@ -37,6 +37,9 @@ pub enum ModelError {
     /// Inverse kinematics did not converge.
     #[error("inverse kinematics did not converge for `{frame}`: residual {residual:.3e} after {iterations} iterations")]
     IkFailed { frame: String, residual: f64, iterations: usize },
+    /// A closed-form inverse kinematics asked of an end effector that has none.
+    #[error("robot `{robot}`: end effector `{frame}` has no closed-form inverse kinematics (use the numerical one)")]
+    NoClosedForm { robot: String, frame: String },
     /// A frame, link or joint name that the robot does not have.
     #[error("robot `{robot}` has no {what} named `{name}`")]
     NoSuchName { robot: String, what: &'static str, name: String },

@@ -1,10 +1,58 @@
-//! Inverse kinematics: damped least squares with joint limits and seeded restarts.
+//! Inverse kinematics: closed forms where the arm has one (the IRp-6), damped least squares with
+//! joint limits and seeded restarts for any arm.
+
+mod irp6;
+
+pub(crate) use irp6::Irp6Lengths;
+
+use std::f64::consts::TAU;
 
 use nalgebra::{DMatrix, DVector, Isometry3, Vector6};
 
 use crate::error::ModelError;
+use crate::joint::{JointKind, JointLimits};
 use crate::rng::Rng;
 use crate::robot::Robot;
+
+/// An analytic inverse-kinematics solution a robot's builder attaches to an end effector
+/// ([`crate::RobotBuilder::closed_form_ik`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum ClosedForm {
+    /// The IRp-6 arm (shared/robots/README.md 1.3.1): the six revolute joints ending at the
+    /// flange, built from the standard DH table; up to eight solutions per pose.
+    Irp6,
+}
+
+/// A closed form resolved against a built robot: which degrees of freedom it solves and where
+/// its chain starts.
+#[derive(Debug, Clone)]
+pub(crate) struct ArmChain {
+    pub kind: ClosedForm,
+    /// `q` indices of the six arm joints, shoulder first.
+    pub dofs: [usize; 6],
+    /// The link the first arm joint hangs from, and that joint's origin in it (DH frame 0).
+    pub shoulder_link: usize,
+    pub shoulder: Isometry3<f64>,
+    /// Whether the six joints are every degree of freedom that moves the end effector (no track).
+    pub whole: bool,
+}
+
+/// Largest position (m) and angle (rad) error a closed-form solution may show when checked by
+/// forward kinematics; above it the solution is dropped (a numerical edge, never expected).
+const CLOSED_FORM_CHECK: f64 = 1e-9;
+
+/// Bring an angle into `limits` by whole turns, choosing the copy nearest `near`; `None` when no
+/// copy lies within the limits.
+fn turn_into(value: f64, limits: &JointLimits, near: f64) -> Option<f64> {
+    let slack = 1e-12;
+    let base = value + TAU * ((near - value) / TAU).round();
+    [base, base - TAU, base + TAU, base - 2.0 * TAU, base + 2.0 * TAU]
+        .into_iter()
+        .filter(|v| (limits.lower - slack..=limits.upper + slack).contains(v))
+        .min_by(|a, b| (a - near).abs().total_cmp(&(b - near).abs()))
+        .map(|v| limits.clamp(v))
+}
 
 /// Settings of [`Robot::inverse_kinematics`].
 #[derive(Debug, Clone)]
@@ -23,6 +71,9 @@ pub struct IkOptions {
     pub seed: u64,
     /// Solve for position only (3 DOF task), ignoring orientation.
     pub position_only: bool,
+    /// Answer from the end effector's closed form when it has one covering every joint that
+    /// moves it (default); `false` always uses the numerical solver.
+    pub closed_form: bool,
 }
 
 impl Default for IkOptions {
@@ -35,6 +86,7 @@ impl Default for IkOptions {
             damping: 1e-4,
             seed: 0x1c0ffee,
             position_only: false,
+            closed_form: true,
         }
     }
 }
@@ -47,9 +99,108 @@ pub fn pose_error(current: &Isometry3<f64>, target: &Isometry3<f64>) -> Vector6<
 }
 
 impl Robot {
+    /// The closed form attached to end effector `ee`, if it has one.
+    pub fn closed_form(&self, ee: usize) -> Option<ClosedForm> {
+        self.closed_forms.get(ee).and_then(|c| c.as_ref()).map(|c| c.kind)
+    }
+
+    /// Every configuration placing end effector `ee`'s tool frame at `target` within the joint
+    /// limits, from the end effector's closed form, nearest to `seed` first (configuration-space
+    /// distance). Joints outside the arm (a track) keep their `seed` values; each arm angle is
+    /// the whole-turn copy within its limits nearest the seed's. An empty list means the pose is
+    /// out of reach or every solution breaks a limit. Each solution is checked by forward
+    /// kinematics to 1e-9 m and rad.
+    ///
+    /// Errors: no such end effector, an invalid seed, or no closed form for this end effector
+    /// ([`ModelError::NoClosedForm`]; use [`Robot::inverse_kinematics`]).
+    pub fn inverse_kinematics_all(
+        &self,
+        ee: usize,
+        target: &Isometry3<f64>,
+        seed: &[f64],
+    ) -> Result<Vec<Vec<f64>>, ModelError> {
+        let effector = self.end_effector_checked(ee)?;
+        self.check_configuration(seed)?;
+        let Some(chain) = self.closed_forms.get(ee).and_then(|c| c.as_ref()) else {
+            return Err(ModelError::NoClosedForm { robot: self.name().to_string(), frame: effector.name.clone() });
+        };
+        let shoulder = self.link_pose(seed, chain.shoulder_link) * chain.shoulder;
+        let flange = shoulder.inv_mul(&(target * effector.tool.inverse()));
+        let arm_seed = chain.dofs.map(|d| seed[d]);
+        let limits = self.limits();
+        let mut found: Vec<(f64, Vec<f64>)> = Vec::with_capacity(8);
+        let mut poses = self.forward_kinematics(seed);
+        let mut raw = Vec::with_capacity(8);
+        // At the wrist singularity the seed's wrist pitch first; if no solution keeps to the
+        // limits with it, pitches every 10 degrees.
+        for pitch_samples in [0, 35] {
+            raw.clear();
+            let singular = match chain.kind {
+                ClosedForm::Irp6 => {
+                    irp6::solve(&crate::builtin::IRP6_LENGTHS, &flange, &arm_seed, pitch_samples, &mut raw)
+                }
+            };
+            self.keep_solutions(chain, effector, target, seed, &limits, &raw, &mut poses, &mut found);
+            if !singular || !found.is_empty() {
+                break;
+            }
+        }
+        found.sort_by(|a, b| a.0.total_cmp(&b.0));
+        Ok(found.into_iter().map(|(_, q)| q).collect())
+    }
+
+    /// Turn raw closed-form angles into configurations within the limits that reach `target`,
+    /// each with its distance from `seed`, skipping repeats.
+    #[allow(clippy::too_many_arguments)]
+    fn keep_solutions(
+        &self,
+        chain: &ArmChain,
+        effector: &crate::robot::EndEffector,
+        target: &Isometry3<f64>,
+        seed: &[f64],
+        limits: &[JointLimits],
+        raw: &[[f64; 6]],
+        poses: &mut [Isometry3<f64>],
+        found: &mut Vec<(f64, Vec<f64>)>,
+    ) {
+        let space = self.config_space();
+        'solutions: for angles in raw {
+            let mut q = seed.to_vec();
+            for (k, &d) in chain.dofs.iter().enumerate() {
+                let value = if self.dof_joint(d).kind == JointKind::Continuous {
+                    angles[k] + TAU * ((seed[d] - angles[k]) / TAU).round()
+                } else {
+                    match turn_into(angles[k], &limits[d], seed[d]) {
+                        Some(v) => v,
+                        None => continue 'solutions,
+                    }
+                };
+                q[d] = value;
+            }
+            self.forward_kinematics_into(&q, poses);
+            let e = pose_error(&(poses[effector.link] * effector.tool), target);
+            let close =
+                e.fixed_rows::<3>(0).norm() <= CLOSED_FORM_CHECK && e.fixed_rows::<3>(3).norm() <= CLOSED_FORM_CHECK;
+            if close && found.iter().all(|(_, o)| space.distance(o, &q) > 1e-9) {
+                found.push((space.distance(seed, &q), q));
+            }
+        }
+    }
+
+    fn end_effector_checked(&self, ee: usize) -> Result<&crate::robot::EndEffector, ModelError> {
+        self.end_effectors().get(ee).ok_or_else(|| ModelError::NoSuchName {
+            robot: self.name().to_string(),
+            what: "end effector",
+            name: ee.to_string(),
+        })
+    }
+
     /// Joint values placing end effector `ee`'s tool frame at `target`, within the position limits.
     ///
-    /// Damped least squares (Levenberg-Marquardt style), clamping every step into the limits, with
+    /// Where the end effector has a closed form that covers every joint moving it (the IRp-6 on
+    /// its postument), the answer is the closed-form solution nearest `seed`. Otherwise (and for
+    /// `position_only`, or when no closed-form solution lies within the limits): damped least
+    /// squares (Levenberg-Marquardt style), clamping every step into the limits, with
     /// deterministic random restarts. Continuous joints are returned wrapped near the seed.
     pub fn inverse_kinematics(
         &self,
@@ -58,14 +209,21 @@ impl Robot {
         seed: &[f64],
         options: &IkOptions,
     ) -> Result<Vec<f64>, ModelError> {
-        let Some(effector) = self.end_effectors().get(ee) else {
-            return Err(ModelError::NoSuchName {
-                robot: self.name().to_string(),
-                what: "end effector",
-                name: ee.to_string(),
-            });
-        };
+        let effector = self.end_effector_checked(ee)?;
         self.check_configuration(seed)?;
+        let whole = self.closed_forms.get(ee).and_then(|c| c.as_ref()).is_some_and(|c| c.whole);
+        if whole
+            && options.closed_form
+            && !options.position_only
+            && let Some(q) = self.inverse_kinematics_all(ee, target, seed)?.into_iter().next()
+        {
+            let e = pose_error(&(self.link_pose(&q, effector.link) * effector.tool), target);
+            let within = e.fixed_rows::<3>(0).norm() <= options.position_tolerance
+                && e.fixed_rows::<3>(3).norm() <= options.orientation_tolerance;
+            if within {
+                return Ok(q);
+            }
+        }
         let limits = self.limits();
         let mut rng = Rng::new(options.seed);
         let mut best = (f64::INFINITY, seed.to_vec());

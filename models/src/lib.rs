@@ -30,7 +30,7 @@ pub use collision::{Body, CollisionModel, CollisionScratch, Contact, DistanceRep
 pub use cspace::{ConfigSpace, wrap_angle};
 pub use error::ModelError;
 pub use geometry::{ConvexHull, PlacedShape, Shape};
-pub use ik::IkOptions;
+pub use ik::{ClosedForm, IkOptions};
 pub use joint::{Dh, Joint, JointKind, JointLimits};
 pub use rng::Rng;
 pub use robot::{EndEffector, Link, Robot, RobotBuilder};

@@ -6,6 +6,7 @@ use nalgebra::{DVector, Isometry3, Matrix6xX, Point3, Vector3};
 
 use crate::error::ModelError;
 use crate::geometry::PlacedShape;
+use crate::ik::{ArmChain, ClosedForm};
 use crate::joint::{Joint, JointKind, JointLimits};
 
 /// A rigid body of the tree with its collision shapes (in the link frame).
@@ -43,6 +44,8 @@ pub struct Robot {
     home: Vec<f64>,
     disabled_pairs: HashSet<(usize, usize)>,
     base: Isometry3<f64>,
+    /// Per end effector: its closed-form inverse kinematics, if the builder attached one.
+    pub(crate) closed_forms: Vec<Option<ArmChain>>,
 }
 
 /// Builds a [`Robot`] link by link; [`RobotBuilder::build`] checks and orders the tree.
@@ -57,6 +60,7 @@ pub struct RobotBuilder {
     disabled: Vec<(String, String)>,
     pending_mimic: Vec<(usize, String, f64, f64)>,
     base: Isometry3<f64>,
+    closed_forms: Vec<(String, ClosedForm)>,
 }
 
 impl RobotBuilder {
@@ -71,6 +75,7 @@ impl RobotBuilder {
             disabled: Vec::new(),
             pending_mimic: Vec::new(),
             base: Isometry3::identity(),
+            closed_forms: Vec::new(),
         }
     }
     /// Where the numbers come from (shown in `--help` and `embodied model`).
@@ -133,6 +138,11 @@ impl RobotBuilder {
     /// Declare an end effector: flange = the named link's frame; tool relative to it.
     pub fn end_effector(&mut self, name: impl Into<String>, link: impl Into<String>, tool: Isometry3<f64>) {
         self.end_effectors.push((name.into(), link.into(), tool));
+    }
+    /// Attach a closed-form inverse kinematics to the named end effector. [`RobotBuilder::build`]
+    /// checks that the chain ending at its flange has the joints the closed form needs.
+    pub fn closed_form_ik(&mut self, end_effector: impl Into<String>, kind: ClosedForm) {
+        self.closed_forms.push((end_effector.into(), kind));
     }
     /// The configuration reported as "home" (default: zeros clamped into limits).
     pub fn home(&mut self, q: Vec<f64>) {
@@ -263,7 +273,19 @@ impl RobotBuilder {
             }
             None => dof_joints.iter().map(|&ji| joints[ji].limits.clamp(0.0)).collect(),
         };
+        let mut closed_forms = vec![None; end_effectors.len()];
+        for (name, kind) in &self.closed_forms {
+            let Some(ee) = end_effectors.iter().position(|e| &e.name == name) else {
+                return Err(ModelError::NoSuchName {
+                    robot: self.name.clone(),
+                    what: "end effector",
+                    name: name.clone(),
+                });
+            };
+            closed_forms[ee] = Some(arm_chain(&links, &joints, end_effectors[ee].link, *kind).map_err(&invalid)?);
+        }
         Ok(Robot {
+            closed_forms,
             name: self.name,
             provenance: self.provenance,
             links,
@@ -275,6 +297,42 @@ impl RobotBuilder {
             base: self.base,
         })
     }
+}
+
+/// Resolve a closed form against the built tree: the six revolute joints nearest the flange link,
+/// consecutive, with nothing between the last and the flange.
+fn arm_chain(links: &[Link], joints: &[Joint], flange: usize, kind: ClosedForm) -> Result<ArmChain, String> {
+    let mut moving = Vec::new();
+    let mut l = flange;
+    while let Some(ji) = links[l].parent_joint {
+        if joints[ji].kind != JointKind::Fixed {
+            moving.push(ji);
+        }
+        l = joints[ji].parent_link;
+    }
+    let name = &links[flange].name;
+    if moving.len() < 6 {
+        return Err(format!("the closed form {kind:?} needs six joints up to `{name}`, found {}", moving.len()));
+    }
+    let arm = &moving[..6];
+    // Consecutive: each arm joint's parent link is the child of the next one up the chain.
+    let consecutive = joints[arm[0]].child_link == flange
+        && arm.windows(2).all(|w| joints[w[0]].parent_link == joints[w[1]].child_link);
+    let mut dofs = [0usize; 6];
+    for (k, &ji) in arm.iter().rev().enumerate() {
+        let j = &joints[ji];
+        match (j.kind, j.dof_index, j.mimic) {
+            (JointKind::Revolute | JointKind::Continuous, Some(d), None) if consecutive => dofs[k] = d,
+            _ => {
+                return Err(format!(
+                    "the closed form {kind:?} needs six consecutive revolute joints ending at `{name}`; `{}` is not one",
+                    j.name
+                ));
+            }
+        }
+    }
+    let first = &joints[arm[5]];
+    Ok(ArmChain { kind, dofs, shoulder_link: first.parent_link, shoulder: first.origin, whole: moving.len() == 6 })
 }
 
 impl Robot {
@@ -578,6 +636,13 @@ impl Robot {
             .filter(|(ji, _)| robot.joints[**ji].kind != JointKind::Fixed)
             .map(|(_, v)| *v)
             .collect();
+        // A closed form survives when its six joints still move; a frozen track makes it whole.
+        for ee in 0..robot.closed_forms.len() {
+            let resolved = robot.closed_forms[ee]
+                .as_ref()
+                .and_then(|c| arm_chain(&robot.links, &robot.joints, robot.end_effectors[ee].link, c.kind).ok());
+            robot.closed_forms[ee] = resolved;
+        }
         Ok(robot)
     }
 }

@@ -242,7 +242,16 @@ pub fn two_arm_ik(
     };
     let mut q = seed.to_vec();
     for k in 0..2 {
-        let solution = robot.inverse_kinematics(ee[k], targets[k], &q, &options).ok()?;
+        // The closed form's nearest solution (a track held where it is), else the numerical one.
+        let closed = robot.closed_form(ee[k]).and_then(|_| {
+            let nearest = robot.inverse_kinematics_all(ee[k], targets[k], &q).ok()?.into_iter().next()?;
+            let (dp, da) = pose_difference(&tool_pose(robot, &nearest, ee[k]), targets[k]);
+            (dp <= tolerance && da <= tolerance).then_some(nearest)
+        });
+        let solution = match closed {
+            Some(s) => s,
+            None => robot.inverse_kinematics(ee[k], targets[k], &q, &options).ok()?,
+        };
         for d in arm_dofs(robot, ee[k]) {
             q[d] = solution[d];
         }

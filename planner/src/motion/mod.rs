@@ -383,12 +383,20 @@ fn resolve_goals(
     match (valid.is_empty(), first_error) {
         (true, Some(e)) => Err(e),
         (true, None) => Err(PlanError::InvalidInput { message: "no goal configuration".into() }),
-        (false, _) => Ok(valid),
+        (false, _) => {
+            if matches!(goal, Goal::ToolPose { .. }) {
+                valid.truncate(settings.ik_solutions.max(1));
+            }
+            Ok(valid)
+        }
     }
 }
 
-/// Up to `ik_solutions` distinct IK solutions for a tool pose: the first seeded at the start,
-/// the others at random configurations.
+/// IK solutions for a tool pose. Where the end effector has a closed form: every solution it
+/// lists (nearest the start first; `resolve_goals` keeps the first `ik_solutions` valid ones).
+/// Otherwise, or when the closed form finds none with the start's other joints (a track held
+/// where it is): up to `ik_solutions` distinct numerical solutions, the first seeded at the
+/// start, the others at random configurations.
 fn tool_pose_goals(
     robot: &Robot,
     start: &[f64],
@@ -399,6 +407,14 @@ fn tool_pose_goals(
 ) -> Result<Vec<Vec<f64>>, PlanError> {
     if ee >= robot.end_effectors().len() {
         return Err(PlanError::InvalidInput { message: format!("robot `{}` has no end effector {ee}", robot.name()) });
+    }
+    if robot.closed_form(ee).is_some() {
+        let all = robot
+            .inverse_kinematics_all(ee, pose, start)
+            .map_err(|e| PlanError::InvalidInput { message: format!("tool-pose goal: {e}") })?;
+        if !all.is_empty() {
+            return Ok(all);
+        }
     }
     let space = robot.config_space();
     let wanted = settings.ik_solutions.max(1);
