@@ -447,6 +447,13 @@ pub fn parse_scenario(text: &str, file: &Path, dir: &Path) -> Result<Scenario, A
                 if robot.end_effectors().is_empty() {
                     return Err(ctx.err(p.span(), "goal_pose: this robot has no end effector"));
                 }
+                let rpy = raw_pose.rpy.unwrap_or([0.0; 3]);
+                if !raw_pose.xyz.iter().chain(&rpy).all(|v| v.is_finite()) {
+                    return Err(ctx.err(
+                        p.span(),
+                        format!("goal_pose: expected finite numbers, got xyz {:?}, rpy {rpy:?}", raw_pose.xyz),
+                    ));
+                }
                 Some(GoalSpec::ToolPose { end_effector: ee, pose: pose(raw_pose.xyz, raw_pose.rpy) })
             }
             _ => {
@@ -510,6 +517,17 @@ pub fn parse_scenario(text: &str, file: &Path, dir: &Path) -> Result<Scenario, A
             ));
         }
         let Some(shape) = shapes.pop() else { unreachable!("checked above") };
+        let (rpy, velocity) = (o.rpy.unwrap_or([0.0; 3]), o.velocity.unwrap_or([0.0; 3]));
+        let placement = o.xyz.iter().chain(&rpy).chain(&velocity);
+        if !placement.into_iter().all(|v| v.is_finite()) || !o.scale.unwrap_or(1.0).is_finite() {
+            return Err(ctx.err(
+                span,
+                format!(
+                    "obstacle `{}`: expected finite numbers, got xyz {:?}, rpy {:?}, velocity {:?}, scale {:?}",
+                    o.name, o.xyz, o.rpy, o.velocity, o.scale
+                ),
+            ));
+        }
         let appear_at = match &o.appear_at {
             Some(t) if !(t.get_ref().is_finite() && *t.get_ref() >= 0.0) => {
                 return Err(ctx.err(

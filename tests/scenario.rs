@@ -87,3 +87,16 @@ fn edge_check_is_certified_by_default_and_checked_with_its_place() {
     assert!(e.starts_with("bad.toml:7:14:"), "{e}");
     assert!(e.contains("\"certified\" or \"sampled\""), "{e}");
 }
+
+#[test]
+fn non_finite_poses_are_refused_with_their_place() {
+    let base = "name = \"x\"\ndescription = \"d\"\n[[agents]]\nname = \"a\"\nrobot = \"irp6-postument\"\n";
+    let e = err_of(&format!("{base}goal_pose = {{ xyz = [0.5, 0.6, nan], rpy = [0.0, 1.5, 0.0] }}\n"));
+    assert!(e.starts_with("bad.toml:6:") && e.contains("goal_pose: expected finite numbers"), "{e}");
+    let e = err_of(&format!("{base}goal_pose = {{ xyz = [0.5, 0.6, 1.0], rpy = [0.0, inf, 0.0] }}\n"));
+    assert!(e.starts_with("bad.toml:6:") && e.contains("rpy [0.0, inf, 0.0]"), "{e}");
+    for bad in ["xyz = [0, nan, 0]", "xyz = [0, 0, 0]\nrpy = [0, 0, -inf]", "xyz = [0, 0, 0]\nvelocity = [nan, 0, 0]"] {
+        let e = err_of(&format!("{base}[[obstacles]]\nname = \"o\"\nsphere = 0.1\n{bad}\n"));
+        assert!(e.starts_with("bad.toml:6:") && e.contains("obstacle `o`: expected finite numbers"), "{bad}: {e}");
+    }
+}
