@@ -245,8 +245,11 @@ pub fn two_arm_ik(
         // The closed form's nearest solution (a track held where it is), else the numerical one.
         let closed = robot.closed_form(ee[k]).and_then(|_| {
             let nearest = robot.inverse_kinematics_all(ee[k], targets[k], &q).ok()?.into_iter().next()?;
-            let (dp, da) = pose_difference(&tool_pose(robot, &nearest, ee[k]), targets[k]);
-            (dp <= tolerance && da <= tolerance).then_some(nearest)
+            // The solver's own error measure (a rotation vector: `angle()` of a near-identity
+            // rotation is only good to about 1e-8 rad, too coarse for a 1e-10 tolerance).
+            let e = embodied_models::ik::pose_error(&tool_pose(robot, &nearest, ee[k]), targets[k]);
+            let within = e.fixed_rows::<3>(0).norm() <= tolerance && e.fixed_rows::<3>(3).norm() <= tolerance;
+            within.then_some(nearest)
         });
         let solution = match closed {
             Some(s) => s,
