@@ -214,7 +214,12 @@ pub fn plan_scenario(scenario: &Scenario, deadline_ms: Option<f64>) -> Result<Pl
 /// Read a plan file back, checking its format tag.
 pub fn read_plan(path: &std::path::Path) -> Result<PlanFile, AppError> {
     let text = std::fs::read_to_string(path).map_err(|e| AppError::io(path, e))?;
-    let plan: PlanFile = serde_json::from_str(&text).map_err(|e| AppError::Parse {
+    parse_plan(&text, path)
+}
+
+/// Parse a plan file's text, checking its format tag; `path` names it in errors.
+pub fn parse_plan(text: &str, path: &std::path::Path) -> Result<PlanFile, AppError> {
+    let plan: PlanFile = serde_json::from_str(text).map_err(|e| AppError::Parse {
         file: path.to_path_buf(),
         line: e.line(),
         column: e.column(),
