@@ -189,6 +189,65 @@ proptest! {
     }
 }
 
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(3000))]
+
+    /// The capsule-box and capsule-cylinder contact tests decide exactly at the boundary: a
+    /// capsule whose core lies a known (exact reference) distance `core` from a box or cylinder
+    /// touches it with radius `core` (1 + 1e-9) and misses it with radius `core` (1 - 1e-9),
+    /// in either argument order.
+    #[test]
+    fn capsule_box_and_cylinder_contact_is_decided_at_the_exact_distance(
+        ends in (prop::array::uniform3(-0.6..0.6f64), prop::array::uniform3(-0.6..0.6f64)),
+        pa in pose(),
+        other in prop_oneof![
+            prop::array::uniform3(0.02..0.6f64).prop_map(|h| Shape::cuboid(h[0], h[1], h[2])),
+            (0.02..0.6f64, 0.02..0.6f64).prop_map(|(r, h)| Shape::cylinder(r, h)),
+        ],
+        pb in pose(),
+        flip in any::<bool>(),
+    ) {
+        let thin = Shape::capsule(ends.0, ends.1, 1e-300);
+        let core = capsule_reference(&thin, &pa, &other, &pb);
+        prop_assume!(core.is_some_and(|d| d > 1e-6));
+        let core = core.unwrap_or_default();
+        for (scale, touching) in [(1.0 + 1e-9, true), (1.0 - 1e-9, false)] {
+            let capsule = Shape::capsule(ends.0, ends.1, core * scale);
+            let hit = if flip { shapes_intersect(&other, &pb, &capsule, &pa) } else { shapes_intersect(&capsule, &pa, &other, &pb) };
+            prop_assert_eq!(hit, touching, "{} at core distance {}, radius {}", other.kind(), core, core * scale);
+        }
+    }
+}
+
+#[test]
+fn capsule_box_contact_in_special_positions() {
+    let cube = Shape::cuboid(0.5, 0.5, 0.5);
+    let id = Isometry3::identity();
+    // Parallel to a face, 0.1 above it: distance 0.1 along the whole length.
+    let above = Shape::capsule([-2.0, 0.3, 0.6], [2.0, 0.3, 0.6], 0.1);
+    assert!((dist(&above, id, &cube, id)).abs() < 1e-12);
+    assert!(shapes_intersect(&above, &id, &cube, &id));
+    assert!(!shapes_intersect(&Shape::capsule([-2.0, 0.3, 0.6], [2.0, 0.3, 0.6], 0.0999), &id, &cube, &id));
+    // Skew past an edge: nearest to the edge x = z = 0.5 at (0.5, 0, 0.5), from (0.7, 0, 0.7).
+    let skew = Shape::capsule([0.7, -1.0, 0.7], [0.7, 1.0, 0.7], 0.05);
+    let d = dist(&skew, id, &cube, id);
+    assert!((d - (0.2 * 2f64.sqrt() - 0.05)).abs() < 1e-12, "{d}");
+    // A point capsule (zero length) is a sphere; a capsule through the box touches it.
+    let point = Shape::capsule([0.0, 0.0, 0.9], [0.0, 0.0, 0.9], 0.39);
+    assert!(!shapes_intersect(&point, &id, &cube, &id));
+    assert!(shapes_intersect(&Shape::capsule([0.0, 0.0, 0.9], [0.0, 0.0, 0.9], 0.41), &id, &cube, &id));
+    let through = Shape::capsule([-3.0, 0.1, 0.0], [3.0, 0.1, 0.0], 0.01);
+    assert!(shapes_intersect(&through, &id, &cube, &id));
+    assert!(dist(&through, id, &cube, id) < 0.0);
+    // Witness points of the edge case (the capsule runs along the edge, so any y on it will
+    // do): on the box's edge, and on the capsule's surface straight out from it.
+    let sep = shape_separation(&skew, &id, &cube, &id);
+    let y = sep.point_b.y;
+    assert!(y.abs() <= 0.5 && (sep.point_b - Point3::new(0.5, y, 0.5)).norm() < 1e-12, "{:?}", sep.point_b);
+    let h = 0.05 / 2f64.sqrt();
+    assert!((sep.point_a - Point3::new(0.7 - h, y, 0.7 - h)).norm() < 1e-12, "{:?}", sep.point_a);
+}
+
 // ---------------------------------------------------------------------------------------------
 // Built-in robots.
 

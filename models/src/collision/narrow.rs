@@ -1,8 +1,10 @@
 //! Narrow phase: does one pair of posed shapes overlap, and how far apart are they?
 //!
 //! The robot hot path is spheres and capsules against spheres, boxes, capsules and cylinders, so
-//! those pairs are answered in closed form here (a handful of flops, no branches into GJK). Every
-//! other pair (box-box, cylinder-cylinder, capsule-box, meshes...) goes to parry's dispatcher.
+//! those pairs are answered here without GJK: in closed form (a capsule against a box by the
+//! exact segment-box distance), or, for a capsule against a cylinder's curved side, by a search
+//! whose Lipschitz bound decides the answer. Every other pair (box-box, box-cylinder,
+//! cylinder-cylinder, meshes...) goes to parry's dispatcher.
 //!
 //! Distances are *signed*: positive is the gap between the shapes, negative is the penetration
 //! depth (the smallest translation that separates them), for the analytic paths and for parry's
@@ -183,6 +185,130 @@ pub fn sphere_cylinder(c: &Point3<f64>, r: f64, iso: &Isometry3<f64>, rc: f64, h
     Separation { distance: len - r, point_a: c + n * r, point_b: iso * q }
 }
 
+/// Squared distance from the segment `p + t d`, t in [0, 1], to the box |x_i| <= `half`_i (all
+/// in the box's frame), and the parameter `t` of a nearest segment point.
+///
+/// Along the segment each axis adds max(0, |x_i(t)| - half_i)^2: a convex piecewise quadratic
+/// in t whose pieces change where x_i(t) crosses -half_i or +half_i. The sum is convex and one
+/// quadratic between consecutive crossings, so its minimum over [0, 1] is the least of the
+/// pieces' minima, each the vertex of its parabola clamped into the piece (at most seven
+/// pieces). Each candidate is measured from its point, not from the expanded quadratic, so a
+/// small gap keeps its digits. A NaN coordinate reads as inside (distance 0): the safe side.
+pub fn segment_box_dist2(p: &Vector3<f64>, d: &Vector3<f64>, half: &Vector3<f64>) -> (f64, f64) {
+    let mut ts = [0.0f64; 8];
+    let mut n = 1;
+    for i in 0..3 {
+        if d[i] != 0.0 {
+            for edge in [-half[i], half[i]] {
+                let t = (edge - p[i]) / d[i];
+                if t > 0.0 && t < 1.0 {
+                    // Insertion into the sorted crossings.
+                    let mut k = n;
+                    while k > 1 && ts[k - 1] > t {
+                        ts[k] = ts[k - 1];
+                        k -= 1;
+                    }
+                    ts[k] = t;
+                    n += 1;
+                }
+            }
+        }
+    }
+    ts[n] = 1.0;
+    let at = |t: f64| {
+        let x = p + d * t;
+        let e =
+            Vector3::new((x.x.abs() - half.x).max(0.0), (x.y.abs() - half.y).max(0.0), (x.z.abs() - half.z).max(0.0));
+        e.norm_squared()
+    };
+    let mut best = (f64::INFINITY, 0.0);
+    for k in 0..n {
+        let (t0, t1) = (ts[k], ts[k + 1]);
+        let tm = 0.5 * (t0 + t1);
+        // The piece's quadratic a t^2 + 2 b t + c: the axes outside the slab at its middle.
+        let (mut a, mut b) = (0.0, 0.0);
+        for i in 0..3 {
+            let x = p[i] + d[i] * tm;
+            let e = if x > half[i] {
+                p[i] - half[i]
+            } else if x < -half[i] {
+                p[i] + half[i]
+            } else {
+                continue;
+            };
+            a += d[i] * d[i];
+            b += e * d[i];
+        }
+        let t = if a > 0.0 { (-b / a).clamp(t0, t1) } else { t0 };
+        let f = at(t);
+        if f < best.0 {
+            best = (f, t);
+        }
+    }
+    best
+}
+
+/// Whether a capsule (segment `p`-`q`, radius `r`, world frame) touches a box.
+#[inline]
+fn capsule_box_hit(p: &Point3<f64>, q: &Point3<f64>, r: f64, iso: &Isometry3<f64>, half: &Vector3<f64>) -> bool {
+    let pl = iso.inverse_transform_point(p);
+    let ql = iso.inverse_transform_point(q);
+    segment_box_dist2(&pl.coords, &(ql - pl), half).0 <= r * r
+}
+
+/// Whether a capsule (segment `p`-`q`, radius `r`, world frame) touches a cylinder along its
+/// local z. The cylinder's box bounds it from outside, so a capsule clear of the box is clear
+/// (the usual answer, exact and cheap). Otherwise the distance from the segment's points to the
+/// cylinder, convex along the segment and |q - p|-Lipschitz in its parameter, is searched by
+/// golden sections: any point within `r` is a contact; once the best point inside the bracket
+/// (which keeps a minimiser of a convex function) less |q - p| times the bracket's width is
+/// beyond `r`, nothing on the segment comes within `r`. Undecided after the search (within
+/// rounding of touching), it says touching: the safe side.
+fn capsule_cylinder_hit(p: &Point3<f64>, q: &Point3<f64>, r: f64, iso: &Isometry3<f64>, rc: f64, hh: f64) -> bool {
+    let pl = iso.inverse_transform_point(p);
+    let d = iso.inverse_transform_point(q) - pl;
+    if segment_box_dist2(&pl.coords, &d, &Vector3::new(rc, rc, hh)).0 > r * r {
+        return false;
+    }
+    let at = |t: f64| {
+        let x = pl + d * t;
+        let dr = ((x.x * x.x + x.y * x.y).sqrt() - rc).max(0.0);
+        let dz = (x.z.abs() - hh).max(0.0);
+        (dr * dr + dz * dz).sqrt()
+    };
+    let lipschitz = d.norm();
+    const G: f64 = 0.618_033_988_749_894_8;
+    let (mut lo, mut hi) = (0.0, 1.0);
+    let (mut t1, mut t2) = (hi - G * (hi - lo), lo + G * (hi - lo));
+    let (mut f1, mut f2) = (at(t1), at(t2));
+    // A NaN (a NaN pose) ends in "touching" too.
+    let ends = at(0.0).min(at(1.0));
+    if ends.is_nan() || ends <= r {
+        return true;
+    }
+    for _ in 0..100 {
+        let inside = f1.min(f2);
+        if inside.is_nan() || inside <= r {
+            return true;
+        }
+        if inside - lipschitz * (hi - lo) > r {
+            return false;
+        }
+        if f1 <= f2 {
+            hi = t2;
+            (t2, f2) = (t1, f1);
+            t1 = hi - G * (hi - lo);
+            f1 = at(t1);
+        } else {
+            lo = t1;
+            (t1, f1) = (t2, f2);
+            t2 = lo + G * (hi - lo);
+            f2 = at(t2);
+        }
+    }
+    true
+}
+
 #[inline]
 fn sphere_box_hit(c: &Point3<f64>, r: f64, iso: &Isometry3<f64>, half: &Vector3<f64>) -> bool {
     let p = iso.inverse_transform_point(c);
@@ -229,6 +355,12 @@ pub(crate) fn intersects(a: &View, b: &View) -> bool {
         (Sphere { c, r }, Cylinder { iso, r: rc, hh }) | (Cylinder { iso, r: rc, hh }, Sphere { c, r }) => {
             sphere_cylinder_hit(c, *r, iso, *rc, *hh)
         }
+        (Capsule { a, b, r }, Cuboid { iso, half }) | (Cuboid { iso, half }, Capsule { a, b, r }) => {
+            capsule_box_hit(a, b, *r, iso, half)
+        }
+        (Capsule { a, b, r }, Cylinder { iso, r: rc, hh }) | (Cylinder { iso, r: rc, hh }, Capsule { a, b, r }) => {
+            capsule_cylinder_hit(a, b, *r, iso, *rc, *hh)
+        }
         _ => parry_intersects(a, b),
     }
 }
@@ -263,6 +395,20 @@ fn rounded_segment(p: &Point3<f64>, q: &Point3<f64>, r: f64, other: &View) -> Se
         && let Some(s) = segment_cylinder(p, q, r, iso, rc, hh)
     {
         return s;
+    }
+    if let View::Cuboid { iso, half } = *other {
+        let pl = iso.inverse_transform_point(p);
+        let d = iso.inverse_transform_point(q) - pl;
+        let (d2, t) = segment_box_dist2(&pl.coords, &d, &half);
+        // Core outside the box (by more than rounding): the nearest core point and its clamp
+        // into the box are the witnesses. Touching or inside: parry's depth below.
+        if d2 > 1e-24 {
+            let s = pl + d * t;
+            let c = Point3::new(s.x.clamp(-half.x, half.x), s.y.clamp(-half.y, half.y), s.z.clamp(-half.z, half.z));
+            let gap = d2.sqrt();
+            let n = iso.rotation * ((c - s) / gap);
+            return Separation { distance: gap - r, point_a: iso * s + n * r, point_b: iso * c };
+        }
     }
     let (io, so) = to_parry(other);
     let segment = Segment::new(*p, *q);
