@@ -1,7 +1,8 @@
 //! Criterion benchmarks: forward kinematics (all links, and one end effector) and the geometric
 //! Jacobian of the first end effector, per built-in robot, over random configurations; inverse
 //! kinematics of the IRp-6 on its postument, closed form against the numerical solver, for tool
-//! poses reached at random configurations (seeded at the home pose).
+//! poses reached at random configurations (seeded at the home pose); and the numerical solver
+//! tracking a moving target from a nearby seed, as path following does.
 
 #![allow(clippy::unwrap_used)]
 
@@ -60,6 +61,35 @@ fn inverse_kinematics(c: &mut Criterion) {
         b.iter(|| {
             i = (i + 1) % targets.len();
             black_box(robot.inverse_kinematics(0, black_box(&targets[i]), &home, &numerical).is_ok())
+        })
+    });
+    // Tracking, as Cartesian path following does it (the two-arm carry's 1 ms samples): the
+    // on-track arm of `two-irp6` (7 DOF with its track, so the numerical solver) seeded at a
+    // configuration 0.01 rad or m per joint away from one that reaches the target, to 1e-10.
+    let cell = builtin("two-irp6").unwrap();
+    let near: Vec<(Vec<f64>, Isometry3<f64>)> = (0..64)
+        .map(|_| {
+            let q = cell.random_configuration(&mut rng);
+            let mut reached = q.clone();
+            for (v, l) in reached.iter_mut().zip(cell.limits()) {
+                *v = l.clamp(*v + rng.range(-0.01, 0.01));
+            }
+            let target = cell.end_effector_poses(&reached, 0).1;
+            (q, target)
+        })
+        .collect();
+    let tracking = IkOptions {
+        closed_form: false,
+        position_tolerance: 1e-10,
+        orientation_tolerance: 1e-10,
+        restarts: 0,
+        ..IkOptions::default()
+    };
+    c.bench_function("ik-numerical-tracking/two-irp6-on-track-arm", |b| {
+        b.iter(|| {
+            i = (i + 1) % near.len();
+            let (seed, target) = &near[i];
+            black_box(cell.inverse_kinematics(0, black_box(target), seed, &tracking).is_ok())
         })
     });
 }

@@ -7,7 +7,7 @@ pub(crate) use irp6::Irp6Lengths;
 
 use std::f64::consts::TAU;
 
-use nalgebra::{DMatrix, DVector, Isometry3, Vector6};
+use nalgebra::{Isometry3, Matrix6, Vector6};
 
 use crate::error::ModelError;
 use crate::joint::{JointKind, JointLimits};
@@ -227,7 +227,7 @@ impl Robot {
         let limits = self.limits();
         let mut rng = Rng::new(options.seed);
         let mut best = (f64::INFINITY, seed.to_vec());
-        let rows = if options.position_only { 3 } else { 6 };
+        let rot_weight = if options.position_only { 0.0 } else { 1.0 };
         let mut poses = self.forward_kinematics(seed);
         let residual_of = |poses: &mut Vec<Isometry3<f64>>, q: &[f64]| -> (Vector6<f64>, f64, f64) {
             self.forward_kinematics_into(q, poses);
@@ -236,13 +236,22 @@ impl Robot {
             let rot = if options.position_only { 0.0 } else { e.fixed_rows::<3>(3).norm() };
             (e, pos, rot)
         };
+        // Rows of the error the solve uses: a position-only solve drops the rotation rows,
+        // which leaves J J^T block diagonal with an identity block and those rows of y at zero.
+        let mask = Vector6::new(1.0, 1.0, 1.0, rot_weight, rot_weight, rot_weight);
+        let n = self.dof();
         let mut trial = seed.to_vec();
+        let mut dq = vec![0.0; n];
+        let mut frozen = vec![false; n];
         for attempt in 0..=options.restarts {
             let mut q = if attempt == 0 { seed.to_vec() } else { self.random_configuration(&mut rng) };
             // Levenberg-Marquardt: accept a step only if it lowers the error, adapt the damping.
             let mut lambda = options.damping.max(1e-9);
             let (mut e, mut pos_err, mut rot_err) = residual_of(&mut poses, &q);
             let mut cost = pos_err * pos_err + rot_err * rot_err;
+            // The Jacobian at q: recomputed only when a step is accepted (a rejected step leaves
+            // q, and so the Jacobian, as it was; the poses then are the trial's).
+            let mut jac = self.jacobian_with_poses(&poses, effector.link, &effector.tool);
             for _ in 0..options.max_iterations {
                 if pos_err + rot_err < best.0 {
                     best = (pos_err + rot_err, q.clone());
@@ -250,23 +259,25 @@ impl Robot {
                 if pos_err <= options.position_tolerance && rot_err <= options.orientation_tolerance {
                     return Ok(q);
                 }
-                residual_of(&mut poses, &q);
-                let jac = self.jacobian_with_poses(&poses, effector.link, &effector.tool);
                 // Active set: a joint at a bound that the step would push further out is frozen
                 // (its column removed) and the step solved again, so bounds do not stall progress.
-                let err = DVector::from_fn(rows, |r, _| e[r]);
-                let mut frozen = vec![false; self.dof()];
-                let mut dq = DVector::zeros(self.dof());
+                let err = e.component_mul(&mask);
+                frozen.fill(false);
                 let mut solved = false;
                 for _ in 0..3 {
-                    let j: DMatrix<f64> =
-                        DMatrix::from_fn(rows, self.dof(), |r, c| if frozen[c] { 0.0 } else { jac[(r, c)] });
-                    let jjt = &j * j.transpose() + DMatrix::identity(rows, rows) * lambda;
+                    let mut jjt = Matrix6::identity() * lambda + Matrix6::from_diagonal(&mask.map(|m| 1.0 - m));
+                    for c in (0..n).filter(|&c| !frozen[c]) {
+                        let col = jac.column(c).component_mul(&mask);
+                        jjt += col * col.transpose();
+                    }
                     let Some(chol) = jjt.cholesky() else { break };
-                    dq = j.transpose() * chol.solve(&err);
+                    let y = chol.solve(&err);
+                    for (c, v) in dq.iter_mut().enumerate() {
+                        *v = if frozen[c] { 0.0 } else { jac.column(c).component_mul(&mask).dot(&y) };
+                    }
                     solved = true;
                     let mut changed = false;
-                    for i in 0..q.len() {
+                    for i in 0..n {
                         let at_lower = q[i] <= limits[i].lower + 1e-12 && dq[i] < 0.0;
                         let at_upper = q[i] >= limits[i].upper - 1e-12 && dq[i] > 0.0;
                         if !frozen[i] && (at_lower || at_upper) {
@@ -283,8 +294,9 @@ impl Robot {
                     continue;
                 }
                 // Limit the step so that the linearisation stays valid.
-                let scale = (0.5 / dq.amax().max(1e-12)).min(1.0);
-                for i in 0..q.len() {
+                let largest = dq.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+                let scale = (0.5 / largest.max(1e-12)).min(1.0);
+                for i in 0..n {
                     trial[i] = limits[i].clamp(q[i] + scale * dq[i]);
                 }
                 let (e2, p2, r2) = residual_of(&mut poses, &trial);
@@ -293,6 +305,7 @@ impl Robot {
                     q.copy_from_slice(&trial);
                     (e, pos_err, rot_err, cost) = (e2, p2, r2, cost2);
                     lambda = (lambda / 3.0).max(1e-12);
+                    jac = self.jacobian_with_poses(&poses, effector.link, &effector.tool);
                 } else {
                     lambda *= 4.0;
                     if lambda > 1e6 {
