@@ -129,7 +129,6 @@ impl Robot {
         let arm_seed = chain.dofs.map(|d| seed[d]);
         let limits = self.limits();
         let mut found: Vec<(f64, Vec<f64>)> = Vec::with_capacity(8);
-        let mut poses = self.forward_kinematics(seed);
         let mut raw = Vec::with_capacity(8);
         // At the wrist singularity the seed's wrist pitch first; if no solution keeps to the
         // limits with it, pitches every 10 degrees.
@@ -140,7 +139,7 @@ impl Robot {
                     irp6::solve(&crate::builtin::IRP6_LENGTHS, &flange, &arm_seed, pitch_samples, &mut raw)
                 }
             };
-            self.keep_solutions(chain, effector, target, seed, &limits, &raw, &mut poses, &mut found);
+            self.keep_solutions(chain, effector, target, seed, &limits, &raw, &mut found);
             if !singular || !found.is_empty() {
                 break;
             }
@@ -160,7 +159,6 @@ impl Robot {
         seed: &[f64],
         limits: &[JointLimits],
         raw: &[[f64; 6]],
-        poses: &mut [Isometry3<f64>],
         found: &mut Vec<(f64, Vec<f64>)>,
     ) {
         let space = self.config_space();
@@ -177,8 +175,8 @@ impl Robot {
                 };
                 q[d] = value;
             }
-            self.forward_kinematics_into(&q, poses);
-            let e = pose_error(&(poses[effector.link] * effector.tool), target);
+            // Only the chain to the flange: the check needs no other link (the other arm, say).
+            let e = pose_error(&(self.link_pose(&q, effector.link) * effector.tool), target);
             let close =
                 e.fixed_rows::<3>(0).norm() <= CLOSED_FORM_CHECK && e.fixed_rows::<3>(3).norm() <= CLOSED_FORM_CHECK;
             if close && found.iter().all(|(_, o)| space.distance(o, &q) > 1e-9) {
