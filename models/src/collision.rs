@@ -1174,6 +1174,23 @@ impl CollisionModel {
             .collect()
     }
 
+    /// [`Self::travel_bounds`] from joint steps given as magnitudes (`steps[i]` = |qb_i - qa_i|,
+    /// the short way on continuous joints), written as `out[link] = bound` for every link that
+    /// carries shapes; other entries are left as they are. No allocation, so a checker can
+    /// bound many motions (or one motion with some joints held: a zero step) cheaply. Steps of
+    /// the wrong length write nothing.
+    pub fn travel_bounds_of_steps(&self, steps: &[f64], out: &mut [f64]) {
+        let g = &*self.geom;
+        if steps.len() != g.dof {
+            return;
+        }
+        for (slot, l) in g.links.iter().enumerate() {
+            if let Some(o) = out.get_mut(l.link) {
+                *o = g.lever[slot * g.dof..(slot + 1) * g.dof].iter().zip(steps).map(|(a, d)| a * d).sum();
+            }
+        }
+    }
+
     /// The certificate of [`CollisionModel::motion_is_certified_free`], and the number of
     /// configurations it checked. `check_ends`: check the end configurations too (a planner
     /// that has already checked them passes `false`).

@@ -544,3 +544,26 @@ fn the_certificate_starts_from_pieces_small_enough_to_be_free() {
     assert!(!blocked.collides(&qa) && !blocked.collides(&turned(2.0)));
     assert_eq!(blocked.certify(&qa, &turned(2.0), 1e-4, false, &mut s), (false, 1));
 }
+
+/// The allocation-free travel bound from step magnitudes is the travel bound of the motion,
+/// on every built-in robot (Polycrank's continuous joints the short way round).
+#[test]
+fn travel_bounds_of_steps_match_the_motion_bounds() {
+    let mut rng = Rng::new(5);
+    for name in BUILTIN_NAMES {
+        let robot = builtin(name).unwrap();
+        let model = CollisionModel::new(&robot, Environment::default());
+        let space = robot.config_space();
+        for _ in 0..50 {
+            let (qa, qb) = (robot.random_configuration(&mut rng), robot.random_configuration(&mut rng));
+            let steps: Vec<f64> = (0..robot.dof()).map(|i| space.delta(i, qa[i], qb[i]).abs()).collect();
+            let mut out = vec![-1.0; robot.links().len()];
+            model.travel_bounds_of_steps(&steps, &mut out);
+            let bounds = model.travel_bounds(&qa, &qb);
+            assert!(!bounds.is_empty(), "{name}");
+            for (link, bound) in bounds {
+                assert_eq!(out[link], bound, "{name} link {link}");
+            }
+        }
+    }
+}

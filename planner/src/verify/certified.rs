@@ -544,15 +544,16 @@ impl Pairs {
     fn travel(&self, model: &CollisionModel, qa: &[f64], qb: &[f64], out: &mut Vec<f64>) {
         out.clear();
         out.resize(self.width(), 0.0);
-        for (l, t) in model.travel_bounds(qa, qb) {
-            out[l] = t;
-        }
+        let steps: Vec<f64> =
+            qa.iter().zip(qb).enumerate().map(|(i, (a, b))| self.space.delta(i, *a, *b).abs()).collect();
+        model.travel_bounds_of_steps(&steps, &mut out[..self.links]);
+        let mut held = steps.clone();
         for (m, mask) in self.masks.iter().enumerate() {
             // The same motion with the frozen DOFs held: only the others count.
-            let held: Vec<f64> = qb.iter().zip(qa).zip(mask).map(|((b, a), &f)| if f { *a } else { *b }).collect();
-            for (l, t) in model.travel_bounds(qa, &held) {
-                out[(m + 1) * self.links + l] = t;
+            for ((h, s), &frozen) in held.iter_mut().zip(&steps).zip(mask) {
+                *h = if frozen { 0.0 } else { *s };
             }
+            model.travel_bounds_of_steps(&held, &mut out[(m + 1) * self.links..(m + 2) * self.links]);
         }
     }
 
