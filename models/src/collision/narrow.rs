@@ -270,43 +270,81 @@ fn capsule_cylinder_hit(p: &Point3<f64>, q: &Point3<f64>, r: f64, iso: &Isometry
     if segment_box_dist2(&pl.coords, &d, &Vector3::new(rc, rc, hh)).0 > r * r {
         return false;
     }
-    let at = |t: f64| {
-        let x = pl + d * t;
-        let dr = ((x.x * x.x + x.y * x.y).sqrt() - rc).max(0.0);
-        let dz = (x.z.abs() - hh).max(0.0);
-        (dr * dr + dz * dz).sqrt()
-    };
+    let at = cylinder_along(pl, d, rc, hh);
     let lipschitz = d.norm();
-    const G: f64 = 0.618_033_988_749_894_8;
-    let (mut lo, mut hi) = (0.0, 1.0);
-    let (mut t1, mut t2) = (hi - G * (hi - lo), lo + G * (hi - lo));
-    let (mut f1, mut f2) = (at(t1), at(t2));
     // A NaN (a NaN pose) ends in "touching" too.
     let ends = at(0.0).min(at(1.0));
     if ends.is_nan() || ends <= r {
         return true;
     }
+    let mut search = Golden::new(&at);
     for _ in 0..100 {
-        let inside = f1.min(f2);
+        let inside = search.inside();
         if inside.is_nan() || inside <= r {
             return true;
         }
-        if inside - lipschitz * (hi - lo) > r {
+        if inside - lipschitz * search.width() > r {
             return false;
         }
-        if f1 <= f2 {
-            hi = t2;
-            (t2, f2) = (t1, f1);
-            t1 = hi - G * (hi - lo);
-            f1 = at(t1);
-        } else {
-            lo = t1;
-            (t1, f1) = (t2, f2);
-            t2 = lo + G * (hi - lo);
-            f2 = at(t2);
-        }
+        search.step(&at);
     }
     true
+}
+
+/// The signed distance from the point `p + t d` to the cylinder along z with radius `rc` and
+/// half height `hh` (all in its frame): convex and |d|-Lipschitz in t.
+fn cylinder_along(p: Point3<f64>, d: Vector3<f64>, rc: f64, hh: f64) -> impl Fn(f64) -> f64 {
+    move |t: f64| {
+        let x = p + d * t;
+        let dr = (x.x * x.x + x.y * x.y).sqrt() - rc;
+        let dz = x.z.abs() - hh;
+        let (er, ez) = (dr.max(0.0), dz.max(0.0));
+        if dr <= 0.0 && dz <= 0.0 { dr.max(dz) } else { (er * er + ez * ez).sqrt() }
+    }
+}
+
+/// Golden-section search for the minimum of a convex function on [0, 1]: the bracket
+/// [`lo`, `hi`] always holds a minimiser, and `t1` < `t2` inside it carry their values.
+struct Golden {
+    lo: f64,
+    hi: f64,
+    t1: f64,
+    t2: f64,
+    f1: f64,
+    f2: f64,
+}
+
+impl Golden {
+    const G: f64 = 0.618_033_988_749_894_8;
+
+    fn new(f: &impl Fn(f64) -> f64) -> Self {
+        let (t1, t2) = (1.0 - Self::G, Self::G);
+        Golden { lo: 0.0, hi: 1.0, t1, t2, f1: f(t1), f2: f(t2) }
+    }
+
+    fn width(&self) -> f64 {
+        self.hi - self.lo
+    }
+
+    /// The least value evaluated inside the bracket.
+    fn inside(&self) -> f64 {
+        self.f1.min(self.f2)
+    }
+
+    /// Shrink the bracket by the golden ratio, one new evaluation.
+    fn step(&mut self, f: &impl Fn(f64) -> f64) {
+        if self.f1 <= self.f2 {
+            self.hi = self.t2;
+            (self.t2, self.f2) = (self.t1, self.f1);
+            self.t1 = self.hi - Self::G * (self.hi - self.lo);
+            self.f1 = f(self.t1);
+        } else {
+            self.lo = self.t1;
+            (self.t1, self.f1) = (self.t2, self.f2);
+            self.t2 = self.lo + Self::G * (self.hi - self.lo);
+            self.f2 = f(self.t2);
+        }
+    }
 }
 
 #[inline]
@@ -450,38 +488,21 @@ fn segment_cylinder(
     // built once, for the best point.
     let pl = iso.inverse_transform_point(p);
     let d = iso.inverse_transform_point(q) - pl;
-    let signed = |t: f64| {
-        let x = pl + d * t;
-        let dr = (x.x * x.x + x.y * x.y).sqrt() - rc;
-        let dz = x.z.abs() - hh;
-        let (er, ez) = (dr.max(0.0), dz.max(0.0));
-        if dr <= 0.0 && dz <= 0.0 { dr.max(dz) } else { (er * er + ez * ez).sqrt() }
-    };
+    let signed = cylinder_along(pl, d, rc, hh);
     let at = |t: f64| sphere_cylinder(&(p + (q - p) * t), 0.0, iso, rc, hh);
-    const G: f64 = 0.618_033_988_749_894_8;
-    let (mut lo, mut hi) = (0.0, 1.0);
-    let (mut t1, mut t2) = (hi - G * (hi - lo), lo + G * (hi - lo));
-    let (mut f1, mut f2) = (signed(t1), signed(t2));
     // The distance is |q - p|-Lipschitz in t, so once that times the bracket's width is below
     // 1e-13 m the best point is that close to the minimum (at most 0.618^80 of the segment).
     let lipschitz = d.norm();
+    let mut search = Golden::new(&signed);
     for _ in 0..80 {
-        if lipschitz * (hi - lo) < 1e-13 {
+        if lipschitz * search.width() < 1e-13 {
             break;
         }
-        if f1 <= f2 {
-            hi = t2;
-            (t2, f2) = (t1, f1);
-            t1 = hi - G * (hi - lo);
-            f1 = signed(t1);
-        } else {
-            lo = t1;
-            (t1, f1) = (t2, f2);
-            t2 = lo + G * (hi - lo);
-            f2 = signed(t2);
-        }
+        search.step(&signed);
     }
-    let best = [at(0.0), at(1.0), at(0.5 * (lo + hi))].into_iter().min_by(|a, b| a.distance.total_cmp(&b.distance))?;
+    let best = [at(0.0), at(1.0), at(0.5 * (search.lo + search.hi))]
+        .into_iter()
+        .min_by(|a, b| a.distance.total_cmp(&b.distance))?;
     // Touching, inside, or NaN: not a point's distance.
     if best.distance.is_nan() || best.distance <= 0.0 {
         return None;
