@@ -227,8 +227,11 @@ impl Robot {
         let mut best = (f64::INFINITY, seed.to_vec());
         let rot_weight = if options.position_only { 0.0 } else { 1.0 };
         let mut poses = self.forward_kinematics(seed);
+        // Only the chain to the flange moves it (on two-irp6, not the other arm): the residual
+        // and the Jacobian read no other pose.
+        let chain = self.chain_to(effector.link);
         let residual_of = |poses: &mut Vec<Isometry3<f64>>, q: &[f64]| -> (Vector6<f64>, f64, f64) {
-            self.forward_kinematics_into(q, poses);
+            self.chain_kinematics_into(&chain, q, poses);
             let e = pose_error(&(poses[effector.link] * effector.tool), target);
             let pos = e.fixed_rows::<3>(0).norm();
             let rot = if options.position_only { 0.0 } else { e.fixed_rows::<3>(3).norm() };

@@ -484,6 +484,16 @@ impl Robot {
         }
     }
 
+    /// [`Robot::forward_kinematics_into`] for the links of one chain only: `chain` as
+    /// [`Robot::chain_to`] gives it (root first); the poses of other links are left as they are.
+    pub(crate) fn chain_kinematics_into(&self, chain: &[usize], q: &[f64], out: &mut [Isometry3<f64>]) {
+        out[0] = self.base;
+        for &ji in chain {
+            let j = &self.joints[ji];
+            out[j.child_link] = out[j.parent_link] * j.local_transform(self.joint_value(ji, q));
+        }
+    }
+
     /// World pose of one link frame at `q`.
     pub fn link_pose(&self, q: &[f64], link: usize) -> Isometry3<f64> {
         let mut pose = Isometry3::identity();
