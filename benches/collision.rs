@@ -4,6 +4,8 @@
 //!   `table_pick_ur5` scene 0001 (`benches/fixtures/`, read by `planner::moveit`), over fixed sets of free and random
 //!   configurations. Target: median <= 1 us per call.
 //! - `collides|distance/two-irp6-20-obstacles`: the two-arm IRp-6 cell among 20 boxes/cylinders.
+//! - `collides/two-irp6-400-obstacles/free[/no-grid]`: the cell among 400 small obstacles, with
+//!   the general path's obstacle grid and without it.
 
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
@@ -154,5 +156,26 @@ fn two_irp6(c: &mut Criterion) {
     bench_cycle(c, "distance/two-irp6-20-obstacles/free", &free, |q| model.distance(q).distance > 0.0);
 }
 
-criterion_group!(benches, ur5_table_pick, two_irp6);
+/// 400 small boxes and balls strewn through the two-IRp-6 cell (none touching it at home): the
+/// general path's obstacle grid against the plain obstacle pass.
+fn two_irp6_clutter(c: &mut Criterion) {
+    let robot = builtin("two-irp6").unwrap();
+    let mut rng = Rng::new(3);
+    let mut clutter = Vec::new();
+    while clutter.len() < 400 {
+        let pose = Isometry3::translation(rng.range(-2.5, 2.5), rng.range(-1.5, 3.5), rng.range(0.0, 2.5));
+        let shape = if clutter.len() % 2 == 0 { Shape::cuboid(0.03, 0.05, 0.04) } else { Shape::sphere(0.04) };
+        let o = Obstacle::new(format!("o{}", clutter.len()), pose, shape);
+        if !CollisionModel::new(&robot, std::iter::once(o.clone()).collect()).collides(robot.home()) {
+            clutter.push(o);
+        }
+    }
+    let model = CollisionModel::new(&robot, clutter.into_iter().collect());
+    let (_, free) = samples(&robot, &model, 256, 4);
+    let plain = model.clone().without_obstacle_grid();
+    bench_cycle(c, "collides/two-irp6-400-obstacles/free", &free, |q| model.collides(q));
+    bench_cycle(c, "collides/two-irp6-400-obstacles/free/no-grid", &free, |q| plain.collides(q));
+}
+
+criterion_group!(benches, ur5_table_pick, two_irp6, two_irp6_clutter);
 criterion_main!(benches);

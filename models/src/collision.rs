@@ -51,6 +51,7 @@
 //! `link_shapes_world` returns no shapes.
 
 mod environment;
+mod grid;
 pub mod narrow;
 mod spheres;
 
@@ -543,6 +544,9 @@ pub struct CollisionScratch {
     world: Vec<World>,
     world_c: Vec<Point3<f64>>,
     candidates: Vec<u32>,
+    /// Per obstacle, the grid query that last visited it (a link's cells may list it twice).
+    visited: Vec<u32>,
+    visit: u32,
     q: Vec<f64>,
     intervals: Vec<(u32, u32)>,
     spans: Vec<Span>,
@@ -570,6 +574,8 @@ impl CollisionScratch {
             world: Vec::new(),
             world_c: Vec::new(),
             candidates: Vec::new(),
+            visited: Vec::new(),
+            visit: 0,
             q: Vec::new(),
             intervals: Vec::new(),
             spans: Vec::new(),
@@ -653,7 +659,14 @@ pub struct CollisionModel {
     env: Environment,
     obstacles: Vec<ObstacleGeom>,
     solids: Vec<Solid>,
+    /// The broad phase over many obstacles (from [`GRID_MIN_OBSTACLES`] on; fewer are tested
+    /// against the box around the whole robot, then link by link).
+    grid: Option<grid::ObstacleGrid>,
 }
+
+/// From this many obstacles on, the general path finds the obstacles near each link through a
+/// grid instead of testing every obstacle that overlaps the robot's box against every link.
+const GRID_MIN_OBSTACLES: usize = 128;
 
 impl CollisionModel {
     pub fn new(robot: &Robot, env: Environment) -> Self {
@@ -667,7 +680,24 @@ impl CollisionModel {
         let fast = SphereGeom::new(&geom, prove_cells).map(Arc::new);
         let obstacles: Vec<ObstacleGeom> = env.obstacles().iter().map(ObstacleGeom::new).collect();
         let solids = obstacles.iter().map(|o| Solid::new(&o.world)).collect();
-        Self { robot: Arc::new(robot.clone()), geom, fast, env, obstacles, solids }
+        let mut model = Self { robot: Arc::new(robot.clone()), geom, fast, env, obstacles, solids, grid: None };
+        model.grid_obstacles();
+        model
+    }
+
+    /// (Re)build the obstacle grid of the general path, for [`GRID_MIN_OBSTACLES`] or more.
+    /// Cells are about as wide as a typical link's bounding sphere, so a link's box overlaps a
+    /// few cells.
+    fn grid_obstacles(&mut self) {
+        self.grid = None;
+        if self.obstacles.len() < GRID_MIN_OBSTACLES || self.fast.is_some() {
+            return;
+        }
+        let mut widths: Vec<f64> = self.geom.links.iter().map(|l| 2.0 * l.r).filter(|w| w.is_finite()).collect();
+        widths.sort_by(f64::total_cmp);
+        let cell = widths.get(widths.len() / 2).copied().unwrap_or(0.5).clamp(0.05, 1.0);
+        let boxes: Vec<(Point3<f64>, Point3<f64>)> = self.obstacles.iter().map(|o| (o.lo, o.hi)).collect();
+        self.grid = grid::ObstacleGrid::new(&boxes, cell);
     }
     /// Whether queries take the sphere fast path (every shape of the robot is a sphere).
     pub fn uses_sphere_path(&self) -> bool {
@@ -677,6 +707,14 @@ impl CollisionModel {
     /// robots with capsules and meshes): for comparisons and benchmarks of the fast path.
     pub fn general_path_only(mut self) -> Self {
         self.fast = None;
+        self.grid_obstacles();
+        self
+    }
+    /// The same model with the general path's obstacle grid switched off (every obstacle that
+    /// overlaps the robot's box tested against every link), for tests and benchmarks that
+    /// compare the two.
+    pub fn without_obstacle_grid(mut self) -> Self {
+        self.grid = None;
         self
     }
     pub fn robot(&self) -> &Robot {
@@ -690,6 +728,7 @@ impl CollisionModel {
         self.obstacles = env.obstacles().iter().map(ObstacleGeom::new).collect();
         self.solids = self.obstacles.iter().map(|o| Solid::new(&o.world)).collect();
         self.env = env;
+        self.grid_obstacles();
     }
     /// Move the obstacle(s) of this name, updating the broad phase; `false` if there is none.
     pub fn set_obstacle_pose(&mut self, name: &str, pose: Isometry3<f64>) -> bool {
@@ -702,6 +741,7 @@ impl CollisionModel {
                 *solid = Solid::new(&g.world);
             }
         }
+        self.grid_obstacles();
         true
     }
     /// A fresh scratch for [`CollisionModel::collides_with`] (one per thread).
@@ -939,7 +979,47 @@ impl CollisionModel {
         let g = &*self.geom;
         let grow = |slot: usize| if GROW { inflation.map_or(0.0, |e| e.link[slot]) } else { 0.0 };
         let mut near = false;
-        if !self.obstacles.is_empty() && !g.links.is_empty() {
+        if let Some(grid) = &self.grid {
+            // Many obstacles: each link against those listed in the cells its box overlaps.
+            let mut visited = std::mem::take(&mut s.visited);
+            visited.resize(self.obstacles.len(), 0);
+            let mut hit = None;
+            for (slot, l) in g.links.iter().enumerate() {
+                s.visit = s.visit.wrapping_add(1);
+                if s.visit == 0 {
+                    visited.fill(0);
+                    s.visit = 1;
+                }
+                let visit = s.visit;
+                let e = grow(slot);
+                let r = Vector3::repeat(l.r + e);
+                let (lo, hi) = (s.link_c[slot] - r, s.link_c[slot] + r);
+                grid.near(&lo, &hi, self.obstacles.len(), |oi| {
+                    let seen = &mut visited[oi as usize];
+                    if *seen == visit {
+                        return true;
+                    }
+                    *seen = visit;
+                    match self.link_hits_obstacle::<GROW>(slot, &self.obstacles[oi as usize], e, s) {
+                        Err(()) => {
+                            hit = Some(Hit::Env { slot, obstacle: oi as usize });
+                            false
+                        }
+                        Ok(n) => {
+                            near |= n;
+                            true
+                        }
+                    }
+                });
+                if hit.is_some() {
+                    break;
+                }
+            }
+            s.visited = visited;
+            if let Some(h) = hit {
+                return Err(h);
+            }
+        } else if !self.obstacles.is_empty() && !g.links.is_empty() {
             // Obstacles near the robot at all: against the box around every link sphere.
             let mut lo = Point3::from(Vector3::repeat(f64::INFINITY));
             let mut hi = Point3::from(Vector3::repeat(f64::NEG_INFINITY));

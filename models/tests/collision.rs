@@ -567,3 +567,72 @@ fn travel_bounds_of_steps_match_the_motion_bounds() {
         }
     }
 }
+
+/// `n` small boxes and balls scattered over the space around `robot`, none touching it at home,
+/// plus a large slab overhead (within reach) that the obstacle grid keeps on its list of large ones.
+fn clutter(robot: &embodied_models::Robot, n: usize, seed: u64) -> Environment {
+    let mut rng = Rng::new(seed);
+    let mut out = vec![Obstacle::new("slab", at(0.0, 1.0, 2.2), Shape::cuboid(6.0, 6.0, 0.05))];
+    while out.len() <= n {
+        let i = out.len();
+        let pose = at(rng.range(-2.5, 2.5), rng.range(-1.5, 3.5), rng.range(0.0, 2.5));
+        let shape = if i % 2 == 0 { Shape::cuboid(0.03, 0.05, 0.04) } else { Shape::sphere(0.04) };
+        let o = Obstacle::new(format!("o{i}"), pose, shape);
+        if !CollisionModel::new(robot, std::iter::once(o.clone()).collect()).collides(robot.home()) {
+            out.push(o);
+        }
+    }
+    out.into_iter().collect()
+}
+
+/// The general path's obstacle grid (from 128 obstacles on) changes no answer: exact checks,
+/// the first collision and motion certificates agree with and without it on two robots among
+/// 400 obstacles, and a non-finite configuration still collides.
+#[test]
+fn obstacle_grid_changes_no_answer() {
+    for name in ["two-irp6", "polycrank"] {
+        let robot = builtin(name).unwrap();
+        let grid = CollisionModel::new(&robot, clutter(&robot, 400, 3));
+        let plain = grid.clone().without_obstacle_grid();
+        let mut rng = Rng::new(11);
+        let (mut hits, mut free) = (0, Vec::new());
+        for _ in 0..400 {
+            let q = robot.random_configuration(&mut rng);
+            let hit = grid.collides(&q);
+            assert_eq!(hit, plain.collides(&q), "{name} at {q:?}");
+            assert_eq!(grid.first_collision(&q).is_some(), hit, "{name}");
+            if hit {
+                hits += 1;
+            } else {
+                free.push(q);
+            }
+        }
+        assert!(hits > 20 && free.len() > 20, "{name}: {hits} collide, {} free", free.len());
+        let space = robot.config_space();
+        let mut certified = 0;
+        for w in free.windows(2).take(60) {
+            let b = space.interpolate(&w[0], &w[1], 0.15);
+            let answer = grid.motion_is_certified_free(&w[0], &b, 1e-3);
+            assert_eq!(answer, plain.motion_is_certified_free(&w[0], &b, 1e-3), "{name}");
+            certified += usize::from(answer);
+        }
+        assert!(certified > 0, "{name}: no motion certified");
+        let mut q = robot.home().to_vec();
+        q[1] = f64::NAN;
+        assert!(grid.collides(&q), "{name}: a NaN configuration must collide");
+    }
+}
+
+/// Moving an obstacle updates the grid: a ball moved onto the arm is found, moved away it is not.
+#[test]
+fn a_moved_obstacle_is_found_through_the_grid() {
+    let robot = builtin("irp6-postument").unwrap();
+    let mut model = CollisionModel::new(&robot, clutter(&robot, 300, 4));
+    let home = robot.home().to_vec();
+    assert!(!model.collides(&home));
+    let flange = robot.end_effector_poses(&home, 0).0.translation.vector;
+    assert!(model.set_obstacle_pose("o1", at(flange.x, flange.y, flange.z)));
+    assert!(model.collides(&home), "the ball at the flange is not found");
+    assert!(model.set_obstacle_pose("o1", at(9.0, 9.0, 9.0)));
+    assert!(!model.collides(&home), "the ball moved away is still found");
+}
