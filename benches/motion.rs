@@ -1,6 +1,7 @@
 //! Criterion benchmarks: motion planning on fixed problems (IRp-6 around a box, Polycrank
 //! across +-pi, the two-arm IRp-6 cell), each with both search back ends, plus the share of
-//! planning time spent in collision checks (printed once before the timings).
+//! planning time spent in collision checks (printed once before the timings); and the two-arm
+//! carry planned whole, as `embodied plan two-irp6-carry` does.
 
 use std::hint::black_box;
 use std::time::{Duration, Instant};
@@ -132,5 +133,18 @@ fn bench(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, bench);
+/// The two-arm carry as `embodied plan two-irp6-carry` makes it: grasp, A* over object positions
+/// with closed-chain inverse kinematics, timing with inverse kinematics at every 1 ms sample, and
+/// the certified check of the result.
+fn carry(c: &mut Criterion) {
+    let scenario = embodied::scenario::load_scenario("two-irp6-carry").expect("built-in scenario");
+    let mut group = c.benchmark_group("plan_scenario");
+    group.measurement_time(Duration::from_secs(5)).sample_size(10);
+    group.bench_function("two-irp6-carry", |b| {
+        b.iter(|| black_box(embodied::plan::plan_scenario(&scenario, None).is_ok()))
+    });
+    group.finish();
+}
+
+criterion_group!(benches, bench, carry);
 criterion_main!(benches);
