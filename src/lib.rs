@@ -1,20 +1,13 @@
 //! # embodied: the command-line toolkit
 //!
-//! The root package ties the three crates together: [`embodied_models`] (what a robot is),
-//! [`embodied_planner`] (deliberation) and [`embodied_executor`] (what an agent does each
-//! control step). This library holds what the CLI needs beyond them: robot loading by name or
-//! URDF path, the `model` report, scenario files and reports.
+//! The CLI is a thin shell over the library crates: [`embodied_models`] (what a robot is),
+//! [`embodied_planner`] (deliberation), [`embodied_executor`] (what an agent does each control
+//! step) and [`embodied_system`] (a scenario assembled and run as a system of agents). This
+//! package holds only what the CLI needs beyond them: robot loading by name or URDF path for
+//! the `model` report, and the MotionBenchMaker benchmark.
 #![forbid(unsafe_code)]
 
-pub mod carry_run;
-pub mod deadlines;
-pub mod error;
-pub mod mbm;
 pub mod model_report;
-pub mod plan;
-pub mod run;
-pub mod runlog;
-pub mod scenario;
-pub mod verify;
 
-pub use error::AppError;
+pub use embodied_system::SystemError as AppError;
+pub use embodied_system::{bench_qp, deadlines, log, mbm, plan, scenario, system, verify};

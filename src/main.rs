@@ -245,12 +245,18 @@ fn run(cli: Cli) -> Result<(), AppError> {
                 }
                 (None, None) => None,
             };
-            let args = embodied::run::RunArgs { scenario, duration, seed, log, plot, clock, ..Default::default() };
-            let summary = embodied::run::run_scenario(&args)?;
+            if let Some(d) = duration
+                && !(d.is_finite() && d > 0.0)
+            {
+                return Err(AppError::Usage(format!("--duration must be a positive number of seconds, got {d}")));
+            }
+            let options = embodied::system::RunOptions { duration, seed, clock, ..Default::default() };
+            let args = embodied::system::RunArgs { scenario, options, log, plot };
+            let (summary, _) = embodied::system::run_scenario(&args)?;
             if json {
                 println!("{}", serde_json::to_string(&summary).map_err(|e| AppError::Failed(e.to_string()))?);
             } else {
-                print!("{}", embodied::run::render_summary(&summary));
+                print!("{}", embodied::system::render_summary(&summary));
             }
             match summary.failure {
                 Some(f) => Err(AppError::Failed(format!("run failed: {f}"))),
@@ -347,11 +353,11 @@ fn run(cli: Cli) -> Result<(), AppError> {
             Ok(())
         }
         Command::Bench(BenchCommand::Qp { scenario, json }) => {
-            let report = embodied::carry_run::bench_qp(&scenario)?;
+            let report = embodied::bench_qp::bench_qp(&scenario)?;
             if json {
                 println!("{}", to_json(&report)?);
             } else {
-                print!("{}", embodied::carry_run::render_bench_qp(&report));
+                print!("{}", embodied::bench_qp::render_bench_qp(&report));
             }
             Ok(())
         }

@@ -17,8 +17,8 @@ use std::path::{Path, PathBuf};
 use common::TempDir;
 use embodied::AppError;
 use embodied::plan::{parse_plan, plan_scenario};
-use embodied::run::{RunArgs, run_scenario};
 use embodied::scenario::{BUILTIN_SCENARIOS, load_scenario, parse_scenario};
+use embodied::system::{RunArgs, RunOptions, run_scenario};
 use embodied::verify::{verify_log, verify_plan};
 use embodied_models::urdf::{UrdfOptions, parse_urdf, parse_urdf_with_srdf};
 use embodied_planner::verify::certified::CheckSettings;
@@ -320,8 +320,12 @@ fn plan_files() {
 fn run_logs() {
     let dir = TempDir::new("malformed-logs");
     let log = dir.join("run.jsonl");
-    let args =
-        RunArgs { scenario: "irp6-pick".into(), duration: Some(0.04), log: Some(log.clone()), ..RunArgs::default() };
+    let args = RunArgs {
+        scenario: "irp6-pick".into(),
+        options: RunOptions { duration: Some(0.04), ..RunOptions::default() },
+        log: Some(log.clone()),
+        ..RunArgs::default()
+    };
     run_scenario(&args).expect("run");
     let scenario = load_scenario("irp6-pick").expect("built-in scenario");
     let seeds = [(log.clone(), read(&log))];
@@ -347,7 +351,10 @@ fn edited_scenarios_run() {
         std::fs::write(file, text).map_err(|e| e.to_string())?;
         let args = RunArgs {
             scenario: file.display().to_string(),
-            duration: Some(std::env::var("FUZZ_RUN_S").ok().and_then(|s| s.parse().ok()).unwrap_or(0.06)),
+            options: RunOptions {
+                duration: Some(std::env::var("FUZZ_RUN_S").ok().and_then(|s| s.parse().ok()).unwrap_or(0.06)),
+                ..RunOptions::default()
+            },
             ..RunArgs::default()
         };
         run_scenario(&args).map(|_| ()).map_err(|e| format!("{}: {e}", file.display()))

@@ -314,7 +314,7 @@ fn log_header(scenario: &str, agent: &str, robot: &embodied_models::Robot, chain
     header.to_string()
 }
 
-fn log_step(step: usize, agent: &str, q: &[f64], qd: &[f64], events: &[&str]) -> String {
+fn log_step(step: usize, agent: &str, q: &[f64], qd: &[f64], events: &[embodied_executor::Event]) -> String {
     serde_json::json!({"step": step, "t": (step + 1) as f64 * 0.001,
         "agents": {agent: {"q": q, "qd": qd, "behaviour": "main", "events": events}}})
     .to_string()
@@ -408,9 +408,9 @@ fn run_log_grasp_release_drift() {
             if s >= move_from && s < move_from + 50 {
                 q[3] += 0.2 * 0.001; // the on-track arm's third joint, 0.2 rad/s
             }
-            let events: &[&str] = match s {
-                20 => &["grasp object=box"],
-                150 => &["release"],
+            let events: &[embodied_executor::Event] = match s {
+                20 => &[embodied_executor::Event::Grasp],
+                150 => &[embodied_executor::Event::Release],
                 _ => &[],
             };
             lines.push(log_step(s, "arms", &q, &qd, events));

@@ -161,6 +161,8 @@ pub(crate) trait Steppable: Send {
     fn halt_step(&mut self, world: &World, step: u64, dt: f64);
     fn is_at_rest(&self) -> bool;
     fn record(&self, rec: &mut AgentRecord);
+    /// The input images `c^i` of the last step.
+    fn images(&self) -> &InputImages;
 }
 
 impl<C: Send> Agent<C> {
@@ -211,7 +213,7 @@ impl<C: Send> Agent<C> {
         };
         if let Some(e) = error {
             ctl.outputs.outbox.clear();
-            ctl.outputs.event(format!("specification error; safe halt: {e}"));
+            ctl.outputs.event(crate::Event::SpecificationError { message: e.to_string() });
             self.error = Some(e);
             self.halting = true;
             self.execute_halt(dt);
@@ -283,6 +285,9 @@ impl<C: Send> Steppable for Agent<C> {
     fn is_at_rest(&self) -> bool {
         self.effector.as_ref().is_none_or(|e| e.qd().iter().all(|v| *v == 0.0))
     }
+    fn images(&self) -> &InputImages {
+        &self.control.inputs
+    }
     fn record(&self, rec: &mut AgentRecord) {
         // A record slot belongs to one agent for the runtime's life: name it once.
         if rec.agent.is_empty() {
@@ -301,6 +306,6 @@ impl<C: Send> Steppable for Agent<C> {
             self.behaviour.describe(&mut rec.behaviour);
         }
         rec.events.clear();
-        rec.events.extend(self.control.outputs.events.iter().map(|e| e.to_string()));
+        rec.events.extend(self.control.outputs.events.iter().cloned());
     }
 }

@@ -5,8 +5,6 @@
 //! read) and `&mut OutputImages`, whose only public methods are setters: nothing it writes can be
 //! read back within the step, so `c^{i+1}` depends on `c^i` alone, as eq. (5) demands.
 
-use std::borrow::Cow;
-
 use embodied_models::JointLimits;
 
 /// Number of `f64` words in one [`Message`] and one [`Reading`]; fixed so that images are
@@ -17,29 +15,76 @@ pub const WORDS: usize = 8;
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, serde::Serialize, serde::Deserialize)]
 pub struct AgentId(pub usize);
 
-/// One inter-agent message (an element of `c_T`): a tag saying what it means and a few numbers.
-#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct Message {
-    pub tag: u32,
-    pub data: [f64; WORDS],
+/// One inter-agent message (an element of `c_T`).
+///
+/// The coordination protocol of a system of agents is typed: a coordinator grants a motion
+/// ([`Message::Grant`]), an agent reports it is done ([`Message::Done`]), and the space an agent
+/// occupies (its body at rest, or the sweep of its plan) is handed on whole
+/// ([`Message::Occupancy`]). User protocols send [`Message::Words`]: a tag and a few numbers.
+/// Every kind travels over the same [`crate::Transmitter`], so latency and loss apply to it.
+#[derive(Debug, Clone, PartialEq)]
+#[non_exhaustive]
+pub enum Message {
+    /// A tag saying what it means and [`WORDS`] numbers.
+    Words {
+        /// What the numbers mean (the protocol's own).
+        tag: u32,
+        /// The numbers.
+        data: [f64; WORDS],
+    },
+    /// The coordinator grants the receiver its motion.
+    Grant,
+    /// The sender finished its task (`failed`: without reaching its goal).
+    Done {
+        /// Whether the task failed.
+        failed: bool,
+    },
+    /// Scenario agent `agent` occupies `configurations` (one: its body at rest; several: the
+    /// sweep of its plan, waypoint by waypoint).
+    Occupancy {
+        /// Index of the agent in its system.
+        agent: usize,
+        /// The configurations, shared (sending does not copy them).
+        configurations: std::sync::Arc<[Vec<f64>]>,
+    },
 }
 
 impl Message {
-    /// A message with `tag` and the first `values` (at most [`WORDS`]; extra values are dropped).
+    /// A [`Message::Words`] with `tag` and the first `values` (at most [`WORDS`]; extra values
+    /// are dropped).
     pub fn new(tag: u32, values: &[f64]) -> Self {
         let mut data = [0.0; WORDS];
         for (d, v) in data.iter_mut().zip(values) {
             *d = *v;
         }
-        Self { tag, data }
+        Message::Words { tag, data }
+    }
+
+    /// The tag of a [`Message::Words`].
+    pub fn tag(&self) -> Option<u32> {
+        match self {
+            Message::Words { tag, .. } => Some(*tag),
+            _ => None,
+        }
+    }
+
+    /// Word `k` of a [`Message::Words`] (0 for other messages or beyond [`WORDS`]).
+    pub fn word(&self, k: usize) -> f64 {
+        match self {
+            Message::Words { data, .. } => data.get(k).copied().unwrap_or(0.0),
+            _ => 0.0,
+        }
     }
 }
 
 /// A message with its sender and receiver.
-#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct Envelope {
+    /// The sender.
     pub from: AgentId,
+    /// The receiver.
     pub to: AgentId,
+    /// What it says.
     pub message: Message,
 }
 
@@ -241,7 +286,7 @@ pub struct OutputImages {
     pub(crate) command: JointCommand,
     pub(crate) sensor_configs: Vec<Option<SensorConfig>>,
     pub(crate) outbox: Vec<Envelope>,
-    pub(crate) events: Vec<Cow<'static, str>>,
+    pub(crate) events: Vec<crate::Event>,
     pub(crate) from: AgentId,
     /// First misuse of a setter in this step (what, expected, got).
     pub(crate) misuse: Option<(&'static str, usize, usize)>,
@@ -324,9 +369,10 @@ impl OutputImages {
         self.outbox.push(Envelope { from: self.from, to, message });
     }
 
-    /// Note an event in this step's log record.
-    pub fn event(&mut self, text: impl Into<Cow<'static, str>>) {
-        self.events.push(text.into());
+    /// Note an event in this step's log record (a typed [`crate::Event`], or a user's text
+    /// as [`crate::Event::Note`]).
+    pub fn event(&mut self, event: impl Into<crate::Event>) {
+        self.events.push(event.into());
     }
 
     /// Copy the non-effector parts (sensor configuration, messages, events) of `other` in; the

@@ -80,6 +80,7 @@ pub mod composer;
 pub mod deliberation;
 pub mod effector;
 pub mod error;
+pub mod event;
 pub mod image;
 pub mod motion;
 pub mod runtime;
@@ -96,6 +97,7 @@ pub use deliberation::{
 };
 pub use effector::{Effector, SafeHalt, SafetyLimiter, ServoModel, tracking_velocity, velocity_window};
 pub use error::{ExecutorError, Violation};
+pub use event::{Event, HaltReason, ReplanReason, WallTiming};
 pub use image::{
     AgentId, CommandMode, Envelope, InputImages, JointCommand, Message, OutputImages, Reading, Region, SensorConfig,
     SensorImage, WORDS,

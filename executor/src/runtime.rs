@@ -16,7 +16,7 @@ use rayon::prelude::*;
 
 use crate::agent::{Agent, Steppable};
 use crate::error::ExecutorError;
-use crate::image::AgentId;
+use crate::image::{AgentId, InputImages};
 use crate::transmitter::{ChannelStats, Link, Transmitter};
 use crate::world::World;
 
@@ -73,7 +73,8 @@ pub struct AgentRecord {
     pub qd: Vec<f64>,
     /// Path of the active behaviour, e.g. `main/avoid`.
     pub behaviour: String,
-    pub events: Vec<String>,
+    /// What happened in this step.
+    pub events: Vec<crate::Event>,
 }
 
 /// The log record of one step (one line of JSON Lines).
@@ -184,6 +185,11 @@ impl Runtime {
     pub fn last_record(&self) -> &StepRecord {
         &self.record
     }
+    /// Agent `id`'s input images `c^i` as of the last step (its measured joints, sensor
+    /// readings and delivered messages), or `None` for an unknown id.
+    pub fn images(&self, id: AgentId) -> Option<&InputImages> {
+        self.agents.get(id.0).map(|a| a.images())
+    }
     /// Whether every effector is at rest.
     pub fn is_at_rest(&self) -> bool {
         self.agents.iter().all(|a| a.is_at_rest())
@@ -264,9 +270,10 @@ impl Runtime {
             }
             for agent in &mut self.agents {
                 let mut unconnected = None;
-                for env in agent.outbox().iter() {
-                    if !self.transmitter.send(*env, step) {
-                        unconnected.get_or_insert(env.to.0);
+                for env in agent.outbox().drain(..) {
+                    let to = env.to.0;
+                    if !self.transmitter.send(env, step) {
+                        unconnected.get_or_insert(to);
                     }
                 }
                 if let Some(to) = unconnected

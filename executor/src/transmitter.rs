@@ -91,11 +91,8 @@ impl Transmitter {
     /// Hand every message due by `step` to `deliver(receiver, envelope)`.
     pub fn deliver(&mut self, step: u64, mut deliver: impl FnMut(AgentId, Envelope)) {
         for ch in &mut self.channels {
-            while let Some(&(due, env)) = ch.in_flight.front() {
-                if due > step {
-                    break;
-                }
-                ch.in_flight.pop_front();
+            while ch.in_flight.front().is_some_and(|(due, _)| *due <= step) {
+                let Some((_, env)) = ch.in_flight.pop_front() else { break };
                 ch.stats.delivered += 1;
                 deliver(ch.to, env);
             }

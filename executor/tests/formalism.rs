@@ -74,7 +74,7 @@ fn exactly_one_predicate_violation_is_reported_with_agent_step_and_predicates() 
     assert!(err.to_string().contains("exactly one predicate must hold, but 2 held: early, late"));
     // Log complete up to the failure, then a safe halt to rest.
     assert_eq!(records[3].step, 3);
-    assert!(records[3].agents[0].events[0].contains("specification error"));
+    assert!(matches!(records[3].agents[0].events[0], embodied_executor::Event::SpecificationError { .. }));
     assert_eq!(records.last().expect("records").agents[0].behaviour, "safe-halt");
     assert!(rt.is_at_rest());
     assert!(rt.step().is_err(), "a failed run stays stopped");
@@ -310,7 +310,7 @@ fn transmission_latency_and_loss() {
             1,
             |c: &mut Rx, i: &InputImages, _: &mut OutputImages| {
                 for m in i.messages() {
-                    c.0.push((i.step(), m.message.data[0]));
+                    c.0.push((i.step(), m.message.word(0)));
                 }
             },
         ))
@@ -328,13 +328,13 @@ fn transmission_latency_and_loss() {
             1,
             |_: &mut (), i: &InputImages, o: &mut OutputImages| {
                 for m in i.messages() {
-                    o.event(format!("{}<-{}", i.step(), m.message.data[0]));
+                    o.event(format!("{}<-{}", i.step(), m.message.word(0)));
                 }
             },
         )),
     ));
     rt.connect(a, b, Link { latency: 3, loss: 0.0 }).expect("connect");
-    rt.run(10, |r| got.extend(r.agents[1].events.clone())).expect("runs");
+    rt.run(10, |r| got.extend(r.agents[1].events.iter().map(|e| e.to_string()))).expect("runs");
     assert_eq!(got, vec!["4<-0", "5<-1", "6<-2", "7<-3", "8<-4", "9<-5"]);
 
     let (stats, _) = run(0, 0.3, 11);
@@ -394,7 +394,7 @@ fn sensor_configuration_changes_rate_and_region_of_interest() {
             .with_receptors(camera),
     );
     let mut events = Vec::new();
-    rt.run(35, |r| events.extend(r.agents[0].events.clone())).expect("runs");
+    rt.run(35, |r| events.extend(r.agents[0].events.iter().map(|e| e.to_string()))).expect("runs");
     // Period 10: readings at steps 0, 10, 20, 30 (obstacle a is nearest); reconfigured at 30, the
     // region now holds only b, read every step from 31 on.
     assert_eq!(events, vec!["0:0", "10:0", "20:0", "30:0", "31:1", "32:1", "33:1", "34:1"]);
@@ -412,9 +412,12 @@ fn coordinator_commands_two_agents_in_a_hierarchy() {
     let arm_program = || {
         Reactive::priority("arm")
             .rule(
-                Predicate::new("order", |_: &Arm, i: &InputImages| i.messages().iter().any(|m| m.message.tag == GOTO)),
+                Predicate::new("order", |_: &Arm, i: &InputImages| {
+                    i.messages().iter().any(|m| m.message.tag() == Some(GOTO))
+                }),
                 Primitive::new("accept", 1, |c: &mut Arm, i: &InputImages, _: &mut OutputImages| {
-                    c.target = i.messages().iter().rev().find(|m| m.message.tag == GOTO).map(|m| m.message.data[0]);
+                    c.target =
+                        i.messages().iter().rev().find(|m| m.message.tag() == Some(GOTO)).map(|m| m.message.word(0));
                 }),
             )
             .rule(
@@ -447,13 +450,13 @@ fn coordinator_commands_two_agents_in_a_hierarchy() {
         "sequence",
         1,
         move |c: &mut Cell, i: &InputImages, o: &mut OutputImages| {
-            if i.messages().iter().any(|m| m.message.tag == START) && c.phase == 0 {
+            if i.messages().iter().any(|m| m.message.tag() == Some(START)) && c.phase == 0 {
                 c.phase = 1;
                 for arm in [2, 3] {
                     o.send(AgentId(arm), Message::new(GOTO, &[targets[0]]));
                 }
             }
-            c.arrivals += i.messages().iter().filter(|m| m.message.tag == ARRIVED).count() as u32;
+            c.arrivals += i.messages().iter().filter(|m| m.message.tag() == Some(ARRIVED)).count() as u32;
             if c.arrivals == 2 && (1..=2).contains(&c.phase) {
                 c.arrivals = 0;
                 c.phase += 1;
@@ -492,7 +495,7 @@ fn coordinator_commands_two_agents_in_a_hierarchy() {
     let mut events = Vec::new();
     let mut last = StepRecord::default();
     rt.run(3000, |r| {
-        events.extend(r.agents[1].events.clone());
+        events.extend(r.agents[1].events.iter().map(|e| e.to_string()));
         last = r.clone();
     })
     .expect("runs");

@@ -49,13 +49,6 @@ fn run(extra: u64, deadline_steps: u64, appear: u64, seed: u64, steps: u64) -> V
     records
 }
 
-fn field(event: &str, key: &str) -> Option<f64> {
-    let start = event.find(key)? + key.len();
-    let rest = &event[start..];
-    let end = rest.find(|c: char| c.is_whitespace() || c == ':').unwrap_or(rest.len());
-    rest[..end].parse().ok()
-}
-
 proptest! {
     #![proptest_config(ProptestConfig { cases: 12, ..ProptestConfig::default() })]
 
@@ -77,17 +70,17 @@ proptest! {
         let mut halt_from: Option<usize> = None;
         for (i, r) in records.iter().enumerate() {
             for e in &r.agents[0].events {
-                if let Some(v) = field(e, "world_changed version=") {
-                    world = v as u64;
+                if let Event::WorldChanged { version } = e {
+                    world = *version;
                 }
                 // A stale plan is never followed: every plan taken is for the current world.
-                if e.starts_with("plan_landed") {
-                    prop_assert_eq!(field(e, "world=").map(|v| v as u64), Some(world), "{}", e);
+                if let Event::PlanLanded { world: planned_for, .. } = e {
+                    prop_assert_eq!(*planned_for, world, "{}", e);
                 }
-                if e.starts_with("safe_halt_started reason=no_valid_plan speed=") && i > 0 {
+                if matches!(e, Event::HaltStarted { reason: HaltReason::NoValidPlan, .. }) && i > 0 {
                     halt_from = Some(i - 1);
                 }
-                if e.starts_with("safe_halt_finished")
+                if matches!(e, Event::HaltFinished { .. })
                     && let Some(s) = halt_from.take()
                 {
                     // Stopping distance for the speed at the start of the halt: the path-preserving

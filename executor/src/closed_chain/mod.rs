@@ -18,6 +18,7 @@
 //! updated in place, as fallback and cross-check ([`ClosedChainController::compare`]).
 //! [`ClosedChainQp`] is the older one-shot form (a fresh clarabel solver per call).
 
+pub mod carry;
 mod controller;
 mod dense;
 mod reference;

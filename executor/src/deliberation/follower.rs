@@ -13,6 +13,7 @@ use crate::agent::Agent;
 use crate::behaviour::{Behaviour, Status};
 use crate::effector::SafeHalt;
 use crate::error::{ExecutorError, Violation};
+use crate::event::{Event, HaltReason, ReplanReason, WallTiming};
 use crate::image::{InputImages, JointCommand, OutputImages, SensorConfig};
 use crate::world::ReceptorSpec;
 
@@ -84,10 +85,10 @@ struct Halt {
 }
 
 /// Distance (largest joint travel) and duration (s) of a halt.
-fn halt_report(h: &Halt, q: &[f64], step: u64, dt: f64) -> String {
+fn halt_report(h: &Halt, q: &[f64], step: u64, dt: f64) -> Event {
     let distance = q.iter().zip(&h.q0).fold(0.0_f64, |m, (a, b)| m.max((a - b).abs()));
     let steps = step - h.started_at;
-    format!("safe_halt_finished distance={distance:.6} time_s={:.3} steps={steps}", steps as f64 * dt)
+    Event::HaltFinished { distance, time_s: steps as f64 * dt, steps }
 }
 
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -279,7 +280,7 @@ impl<C: AsDeliberation + Send> Behaviour<C> for PlanFollower {
         let s = cc.deliberation();
         let step = inputs.step();
         if std::mem::take(&mut self.suspended) && s.plan.take().is_some() {
-            outputs.event("plan_suspended");
+            outputs.event(Event::PlanSuspended);
         }
         sense(s, inputs, outputs);
         if let Some(d) = s.deliberator.poll(step) {
@@ -291,7 +292,7 @@ impl<C: AsDeliberation + Send> Behaviour<C> for PlanFollower {
             && let Some(id) = s.deliberator.pending()
         {
             s.deliberator.cancel();
-            outputs.event(format!("plan_lost id={id}"));
+            outputs.event(Event::PlanLost { id });
             s.attempts += 1;
             s.next_request_at = step;
         }
@@ -307,7 +308,7 @@ impl<C: AsDeliberation + Send> Behaviour<C> for PlanFollower {
             if t >= plan.trajectory.duration() {
                 if !s.goal_reached {
                     s.goal_reached = true;
-                    outputs.event(format!("goal_reached id={}", plan.id));
+                    outputs.event(Event::GoalReached { id: Some(plan.id) });
                 }
                 self.phase = "at-goal";
             } else {
@@ -356,7 +357,7 @@ fn maybe_request(s: &mut DeliberativeState, inputs: &InputImages, outputs: &mut 
     }
     if s.attempts >= s.settings.max_attempts {
         s.abandoned = true;
-        outputs.event(format!("plan_abandoned after {} attempts", s.attempts));
+        outputs.event(Event::PlanAbandoned { attempts: s.attempts });
         return;
     }
     let request = PlanRequest {
@@ -372,11 +373,11 @@ fn maybe_request(s: &mut DeliberativeState, inputs: &InputImages, outputs: &mut 
     let id = s.deliberator.request(request);
     s.next_request_at = step;
     s.late_reported = false;
-    outputs.event(format!(
-        "plan_requested id={id} world={} deadline_ms={:.3}",
-        s.world_version,
-        s.settings.budget.steps as f64 * inputs.dt() * 1e3
-    ));
+    outputs.event(Event::PlanRequested {
+        id,
+        world: s.world_version,
+        deadline_ms: s.settings.budget.steps as f64 * inputs.dt() * 1e3,
+    });
     if s.settings.budget.steps == 0 {
         // The plan is needed now and cannot be there.
         s.late_reported = true;
@@ -387,9 +388,9 @@ fn maybe_request(s: &mut DeliberativeState, inputs: &InputImages, outputs: &mut 
 /// The plan is late: `c^{i+1}` is computed without it and halts the effector. The agent is at
 /// rest when it asks for a plan, so this halt is a hold: no distance, no time.
 fn late_halt(s: &mut DeliberativeState, id: u64, step: u64, outputs: &mut OutputImages) {
-    outputs.event(format!("plan_late id={id}"));
-    outputs.event("safe_halt_started reason=plan_late speed=0.000000");
-    outputs.event("safe_halt_finished distance=0.000000 time_s=0.000 steps=0");
+    outputs.event(Event::PlanLate { id });
+    outputs.event(Event::HaltStarted { reason: HaltReason::PlanLate, speed: 0.0, detail: None });
+    outputs.event(Event::HaltFinished { distance: 0.0, time_s: 0.0, steps: 0 });
     s.halted_since.get_or_insert(step);
 }
 
@@ -400,8 +401,8 @@ fn halt(s: &mut DeliberativeState, inputs: &InputImages, outputs: &mut OutputIma
         s.halt = Some(Halt { started_at: inputs.step(), q0: q.to_vec() });
         s.halted_since = Some(inputs.step());
         let speed = qd.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
-        let reason = if s.fault.is_some() { "fault" } else { "no_valid_plan" };
-        outputs.event(format!("safe_halt_started reason={reason} speed={speed:.6}"));
+        let reason = if s.fault.is_some() { HaltReason::Fault } else { HaltReason::NoValidPlan };
+        outputs.event(Event::HaltStarted { reason, speed, detail: None });
     }
     if at_rest(qd)
         && let Some(h) = s.halt.take()
@@ -414,23 +415,19 @@ fn halt(s: &mut DeliberativeState, inputs: &InputImages, outputs: &mut OutputIma
 
 fn deliver(s: &mut DeliberativeState, d: PlanDelivery, inputs: &InputImages, outputs: &mut OutputImages) {
     let step = inputs.step();
-    let when = if step > d.needed_at { "late" } else { "in_time" };
+    let in_time = step <= d.needed_at;
     let id = d.id;
     // Planning time: simulated (reproducible) or wall clock. Wall-clock figures only in
     // wall-clock mode: simulated-time logs must replay exactly.
-    let overshoot = match (s.deliberator.clock(), d.overshoot) {
-        (PlanClock::WallClock, Some(o)) => format!(
-            " planning_ms={:.3} elapsed_us={} overshoot_us={}",
+    let (planning_ms, wall) = match s.deliberator.clock() {
+        PlanClock::WallClock => (
             d.elapsed.as_secs_f64() * 1e3,
-            d.elapsed.as_micros(),
-            o.as_micros()
+            Some(WallTiming {
+                elapsed_us: d.elapsed.as_micros() as u64,
+                overshoot_us: d.overshoot.map(|o| o.as_micros() as u64),
+            }),
         ),
-        (PlanClock::WallClock, None) => {
-            format!(" planning_ms={:.3} elapsed_us={}", d.elapsed.as_secs_f64() * 1e3, d.elapsed.as_micros())
-        }
-        (PlanClock::Simulated { .. }, _) => {
-            format!(" planning_ms={:.3}", (d.landed_at - d.requested_at) as f64 * inputs.dt() * 1e3)
-        }
+        PlanClock::Simulated { .. } => ((d.landed_at - d.requested_at) as f64 * inputs.dt() * 1e3, None),
     };
     let retry = |s: &mut DeliberativeState| {
         s.attempts += 1;
@@ -452,22 +449,23 @@ fn deliver(s: &mut DeliberativeState, d: PlanDelivery, inputs: &InputImages, out
             };
             match stale {
                 Some(why) => {
-                    outputs.event(format!("plan_discarded_stale id={id}: {why}"));
-                    outputs.event("replan reason=stale_plan");
+                    outputs.event(Event::PlanDiscarded { id, reason: why });
+                    outputs.event(Event::Replan { reason: ReplanReason::StalePlan });
                     s.next_request_at = step;
                 }
                 None => {
-                    outputs.event(format!(
-                        "plan_landed id={id} world={} {when} work={}{overshoot} duration_s={:.3}",
-                        d.world_version,
-                        d.work,
-                        trajectory.duration()
-                    ));
+                    outputs.event(Event::PlanLanded {
+                        id,
+                        world: d.world_version,
+                        in_time,
+                        work: d.work,
+                        planning_ms,
+                        duration_s: trajectory.duration(),
+                        wall,
+                    });
                     if let Some(since) = s.halted_since.take() {
-                        outputs.event(format!(
-                            "resumed id={id} after_s={:.3}",
-                            step.saturating_sub(since) as f64 * inputs.dt()
-                        ));
+                        let after_s = step.saturating_sub(since) as f64 * inputs.dt();
+                        outputs.event(Event::Resumed { id, after_s });
                     }
                     s.attempts = 0;
                     s.plan = Some(ActivePlan { trajectory, id, started_at: step });
@@ -475,15 +473,15 @@ fn deliver(s: &mut DeliberativeState, d: PlanDelivery, inputs: &InputImages, out
             }
         }
         PlanOutcome::Rejected(v) => {
-            outputs.event(format!("plan_rejected id={id}: {v}"));
+            outputs.event(Event::PlanRejected { id, reason: v.to_string() });
             retry(s);
         }
         PlanOutcome::Failed(f) => {
-            outputs.event(format!("plan_failed id={id} {when}: {f}{overshoot}"));
+            outputs.event(Event::PlanFailed { id, in_time, reason: f.to_string(), planning_ms, wall });
             retry(s);
         }
         PlanOutcome::Panicked(m) => {
-            outputs.event(format!("planner_panicked id={id}: {m}"));
+            outputs.event(Event::PlannerPanicked { id, message: m.to_string() });
             retry(s);
         }
     }
@@ -499,7 +497,7 @@ fn sense(s: &mut DeliberativeState, inputs: &InputImages, outputs: &mut OutputIm
     if !r.fresh {
         if step.saturating_sub(s.last_fresh) > s.settings.sensor_max_age && s.fault.is_none() {
             s.fault = Some("sensor silent".into());
-            outputs.event(format!("sensor_fault: no reading for {} steps", step - s.last_fresh));
+            outputs.event(Event::SensorSilent { steps: step - s.last_fresh });
         }
         return;
     }
@@ -507,12 +505,12 @@ fn sense(s: &mut DeliberativeState, inputs: &InputImages, outputs: &mut OutputIm
     if r.as_slice().iter().any(|v| !v.is_finite()) {
         if s.fault.is_none() {
             s.fault = Some("sensor NaN".into());
-            outputs.event("sensor_fault: non-finite reading");
+            outputs.event(Event::SensorNonFinite);
         }
         return;
     }
     if s.fault.take().is_some() {
-        outputs.event("sensor_recovered");
+        outputs.event(Event::SensorRecovered);
         s.attempts = 0;
     }
     let changed = if r.len < 5 {
@@ -557,19 +555,20 @@ fn sense(s: &mut DeliberativeState, inputs: &InputImages, outputs: &mut OutputIm
     s.world_version += 1;
     let env = s.environment();
     s.collision.set_environment(env);
-    outputs.event(format!("world_changed version={}", s.world_version));
+    outputs.event(Event::WorldChanged { version: s.world_version });
     let Some(plan) = &s.plan else { return };
     let k = sample_at(&plan.trajectory, step.saturating_sub(plan.started_at) as f64 * inputs.dt());
     let hit = remaining_collides(&s.collision, &plan.trajectory, k, s.settings.verify_resolution);
     if hit || s.settings.halt_on_any_change {
-        outputs.event(format!("plan_invalidated id={}{}", plan.id, if hit { ": obstacle in path" } else { "" }));
-        outputs.event(format!("replan reason={}", if hit { "obstacle_in_path" } else { "world_changed" }));
+        let reason = if hit { ReplanReason::ObstacleInPath } else { ReplanReason::WorldChanged };
+        outputs.event(Event::PlanInvalidated { id: Some(plan.id), reason });
+        outputs.event(Event::Replan { reason });
         s.plan = None;
         s.attempts = 0;
         s.goal_reached = false;
         s.next_request_at = step;
     } else {
-        outputs.event(format!("plan_revalidated id={} world={}", plan.id, s.world_version));
+        outputs.event(Event::PlanRevalidated { id: plan.id, world: s.world_version });
     }
 }
 

@@ -3,7 +3,7 @@
 
 use std::path::Path;
 
-use embodied::scenario::{BUILTIN_SCENARIOS, parse_scenario};
+use embodied_system::scenario::{BUILTIN_SCENARIOS, parse_scenario};
 
 fn err_of(text: &str) -> String {
     match parse_scenario(text, Path::new("bad.toml"), Path::new(".")) {

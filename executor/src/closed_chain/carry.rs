@@ -1,7 +1,7 @@
-//! The two-handed carry as an embodied agent: one agent whose effector is both IRp-6 arms.
+//! The two-handed carry as an embodied agent: one agent whose effector is both arms.
 //!
-//! Its `c_c` holds the carry plan (made before the first step: approach, insertion, the
-//! closed-chain carry, retreat) and the closed-chain controller. Each control step a priority
+//! Its `c_c` holds the carry plan (approach, insertion, the closed-chain carry, retreat; made by
+//! [`embodied_planner::carry::plan_carry`]) and the closed-chain controller. Each control step a priority
 //! list of transition functions picks one:
 //! - `safe_halt` once a closed-chain QP has failed (never an unchecked command);
 //! - `closed_chain` while the object is held: a QP finds both arms' joint velocities that keep
@@ -16,21 +16,23 @@
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
-use embodied_executor::closed_chain::{
+use embodied_models::Robot;
+use embodied_models::collision::{Body, CollisionModel, Environment};
+use embodied_models::nalgebra::{DMatrix, DVector, Isometry3, Vector6};
+use embodied_planner::carry::{CarryPlan, pose_difference, tool_pose};
+use serde::Serialize;
+
+use super::{
     ChainKinematics, ClosedChainConfig, ClosedChainController, ClosureMode, DamperParams, StepInput, VelocityDamper,
     pose_error, relative_pose_error, step_bounds,
 };
-use embodied_executor::{
-    Agent, InputImages, OutputImages, Predicate, Primitive, Reactive, SafeHalt, TransitionFunction,
-};
-use embodied_models::Robot;
-use embodied_models::collision::{Body, CollisionModel};
-use embodied_models::nalgebra::{DMatrix, DVector, Isometry3, Vector6};
-use embodied_planner::carry::{CarryPlan, plan_carry, pose_difference, tool_pose};
-use serde::Serialize;
-
-use crate::AppError;
-use crate::scenario::{ClockSpec, Scenario};
+use crate::agent::Agent;
+use crate::behaviour::{Primitive, Reactive};
+use crate::effector::SafeHalt;
+use crate::error::ExecutorError;
+use crate::event::{Event, HaltReason};
+use crate::image::{InputImages, OutputImages};
+use crate::transition::{Predicate, TransitionFunction};
 
 /// Gain of the object pose feedback, 1/s.
 const OBJECT_GAIN: f64 = 10.0;
@@ -128,7 +130,8 @@ impl CarryAgent {
     fn halt(&mut self, reason: String, i: &InputImages, o: &mut OutputImages) {
         if !self.halted {
             self.halted = true;
-            o.event(format!("safe_halt_started reason=qp: {reason}"));
+            let speed = i.qd().iter().fold(0.0_f64, |m, v| m.max(v.abs()));
+            o.event(Event::HaltStarted { reason: HaltReason::ClosedChain, speed, detail: Some(reason.clone()) });
             self.with_record(|r| {
                 r.summary.halts += 1;
                 r.summary.halt_reason = Some(reason);
@@ -141,19 +144,22 @@ impl CarryAgent {
     fn follow(&mut self, i: &InputImages, o: &mut OutputImages) {
         let t = Self::time(i);
         if i.step() == 0 {
-            o.event(format!(
-                "plan_landed planning_ms={:.3} duration_s={:.3} collision_checks={}",
-                self.planning_ms,
-                self.plan.trajectory.duration(),
-                self.plan.stats.collision_checks
-            ));
+            o.event(Event::PlanLanded {
+                id: 0,
+                world: 0,
+                in_time: true,
+                work: self.plan.stats.collision_checks as u64,
+                planning_ms: self.planning_ms,
+                duration_s: self.plan.trajectory.duration(),
+                wall: None,
+            });
         }
         if !self.released && self.reference.is_some() && t >= self.plan.span.to_s {
             self.released = true;
-            o.event("release");
+            o.event(Event::Release);
             let object = tool_pose(&self.robot, i.q(), 0) * self.object_in_tool;
             let error = (object.translation.vector - self.goal.translation.vector).norm();
-            o.event(format!("object put down {error:.4} m from its goal"));
+            o.event(Event::ObjectPlaced { error_m: error });
             self.with_record(|r| {
                 r.summary.release_s = Some(t);
                 r.summary.object_goal_error_m = Some(error);
@@ -162,7 +168,7 @@ impl CarryAgent {
         let (q, qd, _) = self.plan.trajectory.sample(t);
         if t >= self.plan.trajectory.duration() && !self.done {
             self.done = true;
-            o.event("goal_reached: carry completed");
+            o.event(Event::GoalReached { id: None });
             self.with_record(|r| r.summary.completed = true);
         }
         o.set_position_target(&q, &qd);
@@ -181,7 +187,7 @@ impl CarryAgent {
             None => {
                 let r = kin.relative_pose();
                 self.reference = Some(r);
-                o.event("grasp");
+                o.event(Event::Grasp);
                 self.with_record(|rec| rec.summary.grasp_s = Some(t));
                 // The controller's acceleration bound starts from the arms' actual velocity.
                 if let Err(e) = self.controller.set_previous_velocity(i.qd()) {
@@ -312,77 +318,71 @@ fn program() -> Reactive<CarryAgent> {
         }))
 }
 
-/// The carrying agent, its shared measurements and the log header's `closed_chain` entry.
-pub type CarryParts = (Agent<CarryAgent>, Arc<Mutex<CarryRecord>>, serde_json::Value);
+/// The carrying agent and its shared measurements.
+pub type CarryParts = (Agent<CarryAgent>, Arc<Mutex<CarryRecord>>);
 
-/// The carrying agent of `scenario` (which has a `[carry]` table): the plan is made here.
-pub fn carry_agent(
-    scenario: &Scenario,
-    dt: f64,
-    clock: ClockSpec,
-    config: Option<ClosedChainConfig>,
-    compare: bool,
-) -> Result<CarryParts, AppError> {
-    let (Some(task), Some(spec)) = (scenario.carry_task(), &scenario.carry) else {
-        return Err(AppError::Failed(format!("scenario `{}` has no [carry] table", scenario.name)));
+/// What the carrying agent is made of.
+#[derive(Debug, Clone)]
+pub struct CarrySetup {
+    /// The agent's name.
+    pub name: String,
+    /// The robot whose end effectors 0 and 1 are the two hands.
+    pub robot: Robot,
+    /// The carry plan ([`embodied_planner::carry::plan_carry`]).
+    pub plan: CarryPlan,
+    /// The obstacles the dampers keep the arms and the object away from.
+    pub environment: Environment,
+    /// Where the object should be put down.
+    pub object_goal: Isometry3<f64>,
+    /// The closed-chain controller's settings (its `dt` is the control step).
+    pub config: ClosedChainConfig,
+    /// Planning time as the run's clock counts it, ms (logged with the plan).
+    pub planning_ms: f64,
+    /// Solve every QP with clarabel as well (timing and agreement).
+    pub compare: bool,
+}
+
+/// The carrying agent: its `c_c` ([`CarryAgent`]) and program (halt > closed chain > follow).
+pub fn carry_agent(setup: CarrySetup) -> Result<CarryParts, ExecutorError> {
+    let CarrySetup { name, robot, plan, environment, object_goal, config, planning_ms, compare } = setup;
+    let invalid = |reason: &str| ExecutorError::InvalidParameter {
+        what: format!("carry of agent '{name}'"),
+        reason: reason.into(),
     };
-    let agent = &scenario.agents[spec.agent];
-    let mut settings = scenario.carry_settings();
-    settings.dt = dt;
-    let plan = plan_carry(&task, &settings)
-        .map_err(|e| AppError::Failed(format!("scenario `{}`: agent `{}`: carry: {e}", scenario.name, agent.name)))?;
-    let object = plan.span.object.clone().ok_or_else(|| AppError::Failed("carry plan without its object".into()))?;
-    let object_in_tool = object.pose_in_tool().ok_or_else(|| AppError::Failed("carry: bad object pose".into()))?;
-    let ee = task.end_effectors;
-    if ee != [0, 1] {
-        return Err(AppError::Failed(format!(
-            "scenario `{}`: carry: `embodied run` drives end effectors 0 and 1 of the robot as the two hands",
-            scenario.name
-        )));
+    let object = plan.span.object.clone().ok_or_else(|| invalid("the plan holds no object"))?;
+    let object_in_tool = object.pose_in_tool().ok_or_else(|| invalid("the object's pose in the tool is not finite"))?;
+    let ee = [0, 1];
+    let hands: Vec<&str> = robot.end_effectors().iter().take(2).map(|e| e.name.as_str()).collect();
+    if hands != [plan.span.end_effectors[0].as_str(), plan.span.end_effectors[1].as_str()] {
+        return Err(invalid("the two hands must be the robot's end effectors 0 and 1"));
     }
-    let other_link = agent.robot.end_effectors()[ee[1]].link;
-    let held_robot = object
-        .attach(&agent.robot, ee[0], &[other_link])
-        .ok_or_else(|| AppError::Failed("carry: cannot attach the object".into()))?;
-    let (against_environment, arm_against_arm) = damper_models(&held_robot, ee, scenario);
-    let config = ClosedChainConfig { dt, ..config.unwrap_or_default() };
-    let controller = ClosedChainController::new(agent.robot.limits(), config)
-        .map_err(|e| AppError::Failed(format!("carry: closed-chain controller: {e}")))?;
+    let other_link = robot.end_effectors()[ee[1]].link;
+    let held_robot = object.attach(&robot, ee[0], &[other_link]).ok_or_else(|| invalid("cannot attach the object"))?;
+    let (against_environment, arm_against_arm) = damper_models(&held_robot, ee, environment);
+    let controller = ClosedChainController::new(robot.limits(), config)?;
     let record = Arc::new(Mutex::new(CarryRecord {
         summary: ClosedChainSummary {
-            agent: agent.name.clone(),
-            planning_ms: plan.stats.planning_ms,
+            agent: name.clone(),
+            planning_ms,
             plan_duration_s: plan.trajectory.duration(),
             closest_obstacle_m: f64::INFINITY,
             ..ClosedChainSummary::default()
         },
         ..CarryRecord::default()
     }));
-    // Planning time as the run counts it: simulated from the collision checks (the log stays
-    // byte-identical for a seed) or the wall clock.
-    let planning_ms = match clock {
-        ClockSpec::Wall => plan.stats.planning_ms,
-        ClockSpec::Simulated { us_per_check } => plan.stats.collision_checks as f64 * us_per_check * 1e-3,
-    };
-    let header = serde_json::json!({
-        "agent": agent.name,
-        "end_effectors": plan.span.end_effectors,
-        "tolerance_m": plan.span.tolerance_m,
-        "tolerance_rad": plan.span.tolerance_rad,
-        "object": object,
-    });
-    let start = plan.trajectory.q.first().cloned().unwrap_or_else(|| agent.start.clone());
+    let start = plan.trajectory.q.first().cloned();
+    let robot = Arc::new(robot);
     let state = CarryAgent {
-        robot: Arc::new(agent.robot.clone()),
+        robot: robot.clone(),
         against_environment,
         arm_against_arm,
         plan,
         controller,
-        limits: agent.robot.limits(),
+        limits: robot.limits(),
         damper: DamperParams { xi: 1.0, safety: 0.003, influence: 0.03 },
         reference: None,
         object_in_tool,
-        goal: spec.object_goal,
+        goal: object_goal,
         planning_ms,
         compare,
         released: false,
@@ -390,15 +390,14 @@ pub fn carry_agent(
         done: false,
         record: record.clone(),
     };
-    let a = Agent::embodied(agent.name.clone(), Arc::new(agent.robot.clone()), Some(&start), state, program())
-        .map_err(|e| AppError::Failed(format!("agent `{}`: {e}", agent.name)))?;
-    Ok((a, record, header))
+    let a = Agent::embodied(name, robot, start.as_deref(), state, program())?;
+    Ok((a, record))
 }
 
 /// The two collision models of the dampers: the robot without self pairs among the
 /// environment, and each arm's links (the chain to its end effector) against the other arm's,
 /// with no environment.
-fn damper_models(robot: &Robot, ee: [usize; 2], scenario: &Scenario) -> (CollisionModel, CollisionModel) {
+fn damper_models(robot: &Robot, ee: [usize; 2], environment: Environment) -> (CollisionModel, CollisionModel) {
     let n = robot.links().len();
     let alone = robot.without_self_collisions();
     let arm = |k: usize| -> Vec<usize> {
@@ -417,10 +416,7 @@ fn damper_models(robot: &Robot, ee: [usize; 2], scenario: &Scenario) -> (Collisi
             }
         }
     }
-    (
-        CollisionModel::new(&alone, scenario.initial_environment()),
-        CollisionModel::new(&arms, embodied_models::collision::Environment::new()),
-    )
+    (CollisionModel::new(&alone, environment), CollisionModel::new(&arms, Environment::new()))
 }
 
 /// p50, p99 and max of times in ns, as µs.
@@ -440,87 +436,4 @@ pub fn finish(record: &Mutex<CarryRecord>) -> Option<ClosedChainSummary> {
         s.closest_obstacle_m = 0.0;
     }
     Some(s)
-}
-
-/// `embodied bench qp`: the closed-chain QPs of one carry run, both solvers.
-#[derive(Debug, Clone, Serialize)]
-pub struct QpBenchReport {
-    pub scenario: String,
-    pub steps: usize,
-    /// Fast dense solver (Goldfarb–Idnani, warm-started): data assembly and solve, µs.
-    pub dense_p50_us: f64,
-    pub dense_p99_us: f64,
-    pub dense_max_us: f64,
-    /// Clarabel (one solver, data updated in place) on the same QPs, µs.
-    pub clarabel_p50_us: f64,
-    pub clarabel_p99_us: f64,
-    pub clarabel_max_us: f64,
-    /// Clarabel p50 / dense p50.
-    pub speedup_p50: f64,
-    /// Steps whose QP (dense) alone took longer than the 1 ms control step.
-    pub dense_late_steps: usize,
-    pub clarabel_late_steps: usize,
-    pub max_qd_difference: f64,
-    pub max_objective_difference: f64,
-    pub halts: usize,
-    pub max_closure_error_m: f64,
-}
-
-/// Run the carry of `scenario` with every QP solved by both solvers.
-pub fn bench_qp(scenario: &str) -> Result<QpBenchReport, AppError> {
-    if crate::scenario::load_scenario(scenario)?.carry.is_none() {
-        return Err(AppError::Usage(format!("scenario `{scenario}` has no [carry] table: no closed-chain QP to time")));
-    }
-    let args = crate::run::RunArgs { scenario: scenario.to_string(), qp_compare: true, ..Default::default() };
-    let summary = crate::run::run_scenario(&args)?;
-    let (Some(c), Some(record)) = (&summary.closed_chain, &summary.closed_chain_record) else {
-        return Err(AppError::Usage(format!("scenario `{scenario}` has no [carry] table: no closed-chain QP to time")));
-    };
-    let r = record.lock().map_err(|_| AppError::Failed("carry record poisoned".into()))?;
-    let (dense_p50_us, dense_p99_us, dense_max_us) = percentiles_us(&r.fast_ns);
-    let (clarabel_p50_us, clarabel_p99_us, clarabel_max_us) = percentiles_us(&r.reference_ns);
-    let late = |ns: &[u64]| ns.iter().filter(|v| **v > 1_000_000).count();
-    Ok(QpBenchReport {
-        scenario: summary.scenario.clone(),
-        steps: r.fast_ns.len(),
-        dense_p50_us,
-        dense_p99_us,
-        dense_max_us,
-        clarabel_p50_us,
-        clarabel_p99_us,
-        clarabel_max_us,
-        speedup_p50: clarabel_p50_us / dense_p50_us.max(1e-9),
-        dense_late_steps: late(&r.fast_ns),
-        clarabel_late_steps: late(&r.reference_ns),
-        max_qd_difference: r.max_qd_difference,
-        max_objective_difference: r.max_objective_difference,
-        halts: c.halts,
-        max_closure_error_m: c.max_closure_error_m,
-    })
-}
-
-/// The report as text.
-pub fn render_bench_qp(r: &QpBenchReport) -> String {
-    format!(
-        "closed-chain QP of `{}`: {} held steps, each solved by both solvers\n\
-         \x20 dense (Goldfarb-Idnani, warm start): p50 {:.1} us, p99 {:.1} us, max {:.1} us, {} steps over 1 ms\n\
-         \x20 clarabel (data updated in place):   p50 {:.1} us, p99 {:.1} us, max {:.1} us, {} steps over 1 ms\n\
-         \x20 clarabel / dense at p50: {:.1}x; largest difference: qd {:.1e} (relative), objective {:.1e}\n\
-         \x20 halts {}, largest closure error {:.2e} m\n",
-        r.scenario,
-        r.steps,
-        r.dense_p50_us,
-        r.dense_p99_us,
-        r.dense_max_us,
-        r.dense_late_steps,
-        r.clarabel_p50_us,
-        r.clarabel_p99_us,
-        r.clarabel_max_us,
-        r.clarabel_late_steps,
-        r.speedup_p50,
-        r.max_qd_difference,
-        r.max_objective_difference,
-        r.halts,
-        r.max_closure_error_m,
-    )
 }

@@ -26,7 +26,7 @@ use embodied_planner::moveit::{MoveitError, load_request, load_scene};
 use embodied_planner::verify::verify_path;
 use serde::Serialize;
 
-use crate::error::AppError;
+use crate::SystemError as AppError;
 
 /// The resolution (rad, largest joint step) at which every returned path is re-checked.
 pub const VERIFY_RESOLUTION: f64 = 0.005;

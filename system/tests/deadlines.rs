@@ -4,7 +4,7 @@
 
 use std::path::PathBuf;
 
-use embodied::deadlines::{DeadlineArgs, MbmSample, plot_svg, render_table, run_deadline_bench};
+use embodied_system::deadlines::{DeadlineArgs, MbmSample, plot_svg, render_table, run_deadline_bench};
 
 #[test]
 fn small_deadline_bench_is_consistent() {
@@ -46,7 +46,7 @@ fn small_deadline_bench_is_consistent() {
 
 #[test]
 fn mbm_sample_is_benchmarked_as_its_own_set() {
-    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..");
     let robot = root.join("models/tests/fixtures");
     let args = DeadlineArgs {
         deadlines_ms: vec![0.0, 500.0],

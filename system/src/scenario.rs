@@ -12,7 +12,7 @@ use embodied_models::{ConvexHull, Robot, Shape};
 use serde::Deserialize;
 use toml::Spanned;
 
-use crate::AppError;
+use crate::SystemError;
 
 /// The scenarios embedded in the binary: (name, TOML text).
 pub const BUILTIN_SCENARIOS: &[(&str, &str)] = &[
@@ -98,7 +98,7 @@ struct RawAgent {
     #[serde(default)]
     goal_pose: Option<Spanned<RawPose>>,
     #[serde(default)]
-    behaviour: Option<toml::Table>,
+    behaviour: Option<BehaviourSpec>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -169,29 +169,53 @@ struct RawPlanner {
 /// What an agent should reach.
 #[derive(Debug, Clone)]
 pub enum GoalSpec {
+    /// This configuration.
     Configuration(Vec<f64>),
+    /// Any one of these configurations.
     AnyOf(Vec<Vec<f64>>),
-    ToolPose { end_effector: usize, pose: Isometry3<f64> },
+    /// End effector `end_effector` at `pose` (world frame).
+    ToolPose {
+        /// Index of the end effector.
+        end_effector: usize,
+        /// The tool pose.
+        pose: Isometry3<f64>,
+    },
 }
 
 /// One robot of the scenario, as an agent.
 #[derive(Debug, Clone)]
 pub struct AgentSpec {
+    /// Unique name in the scenario.
     pub name: String,
+    /// The robot, placed in the world (its base pose).
     pub robot: Robot,
+    /// Start configuration.
     pub start: Vec<f64>,
+    /// What it should reach (`None`: it holds where it stands, or the carry drives it).
     pub goal: Option<GoalSpec>,
-    /// The agent's behaviour settings for `embodied run` (free-form table, read by the runner).
-    pub behaviour: Option<toml::Table>,
+    /// The agent's behaviour settings.
+    pub behaviour: BehaviourSpec,
+}
+
+/// An agent's behaviour settings (`[agents.behaviour]`).
+#[derive(Debug, Clone, Default, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BehaviourSpec {
+    /// Contact force (N) above which the force-limited reaction stops the arm and abandons
+    /// the task (the reaction has priority over the plan follower).
+    #[serde(default)]
+    pub force_limit: Option<f64>,
 }
 
 /// An obstacle with its run-time script.
 #[derive(Debug, Clone)]
 pub struct ObstacleSpec {
+    /// Its name, shape and pose at time zero.
     pub obstacle: Obstacle,
     /// Time (s) at which the obstacle appears during a run; `None`: there from the start, and
     /// on every agent's map.
     pub appear_at: Option<f64>,
+    /// Velocity (m/s) with which it moves during a run.
     pub velocity: Option<Vector3<f64>>,
 }
 
@@ -202,7 +226,10 @@ pub enum ClockSpec {
     Wall,
     /// Simulated: `us_per_check` microseconds per collision check the planner makes; runs are
     /// reproducible bit for bit.
-    Simulated { us_per_check: f64 },
+    Simulated {
+        /// Simulated planning time per collision check, µs.
+        us_per_check: f64,
+    },
 }
 
 /// Simulated planning time per collision check when a scenario does not say, µs.
@@ -216,10 +243,13 @@ pub struct PlannerSpec {
     pub deadline_ms: f64,
     /// `embodied run`: when the search gives up (at least `deadline_ms`).
     pub give_up_ms: f64,
+    /// The planner's seed.
     pub seed: u64,
     /// Segments certified free for the whole continuum (default), or sampled at `resolution`.
     pub certify: bool,
+    /// Largest joint step between sampled checks (sampled edges; also the gate's sampling).
     pub resolution: f64,
+    /// A deadline in expansions instead of time (reproducible plans).
     pub expansions: Option<usize>,
     /// `embodied run`: how planning time is counted.
     pub clock: ClockSpec,
@@ -238,7 +268,9 @@ pub enum Coordination {
 /// Run settings of a scenario.
 #[derive(Debug, Clone)]
 pub struct RunSpec {
+    /// Simulated seconds to run (`None`: 6 s).
     pub duration: Option<f64>,
+    /// How a coordinator grants the agents' motions.
     pub coordination: Coordination,
 }
 
@@ -246,33 +278,47 @@ pub struct RunSpec {
 /// at both ends of its x axis, carries it from `object_start` to `object_goal` and puts it down.
 #[derive(Debug, Clone)]
 pub struct CarrySpec {
+    /// Index of the carrying agent.
     pub agent: usize,
+    /// The object's name.
     pub object: String,
     /// Full box sizes, m.
     pub size: [f64; 3],
+    /// Where the object stands at the start.
     pub object_start: Isometry3<f64>,
+    /// Where it should be put down.
     pub object_goal: Isometry3<f64>,
     /// `[holder, other]` end-effector indices.
     pub end_effectors: [usize; 2],
     /// Tool frames in the object frame: the tools approach the object's end faces along its x
     /// axis, turned by `grasp_roll` about their approach axes.
     pub grasps: [Isometry3<f64>; 2],
+    /// Step of the object-pose lattice the carry's A* searches, m.
     pub lattice_step: f64,
 }
 
 /// A loaded, checked scenario.
 #[derive(Debug, Clone)]
 pub struct Scenario {
+    /// Its name.
     pub name: String,
+    /// One line on what it shows.
     pub description: String,
+    /// Where it came from (a file, `<built-in>/NAME.toml`, or `<code>`).
     pub source: String,
-    /// Hex SHA-256 of the scenario text.
+    /// Hex SHA-256 of the scenario text (of its description, for a scenario built in code).
     pub hash: String,
+    /// Seed of all simulated noise.
     pub seed: u64,
+    /// The robots as agents.
     pub agents: Vec<AgentSpec>,
+    /// The obstacles, with their run-time script.
     pub obstacles: Vec<ObstacleSpec>,
+    /// Planner settings.
     pub planner: PlannerSpec,
+    /// Run settings.
     pub run: RunSpec,
+    /// The two-handed carry, if any.
     pub carry: Option<CarrySpec>,
 }
 
@@ -314,6 +360,241 @@ impl Scenario {
     }
 }
 
+impl Scenario {
+    /// A scenario made in code: start with a name, add agents and obstacles, then
+    /// [`ScenarioBuilder::build`] checks it as the TOML reader would.
+    pub fn builder(name: impl Into<String>) -> ScenarioBuilder {
+        ScenarioBuilder::new(name)
+    }
+
+    /// Read a scenario from TOML text; `file` names it in errors, `dir` anchors relative paths
+    /// (URDF, meshes). The same as [`parse_scenario`].
+    pub fn from_toml(text: &str, file: &Path, dir: &Path) -> Result<Scenario, SystemError> {
+        parse_scenario(text, file, dir)
+    }
+}
+
+impl AgentSpec {
+    /// An agent driving `robot` from its home pose, with no goal.
+    pub fn new(name: impl Into<String>, robot: Robot) -> Self {
+        let start = robot.home().to_vec();
+        Self { name: name.into(), robot, start, goal: None, behaviour: BehaviourSpec::default() }
+    }
+
+    /// Place the robot's base at `xyz` (m, world frame), before its own base pose.
+    pub fn at(self, xyz: [f64; 3]) -> Self {
+        self.placed(pose(xyz, None))
+    }
+
+    /// Place the robot's base at `placement` (world frame), before its own base pose.
+    pub fn placed(mut self, placement: Isometry3<f64>) -> Self {
+        let base = placement * self.robot.base();
+        self.robot.set_base(base);
+        self
+    }
+
+    /// Start at `q`.
+    pub fn start(mut self, q: Vec<f64>) -> Self {
+        self.start = q;
+        self
+    }
+
+    /// Reach `goal`.
+    pub fn goal(mut self, goal: GoalSpec) -> Self {
+        self.goal = Some(goal);
+        self
+    }
+
+    /// Stop and abandon the task on a contact force over `newtons`.
+    pub fn force_limit(mut self, newtons: f64) -> Self {
+        self.behaviour.force_limit = Some(newtons);
+        self
+    }
+}
+
+/// Builds a [`Scenario`] in code; [`ScenarioBuilder::build`] checks what the TOML reader checks.
+#[derive(Debug, Clone)]
+pub struct ScenarioBuilder {
+    scenario: Scenario,
+}
+
+impl ScenarioBuilder {
+    fn new(name: impl Into<String>) -> Self {
+        let name = name.into();
+        Self {
+            scenario: Scenario {
+                description: String::new(),
+                source: "<code>".into(),
+                hash: String::new(),
+                seed: 1,
+                agents: Vec::new(),
+                obstacles: Vec::new(),
+                planner: PlannerSpec {
+                    deadline_ms: 200.0,
+                    give_up_ms: 200.0,
+                    seed: 1,
+                    certify: true,
+                    resolution: 0.02,
+                    expansions: None,
+                    clock: ClockSpec::Wall,
+                },
+                run: RunSpec { duration: None, coordination: Coordination::Sequential },
+                carry: None,
+                name,
+            },
+        }
+    }
+
+    /// One line on what it shows.
+    pub fn description(mut self, text: impl Into<String>) -> Self {
+        self.scenario.description = text.into();
+        self
+    }
+
+    /// Seed of the simulated noise and of the planner.
+    pub fn seed(mut self, seed: u64) -> Self {
+        self.scenario.seed = seed;
+        self.scenario.planner.seed = seed;
+        self
+    }
+
+    /// Add an agent.
+    pub fn agent(mut self, agent: AgentSpec) -> Self {
+        self.scenario.agents.push(agent);
+        self
+    }
+
+    /// Add an obstacle, on every agent's map from the start.
+    pub fn obstacle(self, obstacle: Obstacle) -> Self {
+        self.obstacle_spec(ObstacleSpec { obstacle, appear_at: None, velocity: None })
+    }
+
+    /// Add an obstacle with its run-time script (appearing at a time, moving).
+    pub fn obstacle_spec(mut self, obstacle: ObstacleSpec) -> Self {
+        self.scenario.obstacles.push(obstacle);
+        self
+    }
+
+    /// Planner settings.
+    pub fn planner(mut self, planner: PlannerSpec) -> Self {
+        self.scenario.planner = planner;
+        self
+    }
+
+    /// Count planning time as `us_per_check` µs per collision check: runs replay byte for byte.
+    pub fn simulated_clock(mut self, us_per_check: f64) -> Self {
+        self.scenario.planner.clock = ClockSpec::Simulated { us_per_check };
+        self
+    }
+
+    /// How long a run lasts, s.
+    pub fn duration(mut self, seconds: f64) -> Self {
+        self.scenario.run.duration = Some(seconds);
+        self
+    }
+
+    /// How the coordinator grants the agents' motions.
+    pub fn coordination(mut self, coordination: Coordination) -> Self {
+        self.scenario.run.coordination = coordination;
+        self
+    }
+
+    /// A two-handed carry by one of the agents.
+    pub fn carry(mut self, carry: CarrySpec) -> Self {
+        self.scenario.carry = Some(carry);
+        self
+    }
+
+    /// Check and return the scenario: at least one agent, unique names, start and goals
+    /// within the robots' limits, positive sizes and finite numbers.
+    pub fn build(self) -> Result<Scenario, SystemError> {
+        let mut s = self.scenario;
+        let bad = |m: String| SystemError::Usage(format!("scenario `{}`: {m}", s.name));
+        if s.agents.is_empty() {
+            return Err(bad("a scenario needs at least one agent".into()));
+        }
+        for (k, a) in s.agents.iter().enumerate() {
+            if s.agents[..k].iter().any(|b| b.name == a.name) {
+                return Err(bad(format!("two agents are named `{}`", a.name)));
+            }
+            a.robot.check_configuration(&a.start).map_err(|e| bad(format!("agent `{}`: start: {e}", a.name)))?;
+            match &a.goal {
+                Some(GoalSpec::Configuration(q)) => {
+                    a.robot.check_configuration(q).map_err(|e| bad(format!("agent `{}`: goal: {e}", a.name)))?
+                }
+                Some(GoalSpec::AnyOf(qs)) => {
+                    if qs.is_empty() {
+                        return Err(bad(format!("agent `{}`: goals: expected at least one configuration", a.name)));
+                    }
+                    for q in qs {
+                        a.robot.check_configuration(q).map_err(|e| bad(format!("agent `{}`: goals: {e}", a.name)))?;
+                    }
+                }
+                Some(GoalSpec::ToolPose { end_effector, pose }) => {
+                    if *end_effector >= a.robot.end_effectors().len() {
+                        return Err(bad(format!("agent `{}`: goal: no end effector #{end_effector}", a.name)));
+                    }
+                    let t = pose.translation.vector;
+                    if !(t.iter().all(|v| v.is_finite()) && pose.rotation.coords.iter().all(|v| v.is_finite())) {
+                        return Err(bad(format!("agent `{}`: goal pose: expected finite numbers", a.name)));
+                    }
+                }
+                None => {}
+            }
+            if let Some(f) = a.behaviour.force_limit
+                && !(f.is_finite() && f > 0.0)
+            {
+                return Err(bad(format!("agent `{}`: force_limit: expected a force > 0 N, got {f}", a.name)));
+            }
+        }
+        let p = &s.planner;
+        if !(p.deadline_ms.is_finite() && p.deadline_ms >= 0.0) {
+            return Err(bad(format!("planner: deadline_ms: expected a time >= 0 ms, got {}", p.deadline_ms)));
+        }
+        if !(p.give_up_ms.is_finite() && p.give_up_ms >= p.deadline_ms) {
+            s.planner.give_up_ms = p.deadline_ms;
+        }
+        if !(s.planner.resolution.is_finite() && s.planner.resolution > 0.0) {
+            return Err(bad("planner: resolution must be positive".into()));
+        }
+        if let ClockSpec::Simulated { us_per_check } = s.planner.clock
+            && !(us_per_check.is_finite() && us_per_check >= 0.0)
+        {
+            return Err(bad(format!(
+                "planner: simulated clock: expected a time >= 0 µs per check, got {us_per_check}"
+            )));
+        }
+        if let Some(d) = s.run.duration
+            && !(d.is_finite() && d > 0.0)
+        {
+            return Err(bad(format!("run: duration: expected a positive time in s, got {d}")));
+        }
+        for o in &s.obstacles {
+            let finite = o.obstacle.pose.translation.vector.iter().all(|v| v.is_finite())
+                && o.velocity.is_none_or(|v| v.iter().all(|x| x.is_finite()))
+                && o.appear_at.is_none_or(|t| t.is_finite() && t >= 0.0);
+            if !finite {
+                return Err(bad(format!("obstacle `{}`: expected finite numbers and a time >= 0", o.obstacle.name)));
+            }
+        }
+        if let Some(c) = &s.carry {
+            if c.agent >= s.agents.len() {
+                return Err(bad(format!("carry: no agent #{}", c.agent)));
+            }
+            if !c.size.iter().all(|v| v.is_finite() && *v > 0.0) {
+                return Err(bad(format!("carry: size: expected three positive lengths in m, got {:?}", c.size)));
+            }
+        }
+        s.hash = sha256_hex(&format!(
+            "{}\n{}\n{:?}",
+            s.name,
+            s.description,
+            s.agents.iter().map(|a| &a.name).collect::<Vec<_>>()
+        ));
+        Ok(s)
+    }
+}
+
 impl ObstacleSpec {
     /// Present from the start and still: on the agents' map.
     pub fn on_map(&self) -> bool {
@@ -336,9 +617,9 @@ struct Ctx<'a> {
 }
 
 impl Ctx<'_> {
-    fn err(&self, span: Range<usize>, message: impl Into<String>) -> AppError {
+    fn err(&self, span: Range<usize>, message: impl Into<String>) -> SystemError {
         let (line, column) = line_col(self.text, span.start);
-        AppError::Parse { file: self.file.to_path_buf(), line, column, message: message.into() }
+        SystemError::Parse { file: self.file.to_path_buf(), line, column, message: message.into() }
     }
 }
 
@@ -348,19 +629,19 @@ fn pose(xyz: [f64; 3], rpy: Option<[f64; 3]>) -> Isometry3<f64> {
 }
 
 /// Resolve a scenario argument: a built-in name or a file path.
-pub fn load_scenario(arg: &str) -> Result<Scenario, AppError> {
+pub fn load_scenario(arg: &str) -> Result<Scenario, SystemError> {
     if let Some((_, text)) = BUILTIN_SCENARIOS.iter().find(|(n, _)| *n == arg) {
         return parse_scenario(text, Path::new(&format!("<built-in>/{arg}.toml")), Path::new("."));
     }
     let path = PathBuf::from(arg);
     if !path.exists() {
         let names: Vec<&str> = BUILTIN_SCENARIOS.iter().map(|(n, _)| *n).collect();
-        return Err(AppError::Usage(format!(
+        return Err(SystemError::Usage(format!(
             "`{arg}` is neither a scenario file nor a built-in scenario; built-in scenarios are: {}",
             names.join(", ")
         )));
     }
-    let text = std::fs::read_to_string(&path).map_err(|e| AppError::io(&path, e))?;
+    let text = std::fs::read_to_string(&path).map_err(|e| SystemError::io(&path, e))?;
     let dir = path.parent().map(Path::to_path_buf).unwrap_or_else(|| PathBuf::from("."));
     parse_scenario(&text, &path, &dir)
 }
@@ -372,7 +653,7 @@ fn sha256_hex(text: &str) -> String {
 }
 
 /// Parse a scenario from TOML text; `file` names it in errors, `dir` anchors relative paths.
-pub fn parse_scenario(text: &str, file: &Path, dir: &Path) -> Result<Scenario, AppError> {
+pub fn parse_scenario(text: &str, file: &Path, dir: &Path) -> Result<Scenario, SystemError> {
     let ctx = Ctx { file, text };
     let raw: RawScenario = toml::from_str(text).map_err(|e| {
         let span = e.span().unwrap_or(0..0);
@@ -411,7 +692,7 @@ pub fn parse_scenario(text: &str, file: &Path, dir: &Path) -> Result<Scenario, A
         if a.xyz.is_some() || a.rpy.is_some() {
             robot.set_base(pose(a.xyz.unwrap_or([0.0; 3]), a.rpy) * robot.base());
         }
-        let check = |q: &Spanned<Vec<f64>>, what: &str| -> Result<Vec<f64>, AppError> {
+        let check = |q: &Spanned<Vec<f64>>, what: &str| -> Result<Vec<f64>, SystemError> {
             robot.check_configuration(q.get_ref()).map_err(|e| ctx.err(q.span(), format!("{what}: {e}")))?;
             Ok(q.get_ref().clone())
         };
@@ -460,13 +741,21 @@ pub fn parse_scenario(text: &str, file: &Path, dir: &Path) -> Result<Scenario, A
                 return Err(ctx.err(span, format!("agent `{}`: give at most one of goal, goals, goal_pose", a.name)));
             }
         };
-        agents.push(AgentSpec { name: a.name.clone(), robot, start, goal, behaviour: a.behaviour.clone() });
+        let behaviour = a.behaviour.clone().unwrap_or_default();
+        if let Some(f) = behaviour.force_limit
+            && !(f.is_finite() && f > 0.0)
+        {
+            return Err(
+                ctx.err(span, format!("agent `{}`: behaviour.force_limit: expected a force > 0 N, got {f}", a.name))
+            );
+        }
+        agents.push(AgentSpec { name: a.name.clone(), robot, start, goal, behaviour });
     }
     let mut obstacles = Vec::new();
     for spanned in &raw.obstacles {
         let span = spanned.span();
         let o = spanned.get_ref();
-        let positive = |v: f64, what: &str| -> Result<f64, AppError> {
+        let positive = |v: f64, what: &str| -> Result<f64, SystemError> {
             if v.is_finite() && v > 0.0 {
                 Ok(v)
             } else {
@@ -640,7 +929,7 @@ pub fn parse_scenario(text: &str, file: &Path, dir: &Path) -> Result<Scenario, A
     })
 }
 
-fn parse_carry(ctx: &Ctx, spanned: &Spanned<RawCarry>, agents: &[AgentSpec]) -> Result<CarrySpec, AppError> {
+fn parse_carry(ctx: &Ctx, spanned: &Spanned<RawCarry>, agents: &[AgentSpec]) -> Result<CarrySpec, SystemError> {
     use std::f64::consts::FRAC_PI_2;
     let c = spanned.get_ref();
     let agent = agents.iter().position(|a| a.name == *c.agent.get_ref()).ok_or_else(|| {
@@ -687,7 +976,7 @@ fn parse_carry(ctx: &Ctx, spanned: &Spanned<RawCarry>, agents: &[AgentSpec]) -> 
             return Err(ctx.err(s.span(), format!("carry: lattice_step: expected 0.005..0.5 m, got {}", s.get_ref())));
         }
     };
-    let finite = |v: &[f64], what: &str| -> Result<(), AppError> {
+    let finite = |v: &[f64], what: &str| -> Result<(), SystemError> {
         if v.iter().all(|x| x.is_finite()) {
             Ok(())
         } else {

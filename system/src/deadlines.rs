@@ -15,13 +15,12 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use embodied_executor::deliberation::{DeliberationSettings, PlanBudget, PlanClock, deliberative_agent};
-use embodied_executor::{Obstacle, Runtime, RuntimeConfig, StepRecord};
+use embodied_executor::{Event, Obstacle, Runtime, RuntimeConfig, StepRecord, WallTiming};
 use embodied_models::CollisionModel;
 use embodied_planner::motion::Goal;
 
-use crate::error::AppError;
+use crate::SystemError;
 use crate::plan::{agent_problem, goal_of};
-use crate::run::event_field;
 use crate::scenario::load_scenario;
 
 /// A sample of MotionBenchMaker problems to add to the built-in scenarios.
@@ -122,7 +121,7 @@ struct Problem {
     resolution: f64,
 }
 
-fn problems(args: &DeadlineArgs) -> Result<Vec<Problem>, AppError> {
+fn problems(args: &DeadlineArgs) -> Result<Vec<Problem>, SystemError> {
     let names: Vec<String> = if args.scenarios.is_empty() && args.mbm.is_none() {
         crate::scenario::BUILTIN_SCENARIOS.iter().map(|(n, _)| (*n).to_string()).collect()
     } else {
@@ -162,7 +161,7 @@ fn problems(args: &DeadlineArgs) -> Result<Vec<Problem>, AppError> {
         }
     }
     if out.is_empty() {
-        return Err(AppError::Usage("no problem to plan: no scenario agent with a goal, no MBM problem".into()));
+        return Err(SystemError::Usage("no problem to plan: no scenario agent with a goal, no MBM problem".into()));
     }
     Ok(out)
 }
@@ -178,35 +177,37 @@ struct Tally {
     overshoot_us: Vec<f64>,
 }
 
-fn tally_event(t: &mut Tally, problem: &str, e: &str, deadline_us: f64) {
-    if e.starts_with("plan_requested") {
-        t.requested += 1;
-    } else if e.starts_with("plan_landed") {
-        let elapsed = event_field(e, "elapsed_us").unwrap_or(f64::INFINITY);
-        if elapsed <= deadline_us && e.contains(" in_time ") {
-            t.in_time += 1;
+fn tally_event(t: &mut Tally, problem: &str, e: &Event, deadline_us: f64) {
+    let elapsed_us = |wall: &Option<WallTiming>| wall.map_or(f64::INFINITY, |w| w.elapsed_us as f64);
+    match e {
+        Event::PlanRequested { .. } => t.requested += 1,
+        Event::PlanLanded { in_time, wall, .. } => {
+            if *in_time && elapsed_us(wall) <= deadline_us {
+                t.in_time += 1;
+            }
         }
-    } else if e.starts_with("goal_reached") {
-        t.goal = true;
-    } else if e.starts_with("safe_halt_started") {
-        t.halts += 1;
-    } else if e.starts_with("safe_halt_finished") {
-        let distance = event_field(e, "distance").unwrap_or(0.0);
-        let time_ms = event_field(e, "time_s").unwrap_or(0.0) * 1e3;
-        if event_field(e, "steps").unwrap_or(0.0) > 0.0 {
-            t.halts_from_speed.push(HaltRecord { problem: problem.to_string(), distance, time_ms });
+        Event::GoalReached { .. } => t.goal = true,
+        Event::HaltStarted { .. } => t.halts += 1,
+        Event::HaltFinished { distance, time_s, steps } => {
+            if *steps > 0 {
+                t.halts_from_speed.push(HaltRecord {
+                    problem: problem.to_string(),
+                    distance: *distance,
+                    time_ms: time_s * 1e3,
+                });
+            }
         }
+        _ => {}
     }
     // A search that ran to the deadline: how long past it it returned.
-    if (e.starts_with("plan_failed") || e.starts_with("plan_landed"))
-        && let Some(elapsed) = event_field(e, "elapsed_us")
-        && elapsed >= deadline_us
+    if let Event::PlanFailed { wall: Some(w), .. } | Event::PlanLanded { wall: Some(w), .. } = e
+        && w.elapsed_us as f64 >= deadline_us
     {
-        t.overshoot_us.push(elapsed - deadline_us);
+        t.overshoot_us.push(w.elapsed_us as f64 - deadline_us);
     }
 }
 
-fn run_one(p: &Problem, deadline_ms: f64, args: &DeadlineArgs) -> Result<Tally, AppError> {
+fn run_one(p: &Problem, deadline_ms: f64, args: &DeadlineArgs) -> Result<Tally, SystemError> {
     let dt = 0.001;
     let deadline = Duration::from_secs_f64(deadline_ms.max(0.0) / 1e3);
     let settings = DeliberationSettings {
@@ -231,7 +232,7 @@ fn run_one(p: &Problem, deadline_ms: f64, args: &DeadlineArgs) -> Result<Tally, 
     };
     let robot = Arc::new(p.collision.robot().clone());
     let agent = deliberative_agent(&p.name, robot, p.collision.clone(), &p.start, p.goal.clone(), settings)
-        .map_err(|e| AppError::Failed(format!("{}: {e}", p.name)))?;
+        .map_err(|e| SystemError::Failed(format!("{}: {e}", p.name)))?;
     let mut rt = Runtime::new(RuntimeConfig { dt, seed: args.seed, ..RuntimeConfig::default() });
     rt.add_agent(agent);
     let mut t = Tally::default();
@@ -240,25 +241,26 @@ fn run_one(p: &Problem, deadline_ms: f64, args: &DeadlineArgs) -> Result<Tally, 
     let deadline_us = deadline.as_secs_f64() * 1e6;
     let mut pace: Option<(std::time::Instant, u64)> = None;
     for _ in 0..args.max_steps {
-        let rec: StepRecord = rt.step().map_err(|e| AppError::Failed(format!("{}: {e}", p.name)))?.clone();
+        let rec: StepRecord = rt.step().map_err(|e| SystemError::Failed(format!("{}: {e}", p.name)))?.clone();
         for e in &rec.agents[0].events {
             tally_event(&mut t, &p.name, e, deadline_us);
-            if e.starts_with("plan_requested") {
-                pending = true;
-            } else if ["plan_landed", "plan_failed", "plan_rejected", "planner_panicked", "plan_discarded_stale"]
-                .iter()
-                .any(|x| e.starts_with(x))
-            {
-                pending = false;
+            match e {
+                Event::PlanRequested { .. } => pending = true,
+                Event::PlanLanded { .. }
+                | Event::PlanFailed { .. }
+                | Event::PlanRejected { .. }
+                | Event::PlannerPanicked { .. }
+                | Event::PlanDiscarded { .. } => pending = false,
+                _ => {}
             }
-            if e.starts_with("plan_landed") && !disturbed {
+            if matches!(e, Event::PlanLanded { .. }) && !disturbed {
                 // Once it moves, the world changes: halt from speed, replan.
                 disturbed = true;
                 let at = rec.step + 200;
                 rt.world_mut()
                     .add_obstacle(Obstacle { appears_at: at, ..Obstacle::fixed("far", [50.0, 0.0, 0.0], 0.1) });
             }
-            if e.starts_with("plan_abandoned") {
+            if matches!(e, Event::PlanAbandoned { .. }) {
                 return Ok(t);
             }
         }
@@ -297,9 +299,9 @@ fn median(v: &[f64]) -> f64 {
 }
 
 /// Run the benchmark.
-pub fn run_deadline_bench(args: &DeadlineArgs) -> Result<DeadlineReport, AppError> {
+pub fn run_deadline_bench(args: &DeadlineArgs) -> Result<DeadlineReport, SystemError> {
     if args.deadlines_ms.is_empty() || args.deadlines_ms.iter().any(|d| !d.is_finite() || *d < 0.0) {
-        return Err(AppError::Usage("deadlines must be a non-empty list of non-negative milliseconds".into()));
+        return Err(SystemError::Usage("deadlines must be a non-empty list of non-negative milliseconds".into()));
     }
     let problems = problems(args)?;
     let mut rows = Vec::new();
@@ -403,9 +405,9 @@ pub fn render_table(report: &DeadlineReport) -> String {
 }
 
 /// SVG plot of the share of plans delivered in time against the deadline (log x axis).
-pub fn plot_svg(report: &DeadlineReport, path: &Path) -> Result<(), AppError> {
+pub fn plot_svg(report: &DeadlineReport, path: &Path) -> Result<(), SystemError> {
     use plotters::prelude::*;
-    let fail = |e: String| AppError::Failed(format!("plot {}: {e}", path.display()));
+    let fail = |e: String| SystemError::Failed(format!("plot {}: {e}", path.display()));
     let root = SVGBackend::new(path, (800, 500)).into_drawing_area();
     root.fill(&WHITE).map_err(|e| fail(e.to_string()))?;
     let xs: Vec<f64> = report.rows.iter().map(|r| r.deadline_ms.max(0.1)).collect();

@@ -16,7 +16,7 @@ use embodied_planner::verify::certified::{CheckSettings, check_trajectory};
 use embodied_planner::verify::verify_trajectory;
 use serde::{Deserialize, Serialize};
 
-use crate::AppError;
+use crate::SystemError;
 use crate::scenario::{GoalSpec, Scenario};
 
 /// Format tag of plan files.
@@ -134,10 +134,10 @@ pub fn agent_problem(scenario: &Scenario, k: usize, occupied: &[Vec<Vec<f64>>]) 
 
 /// Plan every agent with a goal; other agents' bodies stand at their start poses, except
 /// agents planned before, which stand where their plan ends (they move first).
-pub fn plan_scenario(scenario: &Scenario, deadline_ms: Option<f64>) -> Result<PlanFile, AppError> {
+pub fn plan_scenario(scenario: &Scenario, deadline_ms: Option<f64>) -> Result<PlanFile, SystemError> {
     let deadline_ms = deadline_ms.unwrap_or(scenario.planner.deadline_ms);
     if !(deadline_ms.is_finite() && deadline_ms >= 0.0) {
-        return Err(AppError::Usage(format!("--deadline-ms must be a non-negative number, got {deadline_ms}")));
+        return Err(SystemError::Usage(format!("--deadline-ms must be a non-negative number, got {deadline_ms}")));
     }
     let mut resting: Vec<Vec<Vec<f64>>> = scenario.agents.iter().map(|a| vec![a.start.clone()]).collect();
     let mut plans = Vec::new();
@@ -151,11 +151,11 @@ pub fn plan_scenario(scenario: &Scenario, deadline_ms: Option<f64>) -> Result<Pl
         }
         let settings = motion_settings(scenario, deadline);
         let plan = plan_motion(&model, &agent.start, &goal, &settings)
-            .map_err(|e| AppError::Failed(format!("scenario `{}`: agent `{}`: {e}", scenario.name, agent.name)))?;
+            .map_err(|e| SystemError::Failed(format!("scenario `{}`: agent `{}`: {e}", scenario.name, agent.name)))?;
         let trajectory = time_parameterize(&plan.path, &agent.robot, 0.001);
         // The verifier, not the planner, says whether the plan may drive an effector.
         verify_trajectory(&model, &trajectory, scenario.planner.resolution.min(0.01)).map_err(|v| {
-            AppError::Failed(format!(
+            SystemError::Failed(format!(
                 "scenario `{}`: agent `{}`: plan rejected by the verifier: {v}",
                 scenario.name, agent.name
             ))
@@ -170,21 +170,21 @@ pub fn plan_scenario(scenario: &Scenario, deadline_ms: Option<f64>) -> Result<Pl
             joint_names: agent.robot.joint_names(),
             path: plan.path.clone(),
             trajectory,
-            stats: serde_json::to_value(stats).map_err(|e| AppError::Failed(e.to_string()))?,
+            stats: serde_json::to_value(stats).map_err(|e| SystemError::Failed(e.to_string()))?,
             closed_chain: Vec::new(),
         });
     }
     if let (Some(task), Some(carry)) = (scenario.carry_task(), &scenario.carry) {
         let agent = &scenario.agents[carry.agent];
         let plan = plan_carry(&task, &scenario.carry_settings()).map_err(|e| {
-            AppError::Failed(format!("scenario `{}`: agent `{}`: carry: {e}", scenario.name, agent.name))
+            SystemError::Failed(format!("scenario `{}`: agent `{}`: carry: {e}", scenario.name, agent.name))
         })?;
         // The certified checker, not the planner, says whether the plan may drive an effector.
         let model = agent_problem(scenario, carry.agent, &resting);
         let report =
             check_trajectory(&model, &plan.trajectory, std::slice::from_ref(&plan.span), &CheckSettings::default());
         if !report.certified {
-            return Err(AppError::Failed(format!(
+            return Err(SystemError::Failed(format!(
                 "scenario `{}`: agent `{}`: carry plan rejected by the verifier: {:?}",
                 scenario.name,
                 agent.name,
@@ -197,12 +197,15 @@ pub fn plan_scenario(scenario: &Scenario, deadline_ms: Option<f64>) -> Result<Pl
             joint_names: agent.robot.joint_names(),
             path: plan.waypoints.clone(),
             trajectory: plan.trajectory.clone(),
-            stats: serde_json::to_value(&plan.stats).map_err(|e| AppError::Failed(e.to_string()))?,
+            stats: serde_json::to_value(&plan.stats).map_err(|e| SystemError::Failed(e.to_string()))?,
             closed_chain: vec![plan.span.clone()],
         });
     }
     if plans.is_empty() {
-        return Err(AppError::Usage(format!("scenario `{}` has no agent with a goal: nothing to plan", scenario.name)));
+        return Err(SystemError::Usage(format!(
+            "scenario `{}` has no agent with a goal: nothing to plan",
+            scenario.name
+        )));
     }
     Ok(PlanFile {
         format: PLAN_FORMAT.to_string(),
@@ -212,21 +215,21 @@ pub fn plan_scenario(scenario: &Scenario, deadline_ms: Option<f64>) -> Result<Pl
 }
 
 /// Read a plan file back, checking its format tag.
-pub fn read_plan(path: &std::path::Path) -> Result<PlanFile, AppError> {
-    let text = std::fs::read_to_string(path).map_err(|e| AppError::io(path, e))?;
+pub fn read_plan(path: &std::path::Path) -> Result<PlanFile, SystemError> {
+    let text = std::fs::read_to_string(path).map_err(|e| SystemError::io(path, e))?;
     parse_plan(&text, path)
 }
 
 /// Parse a plan file's text, checking its format tag; `path` names it in errors.
-pub fn parse_plan(text: &str, path: &std::path::Path) -> Result<PlanFile, AppError> {
-    let plan: PlanFile = serde_json::from_str(text).map_err(|e| AppError::Parse {
+pub fn parse_plan(text: &str, path: &std::path::Path) -> Result<PlanFile, SystemError> {
+    let plan: PlanFile = serde_json::from_str(text).map_err(|e| SystemError::Parse {
         file: path.to_path_buf(),
         line: e.line(),
         column: e.column(),
         message: format!("not a plan file: {e}"),
     })?;
     if plan.format != PLAN_FORMAT {
-        return Err(AppError::Parse {
+        return Err(SystemError::Parse {
             file: path.to_path_buf(),
             line: 1,
             column: 1,

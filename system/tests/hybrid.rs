@@ -1,13 +1,14 @@
 //! Hybrid deliberative-behavioural runs of the built-in scenarios, end to end through
-//! `embodied::run::run_scenario`, every behaviour asserted from the JSON Lines log.
+//! `embodied_system::system::run_scenario`, every behaviour asserted from the JSON Lines log.
 #![allow(clippy::unwrap_used)]
 
 mod common;
 use common::tmp;
 
-use embodied::run::{RunArgs, run_scenario};
-use embodied::scenario::{ClockSpec, load_scenario};
+use embodied_executor::Event;
 use embodied_models::collision::{CollisionModel, Environment};
+use embodied_system::scenario::{ClockSpec, load_scenario};
+use embodied_system::system::{RunArgs, RunOptions, run_scenario};
 
 struct Log {
     steps: Vec<serde_json::Value>,
@@ -22,39 +23,36 @@ impl Log {
         self.steps[step]["agents"][agent]["qd"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect()
     }
     /// (step, event) of `agent`, in order.
-    fn events(&self, agent: &str) -> Vec<(usize, String)> {
+    fn events(&self, agent: &str) -> Vec<(usize, Event)> {
         let mut out = Vec::new();
         for (k, s) in self.steps.iter().enumerate() {
             for e in s["agents"][agent]["events"].as_array().into_iter().flatten() {
-                out.push((k, e.as_str().unwrap().to_string()));
+                out.push((k, serde_json::from_value(e.clone()).unwrap()));
             }
         }
         out
     }
+    /// First step with an event of `agent` whose terminal form starts with `prefix`.
     fn first(&self, agent: &str, prefix: &str) -> Option<usize> {
-        self.events(agent).into_iter().find(|(_, e)| e.starts_with(prefix)).map(|(k, _)| k)
+        self.events(agent).into_iter().find(|(_, e)| e.to_string().starts_with(prefix)).map(|(k, _)| k)
     }
-    /// The step lines only (the summary holds wall-clock figures).
-    fn step_text(&self) -> String {
-        self.text.lines().filter(|l| !l.starts_with("{\"summary\"")).collect::<Vec<_>>().join("\n")
+    /// The whole log file.
+    fn file_text(&self) -> String {
+        self.text.clone()
     }
 }
 
 fn run(scenario: &str, duration: f64, name: &str) -> Log {
     let path = tmp(name);
-    let args =
-        RunArgs { scenario: scenario.into(), duration: Some(duration), log: Some(path.clone()), ..RunArgs::default() };
-    let summary = run_scenario(&args).unwrap();
+    let options = RunOptions { duration: Some(duration), ..RunOptions::default() };
+    let args = RunArgs { scenario: scenario.into(), options, log: Some(path.clone()), ..RunArgs::default() };
+    let (summary, _) = run_scenario(&args).unwrap();
     assert!(summary.failure.is_none(), "{:?}", summary.failure);
     let text = std::fs::read_to_string(&path).unwrap();
     let lines: Vec<serde_json::Value> = text.lines().map(|l| serde_json::from_str(l).unwrap()).collect();
     let steps: Vec<serde_json::Value> = lines.into_iter().filter(|l| l.get("step").is_some()).collect();
     assert_eq!(steps.len() as f64, (duration / 0.001).round(), "one line per step");
     Log { steps, text }
-}
-
-fn event_field(event: &str, key: &str) -> Option<f64> {
-    embodied::run::event_field(event, key)
 }
 
 /// Every step: position, velocity and acceleration within the robot's limits.
@@ -81,15 +79,16 @@ fn polycrank_intruder_halts_replans_and_reaches_its_goal_without_colliding() {
     let appear = log.first(a, "world_changed").expect("the ball is sensed");
     let landed = log.first(a, "plan_landed id=1").expect("first plan");
     assert!(landed < appear, "moving when the ball appears: {ev:?}");
-    assert_eq!(log.first(a, "plan_invalidated id=1: obstacle in path"), Some(appear), "{ev:?}");
+    assert_eq!(log.first(a, "plan_invalidated id=1: obstacle_in_path"), Some(appear), "{ev:?}");
     assert_eq!(log.first(a, "replan reason=obstacle_in_path"), Some(appear));
     // The halt from speed: it starts when the plan is dropped, and the arm was moving.
-    let halt = log.first(a, "safe_halt_started reason=no_valid_plan").expect("halt");
+    let halt = log.first(a, "halt_started reason=no_valid_plan").expect("halt");
     assert_eq!(halt, appear);
     assert!(log.qd(appear - 1, a).iter().any(|v| v.abs() > 0.1), "moving fast when it halts");
-    let finished = log.first(a, "safe_halt_finished").expect("halt ends");
+    let finished = log.first(a, "halt_finished").expect("halt ends");
     let (_, e) = ev.iter().find(|(k, _)| *k == finished).unwrap();
-    assert!(event_field(e, "distance").unwrap() > 0.0 && event_field(e, "time_s").unwrap() > 0.0, "{e}");
+    let Event::HaltFinished { distance, time_s, .. } = e else { panic!("{e}") };
+    assert!(*distance > 0.0 && *time_s > 0.0, "{e}");
     // A new plan for the new world, from rest, then resumed and reached.
     let requested = log.first(a, "plan_requested id=2 world=2").expect("replan request");
     assert!(requested >= finished);
@@ -119,7 +118,7 @@ fn polycrank_intruder_halts_replans_and_reaches_its_goal_without_colliding() {
     assert!(min_clearance > 0.0);
     // Goal reached: the last configuration is the goal (modulo turns on continuous joints).
     let goal = match &sc.agents[0].goal {
-        Some(embodied::scenario::GoalSpec::Configuration(g)) => g.clone(),
+        Some(embodied_system::scenario::GoalSpec::Configuration(g)) => g.clone(),
         _ => unreachable!(),
     };
     assert!(robot.config_space().distance(&goal, &log.q(log.steps.len() - 1, a)) < 1e-3);
@@ -135,10 +134,10 @@ fn irp6_with_a_too_short_deadline_halts_then_resumes_when_the_plan_lands() {
     let deadline_steps = (sc.planner.deadline_ms / 1.0).ceil() as usize;
     assert_eq!(log.first(a, "plan_requested id=1"), Some(0), "{ev:?}");
     assert_eq!(log.first(a, "plan_late id=1"), Some(deadline_steps), "{ev:?}");
-    assert_eq!(log.first(a, "safe_halt_started reason=plan_late"), Some(deadline_steps));
+    assert_eq!(log.first(a, "halt_started reason=plan_late"), Some(deadline_steps));
     let landed = log.first(a, "plan_landed id=1 world=1 late").expect("the plan lands late");
     let (_, e) = ev.iter().find(|(k, _)| *k == landed).unwrap();
-    let planning_ms = event_field(e, "planning_ms").unwrap();
+    let Event::PlanLanded { planning_ms, .. } = *e else { panic!("{e}") };
     assert!(planning_ms > sc.planner.deadline_ms, "{e}");
     assert!((planning_ms - landed as f64).abs() < 1e-9, "planning time is the simulated time: {e}");
     assert_eq!(log.first(a, "resumed id=1"), Some(landed));
@@ -149,9 +148,9 @@ fn irp6_with_a_too_short_deadline_halts_then_resumes_when_the_plan_lands() {
     assert!(log.qd(landed + 50, a).iter().any(|v| v.abs() > 0.0));
     assert!(log.first(a, "goal_reached id=1").is_some(), "{ev:?}");
     assert_within_limits(&log, "irp6-late-plan", a);
-    // The deterministic budget: the same seed gives the same log.
+    // The deterministic budget: the same seed gives the same log file, byte for byte.
     let again = run("irp6-late-plan", 4.5, "late2.jsonl");
-    assert_eq!(log.step_text(), again.step_text());
+    assert_eq!(log.file_text(), again.file_text());
 }
 
 #[test]
@@ -159,9 +158,10 @@ fn two_irp6_arms_move_at_the_same_time_and_never_collide() {
     let log = run("two-irp6-together", 5.0, "together.jsonl");
     let (ot, p) = ("irp6ot", "irp6p");
     let coord = log.events("coordinator");
-    assert!(coord.iter().any(|(_, e)| e == "go -> irp6ot"), "{coord:?}");
-    assert!(coord.iter().any(|(_, e)| e == "go -> irp6p"), "{coord:?}");
-    assert!(coord.iter().any(|(_, e)| e == "all agents done"), "{coord:?}");
+    let granted = |name: &str| Event::Granted { agent: name.into() };
+    assert!(coord.iter().any(|(_, e)| *e == granted("irp6ot")), "{coord:?}");
+    assert!(coord.iter().any(|(_, e)| *e == granted("irp6p")), "{coord:?}");
+    assert!(coord.iter().any(|(_, e)| *e == Event::AllDone), "{coord:?}");
     // The second arm was told the first arm's planned sweep before it planned.
     let told = log.first(p, "told: `irp6ot` occupies").expect("sweep handed on");
     assert!(log.first(p, "plan_requested").is_some_and(|k| k > told));
@@ -202,51 +202,46 @@ fn the_default_scenario_runs_through_the_deliberator_one_arm_after_the_other() {
         assert!(log.first(a, "goal_reached").is_some(), "{a}: {:?}", log.events(a));
     }
     // One after the other: the postument arm asks for its plan after the track arm is done.
-    let done = log.first("irp6ot", "plan completed").unwrap();
+    let done = log.first("irp6ot", "task_done").unwrap();
     assert!(log.first("irp6p", "plan_requested").unwrap() > done);
 }
 
 #[test]
 fn wall_clock_runs_report_real_planning_time() {
     let path = tmp("wall.jsonl");
-    let args = RunArgs {
-        scenario: "irp6-pick".into(),
-        duration: Some(3.0),
-        log: Some(path.clone()),
-        clock: Some(ClockSpec::Wall),
-        ..RunArgs::default()
-    };
-    let summary = run_scenario(&args).unwrap();
+    let options = RunOptions { duration: Some(3.0), clock: Some(ClockSpec::Wall), ..RunOptions::default() };
+    let args = RunArgs { scenario: "irp6-pick".into(), options, log: Some(path.clone()), ..RunArgs::default() };
+    let (summary, _) = run_scenario(&args).unwrap();
     assert!(summary.failure.is_none());
     assert_eq!(summary.clock, "wall");
     let text = std::fs::read_to_string(&path).unwrap();
     // Landed with its wall-clock planning time, or (on a loaded machine) failed past the
     // deadline and retried: either way the time is the wall clock's.
-    assert!(text.contains("elapsed_us="), "no wall-clock planning time in the log");
+    assert!(text.contains("\"elapsed_us\":"), "no wall-clock planning time in the log");
     assert!(summary.agents[0].plans_requested >= 1);
 }
 
 proptest::proptest! {
     #![proptest_config(proptest::prelude::ProptestConfig { cases: 3, ..Default::default() })]
 
-    /// With the deterministic budget (simulated planning time), the same seed gives the same log,
-    /// whatever the seed and the simulated cost of a collision check.
+    /// With the deterministic budget (simulated planning time), the same seed gives the same log
+    /// file byte for byte, whatever the seed and the simulated cost of a collision check.
     #[test]
     fn simulated_planning_time_replays_bit_for_bit(seed in 0u64..1000, us in 1.0f64..60.0) {
         let logs: Vec<String> = (0..2)
             .map(|k| {
                 let path = tmp(&format!("replay-{seed}-{k}.jsonl"));
-                let args = RunArgs {
-                    scenario: "polycrank-intruder".into(),
+                let options = RunOptions {
                     duration: Some(0.8),
                     seed: Some(seed),
-                    log: Some(path.clone()),
                     clock: Some(ClockSpec::Simulated { us_per_check: us }),
-                    ..RunArgs::default()
+                    ..RunOptions::default()
                 };
+                let args =
+                    RunArgs { scenario: "polycrank-intruder".into(), options, log: Some(path.clone()), ..RunArgs::default() };
                 run_scenario(&args).unwrap();
-                let text = std::fs::read_to_string(&path).unwrap();
-                text.lines().filter(|l| !l.starts_with("{\"summary\"")).collect::<Vec<_>>().join("\n")
+                // The whole file, summary line included: it holds no wall-clock figure.
+                std::fs::read_to_string(&path).unwrap()
             })
             .collect();
         proptest::prop_assert!(logs[0].contains("plan_landed"));

@@ -27,13 +27,14 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
+use embodied_executor::Event;
 use embodied_models::Robot;
 use embodied_models::nalgebra::Isometry3;
 use embodied_planner::verify::certified::{CheckSettings, Finding, TrajectoryReport, check_trajectory, pose_error};
 use serde::Serialize;
 use serde_json::Value;
 
-use crate::AppError;
+use crate::SystemError;
 use crate::plan::{PlanFile, agent_problem, read_plan};
 use crate::scenario::{GoalSpec, Scenario, load_scenario};
 
@@ -66,13 +67,13 @@ pub struct PlanVerification {
     pub time_s: f64,
 }
 
-fn usage(file: &Path, message: String) -> AppError {
-    AppError::Usage(format!("{}: {message}", file.display()))
+fn usage(file: &Path, message: String) -> SystemError {
+    SystemError::Usage(format!("{}: {message}", file.display()))
 }
 
 /// Check that `plan` fits `scenario` (names, robots, joint names, DOF); returns the warnings
 /// and, per plan, the scenario's agent index.
-fn match_plan(scenario: &Scenario, plan: &PlanFile, file: &Path) -> Result<(Vec<String>, Vec<usize>), AppError> {
+fn match_plan(scenario: &Scenario, plan: &PlanFile, file: &Path) -> Result<(Vec<String>, Vec<usize>), SystemError> {
     let mut warnings = Vec::new();
     if plan.scenario.name != scenario.name {
         return Err(usage(
@@ -189,7 +190,7 @@ pub fn verify_plan(
     plan: &PlanFile,
     file: &Path,
     settings: &CheckSettings,
-) -> Result<PlanVerification, AppError> {
+) -> Result<PlanVerification, SystemError> {
     let start = Instant::now();
     let (warnings, index) = match_plan(scenario, plan, file)?;
     let mut agents = Vec::new();
@@ -366,14 +367,14 @@ struct AgentState<'a> {
     holding: Option<Isometry3<f64>>,
 }
 
-fn parse_err(file: &Path, line: usize, column: usize, message: String) -> AppError {
-    AppError::Parse { file: file.to_path_buf(), line, column, message }
+fn parse_err(file: &Path, line: usize, column: usize, message: String) -> SystemError {
+    SystemError::Parse { file: file.to_path_buf(), line, column, message }
 }
 
 /// Check a run log against `scenario` (see the module documentation).
-pub fn verify_log(scenario: &Scenario, file: &Path, settings: &CheckSettings) -> Result<LogVerification, AppError> {
+pub fn verify_log(scenario: &Scenario, file: &Path, settings: &CheckSettings) -> Result<LogVerification, SystemError> {
     let start = Instant::now();
-    let bytes = std::fs::read(file).map_err(|e| AppError::io(file, e))?;
+    let bytes = std::fs::read(file).map_err(|e| SystemError::io(file, e))?;
     let text = String::from_utf8_lossy(&bytes);
     let lines: Vec<&str> = text.split('\n').collect();
     let last_nonempty = lines.iter().rposition(|l| !l.trim().is_empty());
@@ -538,7 +539,7 @@ pub fn verify_log(scenario: &Scenario, file: &Path, settings: &CheckSettings) ->
         };
         for st in &mut agents {
             let Some(a) = step_agents.get(&st.name) else { continue };
-            let vec = |k: &str| -> Result<Vec<f64>, AppError> {
+            let vec = |k: &str| -> Result<Vec<f64>, SystemError> {
                 let v: Vec<f64> = a.get(k).and_then(|v| serde_json::from_value(v.clone()).ok()).ok_or_else(|| {
                     parse_err(file, number, 1, format!("agents.{}.{k}: missing or not an array of numbers", st.name))
                 })?;
@@ -555,19 +556,22 @@ pub fn verify_log(scenario: &Scenario, file: &Path, settings: &CheckSettings) ->
             let (q, qd) = (vec("q")?, vec("qd")?);
             st.out.steps += 1;
             check_log_step(st, step, t, step_s, &q, &qd, settings);
-            let events: Vec<String> =
-                a.get("events").and_then(|v| serde_json::from_value::<Vec<String>>(v.clone()).ok()).unwrap_or_default();
+            let events: Vec<Event> = match a.get("events") {
+                None => Vec::new(),
+                Some(v) => serde_json::from_value(v.clone()).map_err(|e| {
+                    parse_err(file, number, 1, format!("agents.{}.events: expected typed events ({e})", st.name))
+                })?,
+            };
             if let Some((e0, e1)) = st.closure {
-                let first_word = |e: &String| e.split_whitespace().next().unwrap_or("").to_string();
                 let rel = {
                     let (_, t0) = st.robot.end_effector_poses(&q, e0);
                     let (_, t1) = st.robot.end_effector_poses(&q, e1);
                     t0.inverse() * t1
                 };
                 let Some(c) = st.out.closure.as_mut() else { continue };
-                if events.iter().any(|e| first_word(e) == "release") {
+                if events.iter().any(|e| matches!(e, Event::Release)) {
                     st.holding = None;
-                } else if events.iter().any(|e| first_word(e) == "grasp") {
+                } else if events.iter().any(|e| matches!(e, Event::Grasp)) {
                     c.grasps += 1;
                     st.holding = Some(rel);
                 } else if let Some(reference) = &st.holding {
@@ -714,9 +718,9 @@ pub fn render_log(v: &LogVerification) -> String {
 
 /// `embodied verify SCENARIO [PLAN.json] [--log FILE.jsonl] [--json]`: prints the reports and
 /// returns whether everything is certified.
-pub fn verify_cli(scenario: &str, plan: Option<&Path>, log: Option<&Path>, json: bool) -> Result<bool, AppError> {
+pub fn verify_cli(scenario: &str, plan: Option<&Path>, log: Option<&Path>, json: bool) -> Result<bool, SystemError> {
     if plan.is_none() && log.is_none() {
-        return Err(AppError::Usage("verify: give a plan file, --log FILE.jsonl, or both".into()));
+        return Err(SystemError::Usage("verify: give a plan file, --log FILE.jsonl, or both".into()));
     }
     let scenario = load_scenario(scenario)?;
     let settings = CheckSettings::default();
@@ -747,6 +751,6 @@ pub fn verify_cli(scenario: &str, plan: Option<&Path>, log: Option<&Path>, json:
     Ok(certified)
 }
 
-fn json_of<T: Serialize>(value: &T) -> Result<String, AppError> {
-    serde_json::to_string(value).map_err(|e| AppError::Failed(e.to_string()))
+fn json_of<T: Serialize>(value: &T) -> Result<String, SystemError> {
+    serde_json::to_string(value).map_err(|e| SystemError::Failed(e.to_string()))
 }

@@ -1,0 +1,468 @@
+//! Typed events: what happened in a control step, as the log and the summaries read it.
+//!
+//! A transition function notes events in its output images ([`crate::OutputImages::event`]);
+//! the runtime hands them on in each [`crate::StepRecord`]. In a run log each event is a JSON
+//! object tagged by `kind` (`{"kind":"plan_landed","id":3,...}`); on the terminal it prints as
+//! one readable line ([`std::fmt::Display`]). Nothing reads an event back from its text.
+
+use std::borrow::Cow;
+use std::fmt;
+
+use serde::{Deserialize, Serialize};
+
+/// Why an effector is being halted.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+#[non_exhaustive]
+pub enum HaltReason {
+    /// The plan needed now has not landed.
+    PlanLate,
+    /// No valid plan is in `c_c` (e.g. it was invalidated or discarded).
+    NoValidPlan,
+    /// A sensor fault: the agent cannot trust its world model.
+    Fault,
+    /// The force-limited reaction.
+    ForceLimit,
+    /// The closed-chain controller cannot go on (QP infeasible, contact, singular chain).
+    ClosedChain,
+    /// The agent's specification was violated (a setter misused, a transition function failed).
+    Specification,
+}
+
+impl HaltReason {
+    /// The reason's name as in the log.
+    pub fn as_str(&self) -> &'static str {
+        match self {
+            HaltReason::PlanLate => "plan_late",
+            HaltReason::NoValidPlan => "no_valid_plan",
+            HaltReason::Fault => "fault",
+            HaltReason::ForceLimit => "force_limit",
+            HaltReason::ClosedChain => "closed_chain",
+            HaltReason::Specification => "specification",
+        }
+    }
+}
+
+/// Why an agent plans again.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+#[non_exhaustive]
+pub enum ReplanReason {
+    /// The plan that landed was made for another world or start state.
+    StalePlan,
+    /// An obstacle not on the map entered the remaining path.
+    ObstacleInPath,
+    /// The world changed and the agent replans on any change.
+    WorldChanged,
+    /// Another agent's reserved space (its body or planned sweep) lies in the path.
+    ReservedSpace,
+}
+
+impl ReplanReason {
+    /// The reason's name as in the log.
+    pub fn as_str(&self) -> &'static str {
+        match self {
+            ReplanReason::StalePlan => "stale_plan",
+            ReplanReason::ObstacleInPath => "obstacle_in_path",
+            ReplanReason::WorldChanged => "world_changed",
+            ReplanReason::ReservedSpace => "reserved_space",
+        }
+    }
+}
+
+/// Wall-clock figures of a plan delivery: present only when planning time is counted on the
+/// wall clock, so that a simulated-clock log replays byte for byte.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct WallTiming {
+    /// Planning time on the wall clock, µs.
+    pub elapsed_us: u64,
+    /// How long past its deadline a stopped search returned, µs (`None`: it was not stopped).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub overshoot_us: Option<u64>,
+}
+
+/// One event of one agent in one control step.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case")]
+#[non_exhaustive]
+pub enum Event {
+    /// A plan was asked of the deliberator (`id`), for world model `world`, needed within
+    /// `deadline_ms`.
+    PlanRequested {
+        /// Request id.
+        id: u64,
+        /// World-model version the request was made for.
+        world: u64,
+        /// When the plan is needed, ms after the request.
+        deadline_ms: f64,
+    },
+    /// A verified plan landed in `c_c` and drives the effector from now on.
+    PlanLanded {
+        /// Request id.
+        id: u64,
+        /// World-model version it was made for.
+        world: u64,
+        /// Whether it came within its deadline.
+        in_time: bool,
+        /// Work the planner spent (collision checks or expansions).
+        work: u64,
+        /// Planning time as the run's clock counts it, ms.
+        planning_ms: f64,
+        /// Motion time of the plan, s.
+        duration_s: f64,
+        /// Wall-clock figures (wall clock only).
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        wall: Option<WallTiming>,
+    },
+    /// The plan needed now has not landed.
+    PlanLate {
+        /// Request id.
+        id: u64,
+    },
+    /// The verifier refused a plan.
+    PlanRejected {
+        /// Request id.
+        id: u64,
+        /// The verifier's finding.
+        reason: String,
+    },
+    /// The planner found no plan.
+    PlanFailed {
+        /// Request id.
+        id: u64,
+        /// Whether the failure came within the deadline.
+        in_time: bool,
+        /// The planner's reason.
+        reason: String,
+        /// Planning time as the run's clock counts it, ms.
+        planning_ms: f64,
+        /// Wall-clock figures (wall clock only).
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        wall: Option<WallTiming>,
+    },
+    /// The planner panicked; the agent survives and may retry.
+    PlannerPanicked {
+        /// Request id.
+        id: u64,
+        /// The panic message.
+        message: String,
+    },
+    /// A plan was made for another world or start state and is never followed.
+    PlanDiscarded {
+        /// Request id.
+        id: u64,
+        /// What no longer matches.
+        reason: String,
+    },
+    /// An answer that never came (e.g. its transmission was lost).
+    PlanLost {
+        /// Request id.
+        id: u64,
+    },
+    /// The agent gave up planning.
+    PlanAbandoned {
+        /// Attempts made.
+        attempts: u32,
+    },
+    /// A higher-priority behaviour took over; the plan was dropped.
+    PlanSuspended,
+    /// The plan in `c_c` is no longer valid.
+    PlanInvalidated {
+        /// Its id, when the deliberator made it.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        id: Option<u64>,
+        /// Why.
+        reason: ReplanReason,
+    },
+    /// The world changed but the remaining plan is still free.
+    PlanRevalidated {
+        /// Plan id.
+        id: u64,
+        /// The new world-model version.
+        world: u64,
+    },
+    /// The agent plans again.
+    Replan {
+        /// Why.
+        reason: ReplanReason,
+    },
+    /// A plan landed after a halt: the agent moves again.
+    Resumed {
+        /// Plan id.
+        id: u64,
+        /// Time since the halt began, s.
+        after_s: f64,
+    },
+    /// A controlled stop began.
+    HaltStarted {
+        /// Why.
+        reason: HaltReason,
+        /// Largest joint speed at the start, rad/s or m/s.
+        speed: f64,
+        /// Detail (e.g. the QP's error), when there is one.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        detail: Option<String>,
+    },
+    /// A controlled stop reached rest.
+    HaltFinished {
+        /// Largest joint travel from the start of the halt, rad or m.
+        distance: f64,
+        /// Duration, s.
+        time_s: f64,
+        /// Duration in control steps.
+        steps: u64,
+    },
+    /// The agent's world model changed (an obstacle appeared, moved or vanished).
+    WorldChanged {
+        /// The new world-model version.
+        version: u64,
+    },
+    /// A sensor stopped answering.
+    SensorSilent {
+        /// Steps since its last fresh reading.
+        steps: u64,
+    },
+    /// A sensor gave a non-finite reading.
+    SensorNonFinite,
+    /// A faulty sensor reads well again.
+    SensorRecovered,
+    /// The plan's goal was reached.
+    GoalReached {
+        /// Plan id, when a deliberator made the plan.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        id: Option<u64>,
+    },
+    /// The coordinator's grant arrived.
+    GrantReceived,
+    /// The coordinator granted agent `agent` its motion.
+    Granted {
+        /// The agent granted.
+        agent: String,
+    },
+    /// Told by the coordinator that `agent` occupies `configurations` configurations.
+    Told {
+        /// The other agent.
+        agent: String,
+        /// How many configurations stand for its body or sweep.
+        configurations: usize,
+    },
+    /// The agent finished its task (`failed`: without reaching its goal).
+    TaskDone {
+        /// Whether it failed.
+        failed: bool,
+    },
+    /// The coordinator heard that `agent` failed.
+    AgentFailed {
+        /// The agent.
+        agent: String,
+    },
+    /// The coordinator heard from every agent that it is done.
+    AllDone,
+    /// The force-limited reaction fired: contact force over the limit, plan abandoned.
+    ForceLimit {
+        /// The force read, N.
+        force_n: f64,
+    },
+    /// Both hands hold the object: the closed chain begins.
+    Grasp,
+    /// The object is let go: the closed chain ends.
+    Release,
+    /// Where the object was put down, against its goal.
+    ObjectPlaced {
+        /// Distance from its goal, m.
+        error_m: f64,
+    },
+    /// The agent broke its specification; it halts.
+    SpecificationError {
+        /// What went wrong.
+        message: String,
+    },
+    /// A user's own event (free text, never parsed).
+    Note {
+        /// The text.
+        text: Cow<'static, str>,
+    },
+}
+
+impl Event {
+    /// The event's kind as in the log (`plan_landed`, `halt_started`, ...).
+    pub fn kind(&self) -> &'static str {
+        match self {
+            Event::PlanRequested { .. } => "plan_requested",
+            Event::PlanLanded { .. } => "plan_landed",
+            Event::PlanLate { .. } => "plan_late",
+            Event::PlanRejected { .. } => "plan_rejected",
+            Event::PlanFailed { .. } => "plan_failed",
+            Event::PlannerPanicked { .. } => "planner_panicked",
+            Event::PlanDiscarded { .. } => "plan_discarded",
+            Event::PlanLost { .. } => "plan_lost",
+            Event::PlanAbandoned { .. } => "plan_abandoned",
+            Event::PlanSuspended => "plan_suspended",
+            Event::PlanInvalidated { .. } => "plan_invalidated",
+            Event::PlanRevalidated { .. } => "plan_revalidated",
+            Event::Replan { .. } => "replan",
+            Event::Resumed { .. } => "resumed",
+            Event::HaltStarted { .. } => "halt_started",
+            Event::HaltFinished { .. } => "halt_finished",
+            Event::WorldChanged { .. } => "world_changed",
+            Event::SensorSilent { .. } => "sensor_silent",
+            Event::SensorNonFinite => "sensor_non_finite",
+            Event::SensorRecovered => "sensor_recovered",
+            Event::GoalReached { .. } => "goal_reached",
+            Event::GrantReceived => "grant_received",
+            Event::Granted { .. } => "granted",
+            Event::Told { .. } => "told",
+            Event::TaskDone { .. } => "task_done",
+            Event::AgentFailed { .. } => "agent_failed",
+            Event::AllDone => "all_done",
+            Event::ForceLimit { .. } => "force_limit",
+            Event::Grasp => "grasp",
+            Event::Release => "release",
+            Event::ObjectPlaced { .. } => "object_placed",
+            Event::SpecificationError { .. } => "specification_error",
+            Event::Note { .. } => "note",
+        }
+    }
+
+    /// A user's note.
+    pub fn note(text: impl Into<Cow<'static, str>>) -> Self {
+        Event::Note { text: text.into() }
+    }
+}
+
+impl From<&'static str> for Event {
+    fn from(text: &'static str) -> Self {
+        Event::note(text)
+    }
+}
+
+impl From<String> for Event {
+    fn from(text: String) -> Self {
+        Event::note(text)
+    }
+}
+
+fn in_time(yes: bool) -> &'static str {
+    if yes { "in_time" } else { "late" }
+}
+
+impl fmt::Display for Event {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let kind = self.kind();
+        let wall = |f: &mut fmt::Formatter<'_>, w: &Option<WallTiming>| -> fmt::Result {
+            if let Some(w) = w {
+                write!(f, " elapsed_us={}", w.elapsed_us)?;
+                if let Some(o) = w.overshoot_us {
+                    write!(f, " overshoot_us={o}")?;
+                }
+            }
+            Ok(())
+        };
+        match self {
+            Event::PlanRequested { id, world, deadline_ms } => {
+                write!(f, "{kind} id={id} world={world} deadline_ms={deadline_ms:.3}")
+            }
+            Event::PlanLanded { id, world, in_time: t, work, planning_ms, duration_s, wall: w } => {
+                write!(f, "{kind} id={id} world={world} {} work={work} planning_ms={planning_ms:.3}", in_time(*t))?;
+                wall(f, w)?;
+                write!(f, " duration_s={duration_s:.3}")
+            }
+            Event::PlanLate { id } | Event::PlanLost { id } => write!(f, "{kind} id={id}"),
+            Event::PlanRejected { id, reason } | Event::PlanDiscarded { id, reason } => {
+                write!(f, "{kind} id={id}: {reason}")
+            }
+            Event::PlanFailed { id, in_time: t, reason, planning_ms, wall: w } => {
+                write!(f, "{kind} id={id} {}: {reason} planning_ms={planning_ms:.3}", in_time(*t))?;
+                wall(f, w)
+            }
+            Event::PlannerPanicked { id, message } => write!(f, "{kind} id={id}: {message}"),
+            Event::PlanAbandoned { attempts } => write!(f, "{kind} after {attempts} attempts"),
+            Event::PlanInvalidated { id, reason } => {
+                write!(f, "{kind}")?;
+                if let Some(id) = id {
+                    write!(f, " id={id}")?;
+                }
+                write!(f, ": {}", reason.as_str())
+            }
+            Event::PlanRevalidated { id, world } => write!(f, "{kind} id={id} world={world}"),
+            Event::Replan { reason } => write!(f, "{kind} reason={}", reason.as_str()),
+            Event::Resumed { id, after_s } => write!(f, "{kind} id={id} after_s={after_s:.3}"),
+            Event::HaltStarted { reason, speed, detail } => {
+                write!(f, "{kind} reason={} speed={speed:.6}", reason.as_str())?;
+                if let Some(d) = detail {
+                    write!(f, ": {d}")?;
+                }
+                Ok(())
+            }
+            Event::HaltFinished { distance, time_s, steps } => {
+                write!(f, "{kind} distance={distance:.6} time_s={time_s:.3} steps={steps}")
+            }
+            Event::WorldChanged { version } => write!(f, "{kind} version={version}"),
+            Event::SensorSilent { steps } => write!(f, "{kind}: no reading for {steps} steps"),
+            Event::GoalReached { id } => match id {
+                Some(id) => write!(f, "{kind} id={id}"),
+                None => write!(f, "{kind}"),
+            },
+            Event::Granted { agent } => write!(f, "{kind} -> {agent}"),
+            Event::Told { agent, configurations } => {
+                write!(f, "{kind}: `{agent}` occupies {configurations} configuration(s)")
+            }
+            Event::TaskDone { failed } => write!(f, "{kind}{}", if *failed { ": failed, no plan" } else { "" }),
+            Event::AgentFailed { agent } => write!(f, "{kind}: {agent}"),
+            Event::ForceLimit { force_n } => write!(f, "{kind}: {force_n:.1} N, plan abandoned"),
+            Event::ObjectPlaced { error_m } => write!(f, "{kind}: {error_m:.4} m from its goal"),
+            Event::SpecificationError { message } => write!(f, "{kind}; safe halt: {message}"),
+            Event::Note { text } => f.write_str(text),
+            Event::PlanSuspended
+            | Event::SensorNonFinite
+            | Event::SensorRecovered
+            | Event::GrantReceived
+            | Event::AllDone
+            | Event::Grasp
+            | Event::Release => f.write_str(kind),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn serialises_tagged_and_reads_back() {
+        let e = Event::PlanLanded {
+            id: 3,
+            world: 2,
+            in_time: true,
+            work: 10,
+            planning_ms: 1.5,
+            duration_s: 2.0,
+            wall: None,
+        };
+        let text = serde_json::to_string(&e).expect("serialisable");
+        assert!(text.starts_with("{\"kind\":\"plan_landed\",\"id\":3"), "{text}");
+        assert!(!text.contains("wall"), "{text}");
+        let back: Event = serde_json::from_str(&text).expect("reads back");
+        assert_eq!(back, e);
+        assert_eq!(e.to_string(), "plan_landed id=3 world=2 in_time work=10 planning_ms=1.500 duration_s=2.000");
+        let note: Event = "contact".into();
+        assert_eq!(serde_json::to_string(&note).expect("serialisable"), "{\"kind\":\"note\",\"text\":\"contact\"}");
+    }
+
+    #[test]
+    fn every_kind_matches_its_serialised_tag() {
+        let all = [
+            Event::PlanSuspended,
+            Event::Replan { reason: ReplanReason::ReservedSpace },
+            Event::HaltStarted { reason: HaltReason::PlanLate, speed: 0.0, detail: None },
+            Event::TaskDone { failed: true },
+            Event::ObjectPlaced { error_m: 0.1 },
+            Event::GoalReached { id: None },
+            Event::SensorNonFinite,
+        ];
+        for e in all {
+            let v: serde_json::Value = serde_json::to_value(&e).expect("serialisable");
+            assert_eq!(v["kind"], e.kind(), "{e:?}");
+        }
+    }
+}

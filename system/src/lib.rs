@@ -1,0 +1,53 @@
+//! # embodied-system: a robot system as a library
+//!
+//! A *system* in the sense of Zieliński's paper is a set of embodied agents placed in a world,
+//! with a coordinator and the transmissions between them. This crate assembles one from a
+//! [`Scenario`] — a typed value made in code with [`Scenario::builder`] or read from TOML with
+//! [`Scenario::from_toml`] — and runs it ([`System`]), plans it offline ([`plan::plan_scenario`]),
+//! writes and reads its run log ([`log`]) and checks plans and logs ([`verify`]).
+//!
+//! | layer | crate |
+//! |---|---|
+//! | what a robot is | `embodied-models` |
+//! | deliberation as search, the verifier | `embodied-planner` |
+//! | what an agent does each control step | `embodied-executor` |
+//! | the system: scenario, agents, coordinator, protocol, runs, logs | this crate |
+//!
+//! ## Example: two arms and a coordinator, built in code
+//!
+//! ```
+//! use embodied_system::{Scenario, AgentSpec, GoalSpec, RunOptions, System};
+//!
+//! let robot = embodied_models::builtin("polycrank")?;
+//! let mut goal = robot.home().to_vec();
+//! goal[0] += 0.5;
+//! let scenario = Scenario::builder("two-polycranks")
+//!     .agent(AgentSpec::new("left", robot.clone()).at([0.0, -1.0, 0.0]).goal(GoalSpec::Configuration(goal.clone())))
+//!     .agent(AgentSpec::new("right", robot).at([0.0, 1.0, 0.0]).goal(GoalSpec::Configuration(goal)))
+//!     .simulated_clock(2.0)
+//!     .build()?;
+//! let mut system = System::new(&scenario, &RunOptions::default())?;
+//! system.run_for(3.0, |_| {})?;
+//! let summary = system.summary();
+//! assert!(summary.agents.iter().all(|a| a.goal_reached), "{summary:?}");
+//! # Ok::<(), embodied_system::SystemError>(())
+//! ```
+#![forbid(unsafe_code)]
+#![warn(missing_docs)]
+
+pub mod bench_qp;
+pub mod deadlines;
+pub mod error;
+pub mod log;
+pub mod mbm;
+pub mod plan;
+pub mod scenario;
+pub mod system;
+pub mod verify;
+
+pub use error::SystemError;
+pub use scenario::{
+    AgentSpec, CarrySpec, ClockSpec, Coordination, GoalSpec, ObstacleSpec, PlannerSpec, RunSpec, Scenario,
+    ScenarioBuilder,
+};
+pub use system::{AgentSummary, RunOptions, RunSummary, System};

@@ -1,0 +1,246 @@
+//! The run log: JSON Lines, one header line ([`LogHeader`]), one line per control step
+//! ([`LogStep`], with its typed [`Event`]s), one summary line.
+//!
+//! Every line is written and flushed as soon as it exists, so a run that fails or is
+//! interrupted leaves a valid log up to its last step. The log holds only what the simulation
+//! computed: with a simulated planning clock the same scenario and seed give the same bytes
+//! (on the same build and target: forward kinematics uses the platform's libm).
+
+use std::collections::BTreeMap;
+use std::fs::File;
+use std::io::{BufWriter, Write};
+use std::path::{Path, PathBuf};
+
+use embodied_executor::{Event, StepRecord};
+use serde::{Deserialize, Serialize};
+
+use crate::SystemError;
+
+/// Format tag in every log header.
+pub const LOG_FORMAT: &str = "embodied-log/2";
+
+/// A joint's limits as the log header states them (`None`: unbounded).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct LoggedLimits {
+    /// Lower position limit.
+    pub lower: Option<f64>,
+    /// Upper position limit.
+    pub upper: Option<f64>,
+    /// Speed limit.
+    pub max_velocity: f64,
+    /// Acceleration limit.
+    pub max_acceleration: f64,
+}
+
+/// An agent as the log header describes it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct LoggedAgent {
+    /// Joint names in the order of `q`.
+    pub joint_names: Vec<String>,
+    /// Their limits.
+    pub limits: Vec<LoggedLimits>,
+}
+
+impl LoggedAgent {
+    /// The robot's joints and limits.
+    pub fn of(robot: &embodied_models::Robot) -> Self {
+        let limits = robot
+            .limits()
+            .iter()
+            .map(|l| LoggedLimits {
+                lower: l.lower.is_finite().then_some(l.lower),
+                upper: l.upper.is_finite().then_some(l.upper),
+                max_velocity: l.max_velocity,
+                max_acceleration: l.max_acceleration,
+            })
+            .collect();
+        Self { joint_names: robot.joint_names(), limits }
+    }
+}
+
+/// The first line of a run log.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct LogHeader {
+    /// [`LOG_FORMAT`].
+    #[serde(default)]
+    pub format: String,
+    /// Scenario name.
+    pub scenario: String,
+    /// SHA-256 of the scenario text.
+    pub scenario_hash: String,
+    /// Seed of the simulated noise.
+    pub seed: u64,
+    /// Control step, s.
+    pub step_s: f64,
+    /// Simulated time asked for, s.
+    pub duration_s: f64,
+    /// How planning time was counted.
+    pub planning_clock: String,
+    /// Every scenario agent's joints and limits, by name.
+    pub agents: BTreeMap<String, LoggedAgent>,
+    /// The two-handed carry, when the scenario has one.
+    #[serde(default)]
+    pub closed_chain: Option<serde_json::Value>,
+}
+
+/// One agent in one step.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct LoggedAgentStep {
+    /// Joint positions after the step (empty for a coordinator).
+    pub q: Vec<f64>,
+    /// Joint velocities after the step.
+    pub qd: Vec<f64>,
+    /// The active behaviour's path.
+    pub behaviour: String,
+    /// What happened, typed.
+    pub events: Vec<Event>,
+}
+
+/// One control step of the log.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct LogStep {
+    /// Step index.
+    pub step: u64,
+    /// Time at the end of the step, s.
+    pub t: f64,
+    /// Every agent (the coordinator too), by name.
+    pub agents: BTreeMap<String, LoggedAgentStep>,
+}
+
+impl LogStep {
+    /// The log line of a runtime record.
+    pub fn of(record: &StepRecord) -> Self {
+        let agents = record
+            .agents
+            .iter()
+            .map(|a| {
+                let step = LoggedAgentStep {
+                    q: a.q.clone(),
+                    qd: a.qd.clone(),
+                    behaviour: a.behaviour.clone(),
+                    events: a.events.clone(),
+                };
+                (a.agent.clone(), step)
+            })
+            .collect();
+        Self { step: record.step, t: record.time, agents }
+    }
+}
+
+/// One line of a run log, as read back.
+#[derive(Debug, Clone, PartialEq)]
+pub enum LogLine {
+    /// The header.
+    Header(Box<LogHeader>),
+    /// A control step.
+    Step(LogStep),
+    /// The summary (read as JSON: its fields are the run's, see [`crate::RunSummary`]).
+    Summary(serde_json::Value),
+}
+
+#[derive(Deserialize)]
+#[serde(untagged)]
+enum RawLine {
+    Header { header: Box<LogHeader> },
+    Summary { summary: serde_json::Value },
+    Step(LogStep),
+}
+
+/// Read one line of a run log; `file` and `line` name it in errors.
+pub fn parse_log_line(text: &str, file: &Path, line: usize) -> Result<LogLine, SystemError> {
+    let raw: RawLine = serde_json::from_str(text).map_err(|e| SystemError::Parse {
+        file: file.to_path_buf(),
+        line,
+        column: e.column(),
+        message: format!("expected a log line (header, step or summary): {e}"),
+    })?;
+    Ok(match raw {
+        RawLine::Header { header } => LogLine::Header(header),
+        RawLine::Summary { summary } => LogLine::Summary(summary),
+        RawLine::Step(s) => LogLine::Step(s),
+    })
+}
+
+/// Where log lines go.
+pub struct RunLog {
+    out: Option<(PathBuf, BufWriter<File>)>,
+    lines: usize,
+}
+
+impl RunLog {
+    /// A log written to `path`, or a log that discards lines when `path` is `None`.
+    pub fn create(path: Option<&Path>) -> Result<Self, SystemError> {
+        let out = match path {
+            Some(p) => Some((p.to_path_buf(), BufWriter::new(File::create(p).map_err(|e| SystemError::write(p, e))?))),
+            None => None,
+        };
+        Ok(Self { out, lines: 0 })
+    }
+
+    /// Append one record as a line and flush it to the file.
+    pub fn line<T: Serialize>(&mut self, record: &T) -> Result<(), SystemError> {
+        self.lines += 1;
+        let Some((path, w)) = self.out.as_mut() else { return Ok(()) };
+        serde_json::to_writer(&mut *w, record)
+            .map_err(|e| SystemError::Failed(format!("log {}: {e}", path.display())))?;
+        w.write_all(b"\n").and_then(|_| w.flush()).map_err(|e| SystemError::write(path.clone(), e))
+    }
+
+    /// Number of lines written so far.
+    pub fn lines(&self) -> usize {
+        self.lines
+    }
+}
+
+/// Plot joint trajectories (one panel line per joint) into an SVG file.
+pub fn plot_joints(
+    path: &Path,
+    title: &str,
+    series: &[(String, Vec<(f64, f64)>)],
+    y_label: &str,
+) -> Result<(), SystemError> {
+    use plotters::prelude::*;
+    let fail = |e: String| SystemError::Failed(format!("plot {}: {e}", path.display()));
+    let root = SVGBackend::new(path, (1000, 600)).into_drawing_area();
+    root.fill(&WHITE).map_err(|e| fail(e.to_string()))?;
+    let (mut t0, mut t1, mut y0, mut y1) = (f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY);
+    for (_, pts) in series {
+        for &(t, y) in pts {
+            t0 = t0.min(t);
+            t1 = t1.max(t);
+            y0 = y0.min(y);
+            y1 = y1.max(y);
+        }
+    }
+    if !t0.is_finite() {
+        (t0, t1, y0, y1) = (0.0, 1.0, -1.0, 1.0);
+    }
+    if t1 - t0 < 1e-9 {
+        t1 = t0 + 1.0;
+    }
+    let pad = ((y1 - y0) * 0.05).max(1e-3);
+    let mut chart = ChartBuilder::on(&root)
+        .caption(title, ("sans-serif", 20))
+        .margin(10)
+        .x_label_area_size(40)
+        .y_label_area_size(60)
+        .build_cartesian_2d(t0..t1, (y0 - pad)..(y1 + pad))
+        .map_err(|e| fail(e.to_string()))?;
+    chart.configure_mesh().x_desc("t [s]").y_desc(y_label).draw().map_err(|e| fail(e.to_string()))?;
+    for (i, (name, pts)) in series.iter().enumerate() {
+        let color = Palette99::pick(i).to_rgba();
+        chart
+            .draw_series(LineSeries::new(pts.iter().copied(), color.stroke_width(2)))
+            .map_err(|e| fail(e.to_string()))?
+            .label(name.clone())
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], color.stroke_width(2)));
+    }
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .draw()
+        .map_err(|e| fail(e.to_string()))?;
+    root.present().map_err(|e| fail(e.to_string()))?;
+    Ok(())
+}
