@@ -792,7 +792,7 @@ impl CollisionModel {
     /// length is not a whole number (1 to [`BATCH_LANES`]) of configurations gives `u32::MAX`.
     pub fn batch_collisions_with(&self, qs: &[f64], scratch: &mut CollisionScratch) -> u32 {
         let dof = self.geom.dof;
-        if dof == 0 || qs.len() % dof != 0 || qs.is_empty() || qs.len() > BATCH_LANES * dof {
+        if dof == 0 || !qs.len().is_multiple_of(dof) || qs.is_empty() || qs.len() > BATCH_LANES * dof {
             return u32::MAX;
         }
         self.batch_mask::<false>(qs, scratch)
@@ -807,7 +807,7 @@ impl CollisionModel {
         if dof == 0 {
             return !qs.is_empty() || self.collides_with(qs, scratch);
         }
-        if qs.len() % dof != 0 {
+        if !qs.len().is_multiple_of(dof) {
             return true;
         }
         qs.chunks(BATCH_LANES * dof).any(|chunk| self.batch_mask::<true>(chunk, scratch) != 0)
@@ -1419,59 +1419,6 @@ impl CollisionModel {
         }));
         s.spheres.items.clear();
         let mut free = true;
-        // On the sphere path, the first level's pieces (all of one length) are tested
-        // together, [`BATCH_LANES`] at a time, with the margins of the links and pairs: a piece
-        // free with those is free for the scalar query too (it tests them first), and only the
-        // others are left for it, in the same order.
-        if let Some(fast) = &self.fast
-            && listed
-            && pieces > 1
-            && fast.batch_supported(&self.solids, dof)
-        {
-            let half = 0.5 / pieces as f64;
-            let scale = half * (1.0 + 1e-9);
-            for (m, t) in margins.iter_mut().zip(&travel) {
-                *m = t * scale + 1e-12;
-            }
-            for (m, d) in step.iter_mut().zip(&steps) {
-                *m = d * scale;
-            }
-            let grow = spheres::Grow { link: &margins[..slots], pair: &margins[slots..], step: &step };
-            let mut buf = std::mem::take(&mut s.spheres.batch_q);
-            let mut kept = 0;
-            for first in (0..spans.len()).step_by(BATCH_LANES) {
-                let n = (spans.len() - first).min(BATCH_LANES);
-                buf.clear();
-                buf.resize(BATCH_LANES * dof, 0.0);
-                for lane in 0..BATCH_LANES {
-                    let Span { t0, .. } = spans[first + lane.min(n - 1)];
-                    g.cspace.interpolate_into(qa, qb, t0 + half, &mut buf[lane * dof..(lane + 1) * dof]);
-                }
-                let active = (1u32 << n) - 1;
-                let lanes = fast.check_batch_grown(
-                    &buf,
-                    dof,
-                    active,
-                    &self.obstacles,
-                    &self.solids,
-                    grow,
-                    &mut s.spheres.batch,
-                );
-                checks += n as u32;
-                if lanes.hit != 0 {
-                    free = false;
-                    break;
-                }
-                for lane in 0..n {
-                    if lanes.near & (1 << lane) != 0 {
-                        spans[kept] = spans[first + lane];
-                        kept += 1;
-                    }
-                }
-            }
-            s.spheres.batch_q = buf;
-            spans.truncate(if free { kept } else { 0 });
-        }
         let mut head = 0;
         while head < spans.len() {
             let Span { t0, t1, within } = spans[head];

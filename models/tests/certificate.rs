@@ -557,11 +557,11 @@ fn batched_checks_reject_bad_input_and_fall_back_on_meshes() {
     assert_eq!(m & 2 != 0, closed.collides_with(&nan[dof..], &mut s));
 }
 
-/// The certificate, whose first level is checked in batches, stays sound under dense
-/// sampling: on the spherized UR5, on an arm with a mimic joint (and every other joint form)
-/// and on a long chain, among obstacles the batched path answers.
+/// The certificate of the sphere path stays sound under dense sampling: on the spherized UR5,
+/// on an arm with a mimic joint (and every other joint form) and on a long chain, among boxes,
+/// cylinders, balls and capsules.
 #[test]
-fn batched_certificate_is_sound_under_dense_sampling() {
+fn certificate_is_sound_under_dense_sampling_on_sphere_robots() {
     for (which, robot) in batch_robots().iter().enumerate() {
         let space = robot.config_space();
         let (mut certified, mut refused) = (0, 0);
@@ -581,7 +581,10 @@ fn batched_certificate_is_sound_under_dense_sampling() {
                 tried += 1;
                 if model.motion_is_certified_free(&qa, &qb, 1e-4) {
                     certified += 1;
-                    assert!(general.motion_is_free(&qa, &qb, 0.0005), "{which}: certified but collides: {qa:?} -> {qb:?}");
+                    assert!(
+                        general.motion_is_free(&qa, &qb, 0.0005),
+                        "{which}: certified but collides: {qa:?} -> {qb:?}"
+                    );
                 } else {
                     refused += 1;
                 }

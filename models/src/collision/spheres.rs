@@ -30,7 +30,7 @@ mod arms;
 mod batch;
 mod table;
 
-pub(crate) use batch::{Grow, LANES};
+pub(crate) use batch::LANES;
 
 /// The answer of one (possibly inflated) query.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -289,11 +289,7 @@ fn capsule_d2(a: &Vector3<f64>, b: &Vector3<f64>, r: f64, p: [f64; 3]) -> f64 {
     let ab = [b.x - a.x, b.y - a.y, b.z - a.z];
     let len2 = sq3(ab[0], ab[1], ab[2]);
     let ap = [p[0] - a.x, p[1] - a.y, p[2] - a.z];
-    let s = if len2 > 1e-18 {
-        ((ap[0] * ab[0] + ap[1] * ab[1] + ap[2] * ab[2]) / len2).clamp(0.0, 1.0)
-    } else {
-        0.0
-    };
+    let s = if len2 > 1e-18 { ((ap[0] * ab[0] + ap[1] * ab[1] + ap[2] * ab[2]) / len2).clamp(0.0, 1.0) } else { 0.0 };
     let d = (sq3(a.x + ab[0] * s - p[0], a.y + ab[1] * s - p[1], a.z + ab[2] * s - p[2]).sqrt() - r).max(0.0);
     d * d
 }
@@ -347,42 +343,44 @@ fn sin_cos(x: f64) -> (f64, f64) {
 /// Where [`sin_cos_kernel`] holds: `|x|` below 2^20.
 const SIN_COS_RANGE: f64 = 1_048_576.0;
 
+// π/2 in three parts: the first two have trailing zero bits, so that k times each is exact.
+const PIO2_1: f64 = 1.570_796_326_734_125_6; // 0x3FF921FB54400000
+const PIO2_2: f64 = 6.077_100_506_303_966e-11; // 0x3DD0B4611A600000
+const PIO2_2T: f64 = 2.022_266_248_795_950_6e-21; // π/2 - PIO2_1 - PIO2_2
+/// Adding and subtracting 1.5 * 2^52 rounds to the nearest integer (round to nearest even).
+const SIN_ROUND: f64 = 6_755_399_441_055_744.0;
+/// The kernels' coefficients of fdlibm (k_sin.c, k_cos.c; Sun Microsystems, 1993): minimax
+/// polynomials on [-π/4, π/4], error below 2^-58.
+const SIN_S: [f64; 6] = [
+    -1.666_666_666_666_663_2e-1,
+    8.333_333_333_322_49e-3,
+    -1.984_126_982_985_795e-4,
+    2.755_731_370_707_006_8e-6,
+    -2.505_076_025_340_686_3e-8,
+    1.589_690_995_211_55e-10,
+];
+/// See [`SIN_S`].
+const COS_C: [f64; 6] = [
+    4.166_666_666_666_66e-2,
+    -1.388_888_888_887_411e-3,
+    2.480_158_728_947_673e-5,
+    -2.755_731_435_139_066_3e-7,
+    2.087_572_321_298_175e-9,
+    -1.135_964_755_778_819_5e-11,
+];
+
 /// [`sin_cos`] for `|x|` below [`SIN_COS_RANGE`] (not NaN), without a branch, so that a loop
 /// over several angles runs in vector registers.
 #[inline(always)]
 fn sin_cos_kernel(x: f64) -> (f64, f64) {
-    // π/2 in three parts: the first two have trailing zero bits, so that k times each is exact.
-    const PIO2_1: f64 = 1.570_796_326_734_125_6; // 0x3FF921FB54400000
-    const PIO2_2: f64 = 6.077_100_506_303_966e-11; // 0x3DD0B4611A600000
-    const PIO2_2T: f64 = 2.022_266_248_795_950_6e-21; // π/2 - PIO2_1 - PIO2_2
-    // Adding and subtracting 1.5 * 2^52 rounds to the nearest integer (round to nearest even).
-    const ROUND: f64 = 6_755_399_441_055_744.0;
-    let shifted = x * std::f64::consts::FRAC_2_PI + ROUND;
-    let k = shifted - ROUND;
+    let shifted = x * std::f64::consts::FRAC_2_PI + SIN_ROUND;
+    let k = shifted - SIN_ROUND;
     let r = ((x - k * PIO2_1) - k * PIO2_2) - k * PIO2_2T;
     let r2 = r * r;
-    // The kernels' coefficients of fdlibm (k_sin.c, k_cos.c; Sun Microsystems, 1993): minimax
-    // polynomials on [-π/4, π/4], error below 2^-58.
-    const S: [f64; 6] = [
-        -1.666_666_666_666_663_2e-1,
-        8.333_333_333_322_49e-3,
-        -1.984_126_982_985_795e-4,
-        2.755_731_370_707_006_8e-6,
-        -2.505_076_025_340_686_3e-8,
-        1.589_690_995_211_55e-10,
-    ];
-    const C: [f64; 6] = [
-        4.166_666_666_666_66e-2,
-        -1.388_888_888_887_411e-3,
-        2.480_158_728_947_673e-5,
-        -2.755_731_435_139_066_3e-7,
-        2.087_572_321_298_175e-9,
-        -1.135_964_755_778_819_5e-11,
-    ];
     let r4 = r2 * r2;
     // Split evaluation (two chains of three) to shorten the dependency chain.
-    let ps = (S[0] + r2 * S[1] + r4 * S[2]) + r4 * r2 * (S[3] + r2 * S[4] + r4 * S[5]);
-    let pc = (C[0] + r2 * C[1] + r4 * C[2]) + r4 * r2 * (C[3] + r2 * C[4] + r4 * C[5]);
+    let ps = (SIN_S[0] + r2 * SIN_S[1] + r4 * SIN_S[2]) + r4 * r2 * (SIN_S[3] + r2 * SIN_S[4] + r4 * SIN_S[5]);
+    let pc = (COS_C[0] + r2 * COS_C[1] + r4 * COS_C[2]) + r4 * r2 * (COS_C[3] + r2 * COS_C[4] + r4 * COS_C[5]);
     let sin = r + r * r2 * ps;
     // 1 - r²/2 with its rounding error carried into the small terms.
     let hz = 0.5 * r2;

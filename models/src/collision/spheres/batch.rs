@@ -16,7 +16,8 @@
 //! **Exactly the scalar answer.** Each lane computes the very numbers the scalar query
 //! computes, operation for operation, in the same order (the scalar closed forms are written
 //! out for that: [`super::dist2`], `mul3v`, `mul3tv`), and its masks are the scalar query's
-//! tests. So a lane's answer is [`SphereGeom::check`]'s, bit for bit; the tests compare them on
+//! tests (written `d2 <= r2` where the scalar query skips on `d2 > r2`: the same for the finite
+//! numbers a batch holds, non-finite configurations being answered one by one). So a lane's answer is [`SphereGeom::check`]'s, bit for bit; the tests compare them on
 //! random and near-contact configurations. Double precision throughout: a single-precision
 //! lane would need margins for its rounding and would no longer agree exactly.
 //!
@@ -27,7 +28,7 @@
 
 use super::{
     Check, SIN_COS_RANGE, Solid, SphereGeom, aabb_d2, ball_d2, box_d2, capsule_d2, cuboid_d2, cylinder_d2, local,
-    sin_cos, sin_cos_kernel,
+    sin_cos,
 };
 use crate::collision::ObstacleGeom;
 
@@ -120,6 +121,46 @@ fn at(p: &P, i: usize) -> [f64; 3] {
     [p[0][i], p[1][i], p[2][i]]
 }
 
+/// `super::sin_cos_kernel` of every lane (`|x|` below `SIN_COS_RANGE`), step by step over the
+/// lanes so that each step is one vector loop: the very operations of the scalar kernel, in
+/// its order, so the same bits.
+#[inline(always)]
+fn sin_cos_lanes(x: &V) -> (V, V) {
+    use super::{COS_C, PIO2_1, PIO2_2, PIO2_2T, SIN_ROUND, SIN_S};
+    let (s, c) = (SIN_S, COS_C);
+    let mut shifted = [0.0; LANES];
+    let mut r = [0.0; LANES];
+    for i in 0..LANES {
+        shifted[i] = x[i] * std::f64::consts::FRAC_2_PI + SIN_ROUND;
+        let k = shifted[i] - SIN_ROUND;
+        r[i] = ((x[i] - k * PIO2_1) - k * PIO2_2) - k * PIO2_2T;
+    }
+    let mut sin = [0.0; LANES];
+    let mut cos = [0.0; LANES];
+    for i in 0..LANES {
+        let r2 = r[i] * r[i];
+        let r4 = r2 * r2;
+        let ps = (s[0] + r2 * s[1] + r4 * s[2]) + r4 * r2 * (s[3] + r2 * s[4] + r4 * s[5]);
+        let pc = (c[0] + r2 * c[1] + r4 * c[2]) + r4 * r2 * (c[3] + r2 * c[4] + r4 * c[5]);
+        sin[i] = r[i] + r[i] * r2 * ps;
+        let hz = 0.5 * r2;
+        let w = 1.0 - hz;
+        cos[i] = w + (((1.0 - w) - hz) + r4 * pc);
+    }
+    let mut out_s = [0.0; LANES];
+    let mut out_c = [0.0; LANES];
+    for i in 0..LANES {
+        let q = shifted[i].to_bits();
+        let swap = 0u64.wrapping_sub(q & 1);
+        let (sb, cb) = (sin[i].to_bits(), cos[i].to_bits());
+        let a = (sb & !swap) | (cb & swap);
+        let b = (cb & !swap) | (sb & swap);
+        out_s[i] = f64::from_bits(a ^ ((q & 2) << 62));
+        out_c[i] = f64::from_bits(b ^ ((q.wrapping_add(1) & 2) << 62));
+    }
+    (out_s, out_c)
+}
+
 /// Lanes where the sphere at `c` of radius `r` may touch the solid: [`super::may_touch`] per lane.
 #[inline(always)]
 fn may_touch(solid: &Solid, o: &ObstacleGeom, c: &P, r: f64, live: Mask) -> Mask {
@@ -160,10 +201,6 @@ pub(crate) struct BatchScratch {
     link_posed: Vec<bool>,
     centre: Vec<P>,
     posed: Vec<bool>,
-    /// Per group, its largest link margin (inflated batches).
-    group_e: Vec<f64>,
-    /// Per group pair, its largest pair margin (inflated batches).
-    pair_e: Vec<f64>,
 }
 
 impl BatchScratch {
@@ -179,28 +216,8 @@ impl BatchScratch {
             link_posed: Vec::new(),
             centre: Vec::new(),
             posed: Vec::new(),
-            group_e: Vec::new(),
-            pair_e: Vec::new(),
         }
     }
-}
-
-/// Margins of an inflated batch, as [`crate::collision::Inflation`] (the same for every lane:
-/// the pieces of one segment's first level are equally long).
-#[derive(Debug, Clone, Copy)]
-pub(crate) struct Grow<'a> {
-    pub link: &'a [f64],
-    pub pair: &'a [f64],
-    pub step: &'a [f64],
-}
-
-/// What a batch found, per lane.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub(crate) struct Lanes {
-    /// Lanes in contact (exactly, ungrown).
-    pub hit: Mask,
-    /// Lanes where grown shapes touch (inflated batches; includes the `hit` lanes it found).
-    pub near: Mask,
 }
 
 impl SphereGeom {
@@ -238,33 +255,42 @@ impl SphereGeom {
                 in_range &= v.abs() < SIN_COS_RANGE;
             }
         }
-        for ((v, sn), cs) in s.angle.iter().zip(s.sin.iter_mut()).zip(s.cos.iter_mut()) {
-            for i in 0..LANES {
-                (sn[i], cs[i]) = if in_range { sin_cos_kernel(v[i]) } else { sin_cos(v[i]) };
+        // (The branch outside the lane loops: the kernel then runs in vector registers.)
+        if in_range {
+            for ((v, sn), cs) in s.angle.iter().zip(s.sin.iter_mut()).zip(s.cos.iter_mut()) {
+                (*sn, *cs) = sin_cos_lanes(v);
+            }
+        } else {
+            for ((v, sn), cs) in s.angle.iter().zip(s.sin.iter_mut()).zip(s.cos.iter_mut()) {
+                for i in 0..LANES {
+                    (sn[i], cs[i]) = sin_cos(v[i]);
+                }
             }
         }
         for (k, b) in self.bodies.iter().enumerate().skip(1) {
             let (v, sn, cs) = (&s.angle[k - 1], &s.sin[k - 1], &s.cos[k - 1]);
-            let (pr, pp) = (s.rot[b.parent], s.pos[b.parent]);
+            // (Parents come first: their frames are read in place.)
+            let (done_r, todo_r) = s.rot.split_at_mut(k);
+            let (done_p, todo_p) = s.pos.split_at_mut(k);
+            let (pr, pp) = (&done_r[b.parent], &done_p[b.parent]);
+            let (out_r, out_p) = (&mut todo_r[0], &mut todo_p[0]);
             let t = [b.pre_t.x, b.pre_t.y, b.pre_t.z];
             // `mul3v(pr, pre_t) + pp`, the origin of every revolute joint's frame.
-            let origin = place(&pr, &pp, &t);
+            let origin = place(pr, pp, &t);
             let (mut rot, mut pos): (R, P);
             if let Some((cols, sign)) = &b.turn_perm {
                 // As the scalar `pose`: the parent's columns `cols` with signs, the first two
                 // mixed by the joint's cosine and sine.
-                rot = [[0.0; LANES]; 9];
                 for r in 0..3 {
                     let (ca, cb, cc) = (pr[3 * r + cols[0]], pr[3 * r + cols[1]], pr[3 * r + cols[2]]);
                     for i in 0..LANES {
                         let (k0, k1, k2, k3) = (sign[0] * cs[i], sign[1] * sn[i], sign[1] * cs[i], sign[0] * sn[i]);
-                        rot[3 * r][i] = ca[i] * k0 + cb[i] * k1;
-                        rot[3 * r + 1][i] = cb[i] * k2 - ca[i] * k3;
-                        rot[3 * r + 2][i] = cc[i] * sign[2];
+                        out_r[3 * r][i] = ca[i] * k0 + cb[i] * k1;
+                        out_r[3 * r + 1][i] = cb[i] * k2 - ca[i] * k3;
+                        out_r[3 * r + 2][i] = cc[i] * sign[2];
                     }
                 }
-                s.rot[k] = rot;
-                s.pos[k] = origin;
+                *out_p = origin;
                 continue;
             }
             // m = pr * pre_r.
@@ -326,23 +352,22 @@ impl SphereGeom {
                     }
                 }
             }
-            s.rot[k] = rot;
-            s.pos[k] = pos;
+            *out_r = rot;
+            *out_p = pos;
         }
         for (g, c) in self.groups.iter().zip(s.group_c.iter_mut()) {
             *c = place(&s.rot[g.body], &s.pos[g.body], &[g.c.x, g.c.y, g.c.z]);
         }
     }
 
-    /// World centre of link `l`'s bounding sphere per lane, once per batch.
+    /// World centre of link `l`'s bounding sphere per lane (into `s.link_c[l]`), once per batch.
     #[inline(always)]
-    fn link_centre_batch(&self, l: usize, s: &mut BatchScratch) -> P {
+    fn link_centre_batch(&self, l: usize, s: &mut BatchScratch) {
         if !s.link_posed[l] {
             s.link_posed[l] = true;
             let link = &self.links[l];
             s.link_c[l] = place(&s.rot[link.body], &s.pos[link.body], &[link.c.x, link.c.y, link.c.z]);
         }
-        s.link_c[l]
     }
 
     /// World centres of link `l`'s spheres per lane, once per batch.
@@ -353,10 +378,9 @@ impl SphereGeom {
         }
         s.posed[l] = true;
         let link = &self.links[l];
-        let (rot, pos) = (s.rot[link.body], s.pos[link.body]);
-        for k in link.first..link.end {
-            let c = &self.centre[k];
-            s.centre[k] = place(&rot, &pos, &[c.x, c.y, c.z]);
+        let (rot, pos) = (&s.rot[link.body], &s.pos[link.body]);
+        for (w, c) in s.centre[link.first..link.end].iter_mut().zip(&self.centre[link.first..link.end]) {
+            *w = place(rot, pos, &[c.x, c.y, c.z]);
         }
     }
 
@@ -365,6 +389,7 @@ impl SphereGeom {
     /// the lanes in contact. With `ANY`, it stops at the first contact found (then the answer
     /// holds at least one lane in contact, not necessarily all of them).
     /// Only for obstacles [`Self::batch_supported`] accepts.
+    #[inline(never)]
     pub(crate) fn check_batch<const ANY: bool>(
         &self,
         qs: &[f64],
@@ -374,67 +399,16 @@ impl SphereGeom {
         solids: &[Solid],
         s: &mut BatchScratch,
     ) -> Mask {
-        self.batch_impl::<ANY, false>(qs, dof, active, obstacles, solids, None, s).hit
-    }
-
-    /// The inflated query of the motion certificate over `LANES` sub-intervals of one length
-    /// (their midpoints in `qs`), for the lanes in `active`: which lanes are in contact
-    /// (stopping at the first contact) and which have grown shapes that touch, with the margins
-    /// of the links and pairs ([`crate::collision::Inflation`]'s `link` and `pair`), which bound
-    /// the tighter per-sphere ones of the scalar query. A lane in neither set is
-    /// [`Check::Free`] for the scalar query too (it tests these same margins first).
-    pub(crate) fn check_batch_grown(
-        &self,
-        qs: &[f64],
-        dof: usize,
-        active: Mask,
-        obstacles: &[ObstacleGeom],
-        solids: &[Solid],
-        grow: Grow<'_>,
-        s: &mut BatchScratch,
-    ) -> Lanes {
-        self.batch_impl::<true, true>(qs, dof, active, obstacles, solids, Some(grow), s)
-    }
-
-    #[allow(clippy::too_many_arguments)]
-    #[inline(never)]
-    fn batch_impl<const ANY: bool, const GROW: bool>(
-        &self,
-        qs: &[f64],
-        dof: usize,
-        active: Mask,
-        obstacles: &[ObstacleGeom],
-        solids: &[Solid],
-        grow: Option<Grow<'_>>,
-        s: &mut BatchScratch,
-    ) -> Lanes {
-        let grow = if GROW { grow } else { None };
-        let mut out = Lanes { hit: 0, near: 0 };
-        match self.fixed {
-            Check::Hit => return Lanes { hit: active, near: active },
-            Check::Near if grow.is_some() => out.near = active,
-            _ => {}
+        if self.fixed == Check::Hit {
+            return active;
         }
         self.pose_batch(qs, dof, s);
-        s.group_e.clear();
-        s.group_e.resize(self.groups.len(), 0.0);
-        s.pair_e.clear();
-        s.pair_e.resize(self.group_pairs.len(), 0.0);
-        if let Some(g) = grow {
-            for (gr, e) in self.groups.iter().zip(s.group_e.iter_mut()) {
-                *e = self.group_links[gr.first..gr.end].iter().map(|&l| g.link[l as usize]).fold(0.0, f64::max);
-            }
-            for (gp, e) in self.group_pairs.iter().zip(s.pair_e.iter_mut()) {
-                *e = self.run_pairs[gp.pairs.clone()].iter().map(|rp| g.pair[rp.pair as usize]).fold(0.0, f64::max);
-            }
-        }
         // Each lane's box around its group spheres, as the scalar query's.
         let (mut lo, mut hi) = ([[f64::INFINITY; LANES]; 3], [[f64::NEG_INFINITY; LANES]; 3]);
-        for (k, (g, c)) in self.groups.iter().zip(&s.group_c).enumerate() {
-            let r = g.r + if grow.is_some() { s.group_e[k] } else { 0.0 };
+        for (g, c) in self.groups.iter().zip(&s.group_c) {
             for d in 0..3 {
                 for i in 0..LANES {
-                    let (l, h) = (c[d][i] - r, c[d][i] + r);
+                    let (l, h) = (c[d][i] - g.r, c[d][i] + g.r);
                     if l < lo[d][i] {
                         lo[d][i] = l;
                     }
@@ -444,6 +418,7 @@ impl SphereGeom {
                 }
             }
         }
+        let mut hits = 0;
         let mut live = active;
         for (o, solid) in obstacles.iter().zip(solids) {
             let in_box = live
@@ -459,17 +434,15 @@ impl SphereGeom {
                 continue;
             }
             for (gi, g) in self.groups.iter().enumerate() {
-                let eg = if grow.is_some() { s.group_e[gi] } else { 0.0 };
-                let mg = may_touch(solid, o, &s.group_c[gi], g.r + eg, in_box & live);
+                let mg = may_touch(solid, o, &s.group_c[gi], g.r, in_box & live);
                 if mg == 0 {
                     continue;
                 }
                 for gl in g.first..g.end {
                     let l = self.group_links[gl] as usize;
                     let link = &self.links[l];
-                    let el = grow.map_or(0.0, |g| g.link[l]);
-                    let c = self.link_centre_batch(l, s);
-                    let ml = may_touch(solid, o, &c, link.r + el, mg & live);
+                    self.link_centre_batch(l, s);
+                    let ml = may_touch(solid, o, &s.link_c[l], link.r, mg & live);
                     if ml == 0 {
                         continue;
                     }
@@ -477,69 +450,49 @@ impl SphereGeom {
                     for k in link.first..link.end {
                         let p = &s.centre[k];
                         let r = self.radius[k];
-                        let rel = r + el;
-                        let mk = ml & live & mask(|i| aabb_d2(o, at(p, i)) <= rel * rel);
+                        let mk = ml & live & mask(|i| aabb_d2(o, at(p, i)) <= r * r);
                         if mk == 0 {
                             continue;
                         }
                         let d2 = dist2(solid, p);
                         let hit = mk & mask(|i| d2[i] <= r * r);
-                        if GROW {
-                            out.near |= mk & mask(|i| d2[i] <= rel * rel);
-                        }
                         if hit != 0 {
-                            out.hit |= hit;
+                            hits |= hit;
                             live &= !hit;
                             if ANY || live == 0 {
-                                return out;
+                                return hits;
                             }
                         }
                     }
                 }
             }
         }
-        self.self_batch::<ANY>(qs, dof, grow, &mut live, &mut out, s);
-        out
+        hits | self.self_batch::<ANY>(qs, dof, live, s)
     }
 
-    /// The self-collision part of [`Self::batch_impl`], as the scalar `self_pass`.
+    /// The self-collision part of [`Self::check_batch`], as the scalar `self_pass`: the lanes
+    /// of `live` in contact.
     #[inline(always)]
-    fn self_batch<const ANY: bool>(
-        &self,
-        qs: &[f64],
-        dof: usize,
-        grow: Option<Grow<'_>>,
-        live: &mut Mask,
-        out: &mut Lanes,
-        s: &mut BatchScratch,
-    ) {
+    fn self_batch<const ANY: bool>(&self, qs: &[f64], dof: usize, mut live: Mask, s: &mut BatchScratch) -> Mask {
+        let mut hits = 0;
         for (k, gp) in self.group_pairs.iter().enumerate() {
-            if *live == 0 {
-                return;
+            if live == 0 {
+                break;
             }
-            let eg = s.pair_e[k];
             let c_inner = s.group_c[gp.inner];
-            let rr = if grow.is_some() { gp.rr + eg } else { gp.rr };
+            let rr = gp.rr;
             let co = &s.group_c[gp.outer];
-            let mut m = *live
+            let mut m = live
                 & mask(|i| {
                     let (dx, dy, dz) = (co[0][i] - c_inner[0][i], co[1][i] - c_inner[1][i], co[2][i] - c_inner[2][i]);
-                    !(dx * dx + dy * dy + dz * dz > rr * rr)
+                    dx * dx + dy * dy + dz * dz <= rr * rr
                 });
             if m == 0 {
                 continue;
             }
             if let Some(Some(table)) = self.tables.get(k) {
                 for i in 0..LANES {
-                    if m & (1 << i) == 0 {
-                        continue;
-                    }
-                    let q = &qs[i * dof..(i + 1) * dof];
-                    let proven = match grow {
-                        Some(g) => table.proves_box(q, g.step),
-                        None => table.proves(q),
-                    };
-                    if proven {
+                    if m & (1 << i) != 0 && table.proves(&qs[i * dof..(i + 1) * dof]) {
                         m &= !(1 << i);
                     }
                 }
@@ -547,7 +500,7 @@ impl SphereGeom {
                     continue;
                 }
             }
-            let r_inner = if grow.is_some() { gp.r_inner + eg } else { gp.r_inner };
+            let r_inner = gp.r_inner;
             let (rot_o, pos_o) = (&s.rot[gp.body_o], &s.pos[gp.body_o]);
             let (rot_i, pos_i) = (&s.rot[gp.body_i], &s.pos[gp.body_i]);
             let rel: P = [
@@ -559,18 +512,18 @@ impl SphereGeom {
             for run in &self.runs[gp.runs.clone()] {
                 let reach = run.r + r_inner;
                 let d2 = dist2_to(&[run.c.x, run.c.y, run.c.z], &g);
-                let mr = m & *live & mask(|i| !(d2[i] > reach * reach));
+                let mr = m & live & mask(|i| d2[i] <= reach * reach);
                 if mr == 0 {
                     continue;
                 }
                 for bi in &self.balls[run.first..run.end] {
                     let reach = bi[3] + r_inner;
-                    let mut mb = mr
+                    let mb = mr
+                        & live
                         & mask(|i| {
                             let (dx, dy, dz) = (bi[0] - g[0][i], bi[1] - g[1][i], bi[2] - g[2][i]);
-                            !(dx * dx + dy * dy + dz * dz > reach * reach)
+                            dx * dx + dy * dy + dz * dz <= reach * reach
                         });
-                    mb &= *live;
                     if mb == 0 {
                         continue;
                     }
@@ -584,26 +537,21 @@ impl SphereGeom {
                     ];
                     let u = mul_tv(rot_i, &d);
                     for rp in &self.run_pairs[run.pairs.clone()] {
-                        let ep = grow.map_or(0.0, |g| g.pair[rp.pair as usize]);
-                        let reach = if grow.is_some() { ri + rp.r + ep } else { ri + rp.r };
+                        let reach = ri + rp.r;
                         let d2 = dist2_to(&[rp.c.x, rp.c.y, rp.c.z], &u);
-                        let mp = mb & *live & mask(|i| !(d2[i] > reach * reach));
+                        let mp = mb & live & mask(|i| d2[i] <= reach * reach);
                         if mp == 0 {
                             continue;
                         }
                         for bj in &self.balls[rp.first as usize..rp.end as usize] {
                             let d2 = dist2_to(&[bj[0], bj[1], bj[2]], &u);
                             let r = ri + bj[3];
-                            let hit = mp & *live & mask(|i| d2[i] <= r * r);
-                            if grow.is_some() {
-                                let grown = r + ep;
-                                out.near |= mp & mask(|i| d2[i] <= grown * grown);
-                            }
+                            let hit = mp & live & mask(|i| d2[i] <= r * r);
                             if hit != 0 {
-                                out.hit |= hit;
-                                *live &= !hit;
-                                if ANY || *live == 0 {
-                                    return;
+                                hits |= hit;
+                                live &= !hit;
+                                if ANY || live == 0 {
+                                    return hits;
                                 }
                             }
                         }
@@ -611,5 +559,6 @@ impl SphereGeom {
                 }
             }
         }
+        hits
     }
 }
