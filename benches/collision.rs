@@ -3,6 +3,9 @@
 //! - `collides/ur5-table-pick/*`: the spherized UR5 of MotionBenchMaker (40 spheres) in the
 //!   `table_pick_ur5` scene 0001 (`benches/fixtures/`, read by `planner::moveit`), over fixed sets of free and random
 //!   configurations. Target: median <= 1 us per call.
+//! - `batch8/ur5-table-pick/{free,random,along-motion}/{8-single,batch}`: eight configurations
+//!   checked as one batch (`CollisionModel::any_collides_with`) against eight single checks.
+//!   Target: a free batch <= 800 ns (100 ns per configuration).
 //! - `collides|distance/two-irp6-20-obstacles`: the two-arm IRp-6 cell among 20 boxes/cylinders.
 //! - `collides/two-irp6-400-obstacles/free[/no-grid]`: the cell among 400 small obstacles, with
 //!   the general path's obstacle grid and without it.
@@ -88,6 +91,34 @@ fn ur5_table_pick(c: &mut Criterion) {
             black_box(model.collides_with(black_box(&free[i]), &mut scratch))
         })
     });
+    // Eight configurations at once (`batch_collisions_with`, one per vector lane) against
+    // eight single checks of the same configurations: free ones, random ones (the batch stops
+    // at its first contact, as the singles do), and eight points along a short motion (as a
+    // planner's edge probe).
+    let dof = robot.dof();
+    let flat = |qs: &[Vec<f64>]| -> Vec<Vec<f64>> { qs.chunks_exact(8).map(|c| c.concat()).collect() };
+    let (free8, random8) = (flat(&free), flat(&random));
+    let space = robot.config_space();
+    let along8: Vec<Vec<f64>> = free
+        .windows(2)
+        .map(|w| (1..=8).flat_map(|k| space.interpolate(&w[0], &w[1], 0.1 * k as f64 / 8.0)).collect())
+        .collect();
+    for (name, set) in [("free", &free8), ("random", &random8), ("along-motion", &along8)] {
+        let mut i = 0;
+        c.bench_function(&format!("batch8/ur5-table-pick/{name}/8-single"), |b| {
+            b.iter(|| {
+                i = (i + 1) % set.len();
+                black_box(black_box(&set[i]).chunks_exact(dof).any(|q| model.collides_with(q, &mut scratch)))
+            })
+        });
+        let mut i = 0;
+        c.bench_function(&format!("batch8/ur5-table-pick/{name}/batch"), |b| {
+            b.iter(|| {
+                i = (i + 1) % set.len();
+                black_box(model.any_collides_with(black_box(&set[i]), &mut scratch))
+            })
+        });
+    }
     // The pairs `embodied bench mbm` checks: also without the pairs proven never to touch.
     let mut pruned = robot.clone();
     disable_never_colliding(&mut pruned, 2, 200_000);
@@ -105,7 +136,6 @@ fn ur5_table_pick(c: &mut Criterion) {
         })
     });
     // Short motions (0.1 of the way between two free configurations), as a planner's edges.
-    let space = robot.config_space();
     let short: Vec<(Vec<f64>, Vec<f64>)> = free
         .windows(2)
         .map(|w| (w[0].clone(), space.interpolate(&w[0], &w[1], 0.1)))

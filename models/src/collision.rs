@@ -71,6 +71,10 @@ use narrow::View;
 pub use narrow::{Separation, parry_shape_separation, parry_shapes_intersect, shape_separation, shapes_intersect};
 use spheres::{Check, Solid, SphereGeom, SphereScratch};
 
+/// How many configurations [`CollisionModel::batch_collisions_with`] checks at once (on the
+/// sphere path, one per vector lane).
+pub const BATCH_LANES: usize = spheres::LANES;
+
 /// One side of a contact or distance: a robot link or an obstacle.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum Body {
@@ -777,6 +781,70 @@ impl CollisionModel {
         match &self.fast {
             Some(fast) => fast.check(q, &self.obstacles, &self.solids, None, &mut scratch.spheres) == Check::Hit,
             None => self.find_hit(q, scratch).is_some(),
+        }
+    }
+
+    /// Which of the configurations `qs` collide, as bits (bit `i` for the `i`-th): `qs` holds
+    /// one to [`BATCH_LANES`] configurations, one after another. Each bit is exactly what
+    /// [`Self::collides_with`] answers for its configuration. On the sphere path (among
+    /// boxes, balls, cylinders and capsules) the configurations are checked together, one per
+    /// vector lane (see `spheres::batch` in the source); elsewhere one by one. A `qs` whose
+    /// length is not a whole number (1 to [`BATCH_LANES`]) of configurations gives `u32::MAX`.
+    pub fn batch_collisions_with(&self, qs: &[f64], scratch: &mut CollisionScratch) -> u32 {
+        let dof = self.geom.dof;
+        if dof == 0 || !qs.len().is_multiple_of(dof) || qs.is_empty() || qs.len() > BATCH_LANES * dof {
+            return u32::MAX;
+        }
+        self.batch_mask::<false>(qs, scratch)
+    }
+
+    /// Whether any of the configurations `qs` (any number of them, one after another)
+    /// collides: [`Self::collides_with`] of each, in order, [`BATCH_LANES`] at a time on the
+    /// sphere path, stopping at the first batch with a contact. A `qs` whose length is not a
+    /// multiple of the number of DOFs counts as colliding.
+    pub fn any_collides_with(&self, qs: &[f64], scratch: &mut CollisionScratch) -> bool {
+        let dof = self.geom.dof;
+        if dof == 0 {
+            return !qs.is_empty() || self.collides_with(qs, scratch);
+        }
+        if !qs.len().is_multiple_of(dof) {
+            return true;
+        }
+        qs.chunks(BATCH_LANES * dof).any(|chunk| self.batch_mask::<true>(chunk, scratch) != 0)
+    }
+
+    /// The colliding configurations of a batch (1 to [`BATCH_LANES`] whole configurations);
+    /// with `ANY`, at least one of them if any collides.
+    fn batch_mask<const ANY: bool>(&self, qs: &[f64], s: &mut CollisionScratch) -> u32 {
+        let dof = self.geom.dof;
+        let n = qs.len() / dof;
+        match &self.fast {
+            Some(fast) if fast.batch_supported(&self.solids, dof) && qs.iter().all(|v| v.is_finite()) => {
+                // Unused lanes repeat the first configuration (and are masked off).
+                let mut buf = std::mem::take(&mut s.spheres.batch_q);
+                buf.clear();
+                buf.extend_from_slice(qs);
+                for _ in n..BATCH_LANES {
+                    buf.extend_from_slice(&qs[..dof]);
+                }
+                let active = (1u32 << n) - 1;
+                let hit =
+                    fast.check_batch::<ANY>(&buf, dof, active, &self.obstacles, &self.solids, &mut s.spheres.batch);
+                s.spheres.batch_q = buf;
+                hit
+            }
+            _ => {
+                let mut hit = 0;
+                for (i, q) in qs.chunks_exact(dof).enumerate() {
+                    if self.collides_with(q, s) {
+                        hit |= 1 << i;
+                        if ANY {
+                            break;
+                        }
+                    }
+                }
+                hit
+            }
         }
     }
 

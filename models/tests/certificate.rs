@@ -427,3 +427,169 @@ fn a_self_pair_on_one_body_is_answered_like_the_general_path() {
         }
     }
 }
+
+/// [`clutter`] without its meshes: the obstacles the batched sphere path answers itself.
+fn closed_clutter(seed: u64, n: usize) -> Environment {
+    let mut env = Environment::new();
+    for o in clutter(seed, n).obstacles() {
+        if !matches!(o.shape, Shape::ConvexMesh(_)) {
+            env.add(o.clone());
+        }
+    }
+    env
+}
+
+/// A snake of 14 revolute links (axes alternating z and y), one sphere each: a long chain.
+fn snake() -> Robot {
+    let mut b = RobotBuilder::new("snake");
+    let lim = JointLimits::new(-1.5, 1.5, 1.0, 1.0);
+    let id = Isometry3::identity();
+    let mut parent = b.link("base", vec![]);
+    for k in 0..14 {
+        let shapes = vec![PlacedShape::new(Isometry3::translation(0.06, 0.0, 0.0), Shape::sphere(0.03))];
+        let link = b.link(format!("s{k}"), shapes);
+        let axis = if k % 2 == 0 { Vector3::z() } else { Vector3::y() };
+        let at = Isometry3::translation(if k == 0 { 0.0 } else { 0.12 }, 0.0, 0.0);
+        b.joint(format!("j{k}"), JointKind::Revolute, parent, link, at, axis, 0.0, id, lim);
+        parent = link;
+    }
+    b.build().unwrap()
+}
+
+/// The sphere robots of the batch tests: the spherized UR5, an arm with every joint form
+/// (prismatic, DH `post`, fixed, mimic) and a long chain.
+fn batch_robots() -> Vec<Robot> {
+    vec![ur5(), skewed_sphere_arm(), snake()]
+}
+
+/// Configurations within about `gap` (rad) of contact: the boundary between a colliding and
+/// a free configuration found by bisection, then nudged either side by up to `gap`.
+fn near_contact(model: &CollisionModel, robot: &Robot, rng: &mut Rng, gap: f64) -> Option<Vec<f64>> {
+    let space = robot.config_space();
+    let a = robot.random_configuration(rng);
+    let b = robot.random_configuration(rng);
+    let (ca, cb) = (model.collides(&a), model.collides(&b));
+    if ca == cb {
+        return None;
+    }
+    let (mut lo, mut hi) = (0.0, 1.0);
+    for _ in 0..60 {
+        let mid = 0.5 * (lo + hi);
+        if model.collides(&space.interpolate(&a, &b, mid)) == ca {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    let t = lo + rng.range(-1.0, 1.0) * gap / space.max_joint_step(&a, &b).max(1e-9);
+    Some(space.interpolate(&a, &b, t.clamp(0.0, 1.0)))
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(48))]
+
+    /// Each bit of a batched check is exactly the single check of its configuration, on
+    /// random configurations and on configurations within a hair of contact.
+    #[test]
+    fn batched_and_single_checks_agree(which in 0usize..3, seed in any::<u64>(), lanes in 1usize..=8, gap_exp in 2i32..15) {
+        let robot = &batch_robots()[which];
+        let model = CollisionModel::new(robot, closed_clutter(seed % 50, 14));
+        prop_assert!(model.uses_sphere_path());
+        let mut rng = Rng::new(seed);
+        let mut s = model.scratch();
+        let dof = robot.dof();
+        let gap = 10f64.powi(-gap_exp);
+        let (mut near, mut hits) = (0, 0);
+        for _ in 0..20 {
+            let mut qs = Vec::new();
+            for lane in 0..lanes {
+                let q = match lane % 2 {
+                    0 => near_contact(&model, robot, &mut rng, gap).unwrap_or_else(|| robot.random_configuration(&mut rng)),
+                    _ => robot.random_configuration(&mut rng),
+                };
+                qs.extend(q);
+            }
+            let mask = model.batch_collisions_with(&qs, &mut s);
+            prop_assert_eq!(mask >> lanes, 0);
+            for (i, q) in qs.chunks(dof).enumerate() {
+                let single = model.collides_with(q, &mut s);
+                prop_assert_eq!(mask & (1 << i) != 0, single, "lane {} of {}: {:?}", i, lanes, q);
+                hits += single as usize;
+                near += (i % 2 == 0) as usize;
+            }
+            prop_assert_eq!(model.any_collides_with(&qs, &mut s), mask != 0);
+        }
+        prop_assert!(near > 0 && hits > 0);
+    }
+}
+
+#[test]
+fn batched_checks_reject_bad_input_and_fall_back_on_meshes() {
+    let robot = ur5();
+    let with_mesh = CollisionModel::new(&robot, clutter(3, 15));
+    let closed = CollisionModel::new(&robot, closed_clutter(3, 15));
+    let mut s = closed.scratch();
+    let mut rng = Rng::new(1);
+    let qs: Vec<f64> = (0..13).flat_map(|_| robot.random_configuration(&mut rng)).collect();
+    let dof = robot.dof();
+    // Too many, none, or a broken configuration.
+    assert_eq!(closed.batch_collisions_with(&qs[..9 * dof], &mut s), u32::MAX);
+    assert_eq!(closed.batch_collisions_with(&[], &mut s), u32::MAX);
+    assert_eq!(closed.batch_collisions_with(&qs[..dof + 1], &mut s), u32::MAX);
+    assert!(closed.any_collides_with(&qs[..dof + 1], &mut s));
+    assert!(!closed.any_collides_with(&[], &mut s));
+    // Meshes (answered one by one) and any number of configurations.
+    for model in [&with_mesh, &closed] {
+        let singles: Vec<bool> = qs.chunks(dof).map(|q| model.collides_with(q, &mut s)).collect();
+        assert!(singles.iter().any(|&c| c) && singles.iter().any(|&c| !c));
+        let mask = model.batch_collisions_with(&qs[..8 * dof], &mut s);
+        for (i, &c) in singles[..8].iter().enumerate() {
+            assert_eq!(mask & (1 << i) != 0, c);
+        }
+        assert_eq!(model.any_collides_with(&qs, &mut s), singles.iter().any(|&c| c));
+        let free: Vec<f64> = qs.chunks(dof).zip(&singles).filter(|(_, c)| !**c).flat_map(|(q, _)| q.to_vec()).collect();
+        assert!(!model.any_collides_with(&free, &mut s));
+    }
+    // A NaN lane is answered by the single check.
+    let mut nan = qs[..2 * dof].to_vec();
+    nan[dof + 1] = f64::NAN;
+    let m = closed.batch_collisions_with(&nan, &mut s);
+    assert_eq!(m & 2 != 0, closed.collides_with(&nan[dof..], &mut s));
+}
+
+/// The certificate of the sphere path stays sound under dense sampling: on the spherized UR5,
+/// on an arm with a mimic joint (and every other joint form) and on a long chain, among boxes,
+/// cylinders, balls and capsules.
+#[test]
+fn certificate_is_sound_under_dense_sampling_on_sphere_robots() {
+    for (which, robot) in batch_robots().iter().enumerate() {
+        let space = robot.config_space();
+        let (mut certified, mut refused) = (0, 0);
+        for seed in 0..3 {
+            let model = CollisionModel::new(robot, closed_clutter(seed + 20, 12));
+            let general = model.clone().general_path_only();
+            let mut rng = Rng::new(seed + 70);
+            let mut tried = 0;
+            while tried < 60 {
+                let qa = robot.random_configuration(&mut rng);
+                let far = robot.random_configuration(&mut rng);
+                // Long motions too, so that the first level has 16 pieces.
+                let qb = space.interpolate(&qa, &far, [0.2, 0.5, 1.0][tried % 3]);
+                if model.collides(&qa) || model.collides(&qb) {
+                    continue;
+                }
+                tried += 1;
+                if model.motion_is_certified_free(&qa, &qb, 1e-4) {
+                    certified += 1;
+                    assert!(
+                        general.motion_is_free(&qa, &qb, 0.0005),
+                        "{which}: certified but collides: {qa:?} -> {qb:?}"
+                    );
+                } else {
+                    refused += 1;
+                }
+            }
+        }
+        assert!(certified > 20 && refused > 5, "robot {which}: {certified} certified, {refused} refused");
+    }
+}

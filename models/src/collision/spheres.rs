@@ -24,10 +24,13 @@
 use nalgebra::{Matrix3, Point3, Vector3};
 
 use super::narrow::{self, View};
-use super::{Inflation, ObstacleGeom, RobotGeom, Value, World, sphere_hits_aabb};
+use super::{Inflation, ObstacleGeom, RobotGeom, Value, World};
 
 mod arms;
+mod batch;
 mod table;
+
+pub(crate) use batch::LANES;
 
 /// The answer of one (possibly inflated) query.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -227,37 +230,85 @@ impl Solid {
 }
 
 /// Squared distance from `p` to a solid (0 inside), or `None` when the solid has no closed form.
+/// Written out operation by operation (no nalgebra products, whose order of summation is theirs),
+/// so that the batched check ([`batch`]) computes exactly the same numbers lane by lane.
 #[inline(always)]
 fn dist2(solid: &Solid, p: &Vector3<f64>) -> Option<f64> {
+    let p = [p.x, p.y, p.z];
     Some(match solid {
-        Solid::Ball { c, r } => {
-            let d = ((p - c).norm() - r).max(0.0);
-            d * d
-        }
-        Solid::Cuboid { rt, t, half } => box_dist2(&(rt * (p - t)), half),
-        Solid::Cylinder { rt, t, r, hh } => {
-            let l = rt * (p - t);
-            let dr = ((l.x * l.x + l.y * l.y).sqrt() - r).max(0.0);
-            let dz = (l.z.abs() - hh).max(0.0);
-            dr * dr + dz * dz
-        }
-        Solid::Capsule { a, b, r } => {
-            let ab = b - a;
-            let len2 = ab.norm_squared();
-            let s = if len2 > 1e-18 { ((p - a).dot(&ab) / len2).clamp(0.0, 1.0) } else { 0.0 };
-            let d = ((a + ab * s - p).norm() - r).max(0.0);
-            d * d
-        }
+        Solid::Ball { c, r } => ball_d2(c, *r, p),
+        Solid::Cuboid { rt, t, half } => cuboid_d2(rt, t, half, p),
+        Solid::Cylinder { rt, t, r, hh } => cylinder_d2(rt, t, *r, *hh, p),
+        Solid::Capsule { a, b, r } => capsule_d2(a, b, *r, p),
         Solid::Other => return None,
     })
 }
 
+/// `x² + y² + z²`, in that order.
+#[inline(always)]
+fn sq3(x: f64, y: f64, z: f64) -> f64 {
+    x * x + y * y + z * z
+}
+
+/// `rt * (p - t)`, written out.
+#[inline(always)]
+fn local(rt: &Matrix3<f64>, t: &Vector3<f64>, p: [f64; 3]) -> [f64; 3] {
+    let (x, y, z) = (p[0] - t.x, p[1] - t.y, p[2] - t.z);
+    [
+        rt[(0, 0)] * x + rt[(0, 1)] * y + rt[(0, 2)] * z,
+        rt[(1, 0)] * x + rt[(1, 1)] * y + rt[(1, 2)] * z,
+        rt[(2, 0)] * x + rt[(2, 1)] * y + rt[(2, 2)] * z,
+    ]
+}
+
+/// [`dist2`] of a ball.
+#[inline(always)]
+fn ball_d2(c: &Vector3<f64>, r: f64, p: [f64; 3]) -> f64 {
+    let d = (sq3(p[0] - c.x, p[1] - c.y, p[2] - c.z).sqrt() - r).max(0.0);
+    d * d
+}
+
+/// [`dist2`] of a box.
+#[inline(always)]
+fn cuboid_d2(rt: &Matrix3<f64>, t: &Vector3<f64>, half: &Vector3<f64>, p: [f64; 3]) -> f64 {
+    box_d2(local(rt, t, p), [half.x, half.y, half.z])
+}
+
+/// [`dist2`] of a cylinder.
+#[inline(always)]
+fn cylinder_d2(rt: &Matrix3<f64>, t: &Vector3<f64>, r: f64, hh: f64, p: [f64; 3]) -> f64 {
+    let l = local(rt, t, p);
+    let dr = ((l[0] * l[0] + l[1] * l[1]).sqrt() - r).max(0.0);
+    let dz = (l[2].abs() - hh).max(0.0);
+    dr * dr + dz * dz
+}
+
+/// [`dist2`] of a capsule.
+#[inline(always)]
+fn capsule_d2(a: &Vector3<f64>, b: &Vector3<f64>, r: f64, p: [f64; 3]) -> f64 {
+    let ab = [b.x - a.x, b.y - a.y, b.z - a.z];
+    let len2 = sq3(ab[0], ab[1], ab[2]);
+    let ap = [p[0] - a.x, p[1] - a.y, p[2] - a.z];
+    let s = if len2 > 1e-18 { ((ap[0] * ab[0] + ap[1] * ab[1] + ap[2] * ab[2]) / len2).clamp(0.0, 1.0) } else { 0.0 };
+    let d = (sq3(a.x + ab[0] * s - p[0], a.y + ab[1] * s - p[1], a.z + ab[2] * s - p[2]).sqrt() - r).max(0.0);
+    d * d
+}
+
 /// Squared distance from `l` to the box of half extents `half` about the origin (0 inside).
 #[inline(always)]
-fn box_dist2(l: &Vector3<f64>, half: &Vector3<f64>) -> f64 {
-    let dx = (l.x.abs() - half.x).max(0.0);
-    let dy = (l.y.abs() - half.y).max(0.0);
-    let dz = (l.z.abs() - half.z).max(0.0);
+fn box_d2(l: [f64; 3], half: [f64; 3]) -> f64 {
+    let dx = (l[0].abs() - half[0]).max(0.0);
+    let dy = (l[1].abs() - half[1]).max(0.0);
+    let dz = (l[2].abs() - half[2]).max(0.0);
+    dx * dx + dy * dy + dz * dz
+}
+
+/// Squared distance from `p` to an obstacle's world box (as `dist2_point_aabb`, written out).
+#[inline(always)]
+fn aabb_d2(o: &ObstacleGeom, p: [f64; 3]) -> f64 {
+    let dx = (o.lo.x - p[0]).max(0.0).max(p[0] - o.hi.x);
+    let dy = (o.lo.y - p[1]).max(0.0).max(p[1] - o.hi.y);
+    let dz = (o.lo.z - p[2]).max(0.0).max(p[2] - o.hi.z);
     dx * dx + dy * dy + dz * dz
 }
 
@@ -267,10 +318,12 @@ fn box_dist2(l: &Vector3<f64>, half: &Vector3<f64>) -> f64 {
 /// box and bookshelf scenes, has a world box twice its area).
 #[inline(always)]
 fn may_touch(solid: &Solid, o: &ObstacleGeom, c: &Vector3<f64>, r: f64) -> bool {
+    let p = [c.x, c.y, c.z];
     match solid {
-        Solid::Ball { .. } | Solid::Cuboid { .. } => dist2(solid, c).is_none_or(|d2| d2 <= r * r),
-        Solid::Cylinder { rt, t, r: rc, hh } => box_dist2(&(rt * (c - t)), &Vector3::new(*rc, *rc, *hh)) <= r * r,
-        _ => sphere_hits_aabb(&Point3::from(*c), r, o),
+        Solid::Ball { c, r: rb } => ball_d2(c, *rb, p) <= r * r,
+        Solid::Cuboid { rt, t, half } => cuboid_d2(rt, t, half, p) <= r * r,
+        Solid::Cylinder { rt, t, r: rc, hh } => box_d2(local(rt, t, p), [*rc, *rc, *hh]) <= r * r,
+        _ => aabb_d2(o, p) <= r * r,
     }
 }
 
@@ -290,42 +343,44 @@ fn sin_cos(x: f64) -> (f64, f64) {
 /// Where [`sin_cos_kernel`] holds: `|x|` below 2^20.
 const SIN_COS_RANGE: f64 = 1_048_576.0;
 
+// π/2 in three parts: the first two have trailing zero bits, so that k times each is exact.
+const PIO2_1: f64 = 1.570_796_326_734_125_6; // 0x3FF921FB54400000
+const PIO2_2: f64 = 6.077_100_506_303_966e-11; // 0x3DD0B4611A600000
+const PIO2_2T: f64 = 2.022_266_248_795_950_6e-21; // π/2 - PIO2_1 - PIO2_2
+/// Adding and subtracting 1.5 * 2^52 rounds to the nearest integer (round to nearest even).
+const SIN_ROUND: f64 = 6_755_399_441_055_744.0;
+/// The kernels' coefficients of fdlibm (k_sin.c, k_cos.c; Sun Microsystems, 1993): minimax
+/// polynomials on [-π/4, π/4], error below 2^-58.
+const SIN_S: [f64; 6] = [
+    -1.666_666_666_666_663_2e-1,
+    8.333_333_333_322_49e-3,
+    -1.984_126_982_985_795e-4,
+    2.755_731_370_707_006_8e-6,
+    -2.505_076_025_340_686_3e-8,
+    1.589_690_995_211_55e-10,
+];
+/// See [`SIN_S`].
+const COS_C: [f64; 6] = [
+    4.166_666_666_666_66e-2,
+    -1.388_888_888_887_411e-3,
+    2.480_158_728_947_673e-5,
+    -2.755_731_435_139_066_3e-7,
+    2.087_572_321_298_175e-9,
+    -1.135_964_755_778_819_5e-11,
+];
+
 /// [`sin_cos`] for `|x|` below [`SIN_COS_RANGE`] (not NaN), without a branch, so that a loop
 /// over several angles runs in vector registers.
 #[inline(always)]
 fn sin_cos_kernel(x: f64) -> (f64, f64) {
-    // π/2 in three parts: the first two have trailing zero bits, so that k times each is exact.
-    const PIO2_1: f64 = 1.570_796_326_734_125_6; // 0x3FF921FB54400000
-    const PIO2_2: f64 = 6.077_100_506_303_966e-11; // 0x3DD0B4611A600000
-    const PIO2_2T: f64 = 2.022_266_248_795_950_6e-21; // π/2 - PIO2_1 - PIO2_2
-    // Adding and subtracting 1.5 * 2^52 rounds to the nearest integer (round to nearest even).
-    const ROUND: f64 = 6_755_399_441_055_744.0;
-    let shifted = x * std::f64::consts::FRAC_2_PI + ROUND;
-    let k = shifted - ROUND;
+    let shifted = x * std::f64::consts::FRAC_2_PI + SIN_ROUND;
+    let k = shifted - SIN_ROUND;
     let r = ((x - k * PIO2_1) - k * PIO2_2) - k * PIO2_2T;
     let r2 = r * r;
-    // The kernels' coefficients of fdlibm (k_sin.c, k_cos.c; Sun Microsystems, 1993): minimax
-    // polynomials on [-π/4, π/4], error below 2^-58.
-    const S: [f64; 6] = [
-        -1.666_666_666_666_663_2e-1,
-        8.333_333_333_322_49e-3,
-        -1.984_126_982_985_795e-4,
-        2.755_731_370_707_006_8e-6,
-        -2.505_076_025_340_686_3e-8,
-        1.589_690_995_211_55e-10,
-    ];
-    const C: [f64; 6] = [
-        4.166_666_666_666_66e-2,
-        -1.388_888_888_887_411e-3,
-        2.480_158_728_947_673e-5,
-        -2.755_731_435_139_066_3e-7,
-        2.087_572_321_298_175e-9,
-        -1.135_964_755_778_819_5e-11,
-    ];
     let r4 = r2 * r2;
     // Split evaluation (two chains of three) to shorten the dependency chain.
-    let ps = (S[0] + r2 * S[1] + r4 * S[2]) + r4 * r2 * (S[3] + r2 * S[4] + r4 * S[5]);
-    let pc = (C[0] + r2 * C[1] + r4 * C[2]) + r4 * r2 * (C[3] + r2 * C[4] + r4 * C[5]);
+    let ps = (SIN_S[0] + r2 * SIN_S[1] + r4 * SIN_S[2]) + r4 * r2 * (SIN_S[3] + r2 * SIN_S[4] + r4 * SIN_S[5]);
+    let pc = (COS_C[0] + r2 * COS_C[1] + r4 * COS_C[2]) + r4 * r2 * (COS_C[3] + r2 * COS_C[4] + r4 * COS_C[5]);
     let sin = r + r * r2 * ps;
     // 1 - r²/2 with its rounding error carried into the small terms.
     let hz = 0.5 * r2;
@@ -402,6 +457,10 @@ pub(crate) struct SphereScratch {
     /// The near items of the motion certificate's sub-intervals (see [`Item`]), in the order
     /// the checks found them: each sub-interval's own is a range of this.
     pub(crate) items: Vec<Item>,
+    /// The batched path's working memory (see [`batch`]).
+    pub(crate) batch: batch::BatchScratch,
+    /// Configurations of a batch, one after another.
+    pub(crate) batch_q: Vec<f64>,
 }
 
 /// One thing an inflated query found *near*: its grown shapes touch, its exact ones do not. A
@@ -433,6 +492,8 @@ impl SphereScratch {
             group_e: Vec::new(),
             stamp: 0,
             items: Vec::new(),
+            batch: batch::BatchScratch::new(),
+            batch_q: Vec::new(),
         }
     }
 }
@@ -840,7 +901,7 @@ impl SphereGeom {
             };
             let (mut r, mut t) = if b.prismatic {
                 let a = b.axis * v;
-                (m, pr * b.pre_t + m * a + pp)
+                (m, mul3v(&pr, &b.pre_t) + mul3v(&m, &a) + pp)
             } else {
                 // m * Rz(v): only the first two columns change.
                 let mut r = m;
@@ -1113,7 +1174,8 @@ impl SphereGeom {
                         let item = Item::Obstacle { k: k as u32, l: l as u32, o: oi as u32 };
                         // The obstacle's box first (it holds the obstacle): cheaper than the
                         // exact distance to a turned box or cylinder, and most spheres miss it.
-                        if !sphere_hits_aabb(&Point3::from(*p), r + el, o) {
+                        let rel = r + el;
+                        if aabb_d2(o, [p.x, p.y, p.z]) > rel * rel {
                             continue;
                         }
                         match dist2(solid, p) {
