@@ -5,7 +5,7 @@
 //! For every problem this module freezes the joints outside the request's group at their start
 //! values, builds the collision environment from the scene, plans from the start to the goal's
 //! joint constraints under a deadline, and then checks the returned path independently
-//! ([`verify_path`] at [`VERIFY_RESOLUTION`], plus its end points). Only the call to
+//! ([`Verifier::verify_path`] sampled at [`VERIFY_RESOLUTION`], plus its end points). Only the call to
 //! [`plan_motion`] is timed: loading and checking the problem is not planning time.
 //!
 //! Problems whose start or goal is in collision (or outside the joint limits) are reported as
@@ -23,7 +23,7 @@ use embodied_planner::PlanError;
 use embodied_planner::deadline::Deadline;
 use embodied_planner::motion::{CERTIFY_TOLERANCE, EdgeCheck, Goal, MotionSettings, plan_motion};
 use embodied_planner::moveit::{MoveitError, load_request, load_scene};
-use embodied_planner::verify::verify_path;
+use embodied_planner::verify::Verifier;
 use serde::Serialize;
 
 use crate::error::AppError;
@@ -336,7 +336,7 @@ fn check_path(model: &CollisionModel, path: &[Vec<f64>], start: &[f64], goal: &[
     if d_goal.is_nan() || d_goal > ENDPOINT_TOLERANCE {
         return Err(format!("the path ends {d_goal:.3e} rad away from the request's goal"));
     }
-    verify_path(model, path, VERIFY_RESOLUTION).map_err(|v| format!("verification failed: {v}"))
+    Verifier::sampled(VERIFY_RESOLUTION).verify_path(model, path).map_err(|v| format!("verification failed: {v}"))
 }
 
 /// A per-problem seed: the base seed mixed with the family and index (SplitMix64 finaliser), so

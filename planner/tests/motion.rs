@@ -11,7 +11,7 @@ use embodied_planner::deadline::Deadline;
 use embodied_planner::motion::{CERTIFY_TOLERANCE, Goal, MotionSettings, PlannerKind, plan_motion};
 use embodied_planner::roadmap::Roadmap;
 use embodied_planner::trajectory::time_parameterize;
-use embodied_planner::verify::{Violation, verify_path, verify_trajectory};
+use embodied_planner::verify::{Finding, Verifier};
 use proptest::prelude::*;
 
 fn boxed(robot: &str, obstacles: &[(&str, [f64; 3], [f64; 3])]) -> CollisionModel {
@@ -40,7 +40,7 @@ fn assert_plan_ok(model: &CollisionModel, start: &[f64], goal: &[f64], path: &[V
     assert!(space.distance(&path[0], start) < 1e-9, "path starts at {:?}, not {start:?}", path[0]);
     let end = path.last().expect("non-empty path");
     assert!(space.distance(end, goal) < 1e-9, "path ends at {end:?}, not {goal:?}");
-    if let Err(v) = verify_path(model, path, 0.005) {
+    if let Err(v) = Verifier::sampled(0.005).verify_path(model, path) {
         panic!("planned path fails verification: {v}");
     }
 }
@@ -229,7 +229,8 @@ fn tool_pose_goal_is_reached() {
     let dp = (reached.translation.vector - pose.translation.vector).norm();
     let dr = reached.rotation.angle_to(&pose.rotation);
     assert!(dp < 1e-4 && dr < 1e-4, "tool pose missed by {dp} m, {dr} rad");
-    verify_path(&model, &plan.path, 0.005).expect("verified");
+    Verifier::sampled(0.005).verify_path(&model, &plan.path).expect("verified");
+    Verifier::default().verify_path(&model, &plan.path).expect("certified");
 }
 
 #[test]
@@ -306,17 +307,27 @@ fn roadmap_build_is_deterministic_and_queries_lazily() {
 #[test]
 fn verify_path_rejects_bad_paths() {
     let (model, start, goal) = irp6_around_box();
-    match verify_path(&model, &[start.clone(), goal.clone()], 0.005) {
-        Err(Violation::SegmentCollision { index: 0, contact, .. }) => assert!(contact.contains("box"), "{contact}"),
-        other => panic!("expected a segment collision, got {other:?}"),
+    for verifier in [Verifier::sampled(0.005), Verifier::certified(0.0)] {
+        // The segment 0 -> 1 collides with the box: placed strictly inside it on the path parameter.
+        match verifier.verify_path(&model, &[start.clone(), goal.clone()]) {
+            Err(Finding::Collision { t, a, b, penetration_m, .. }) => {
+                assert!(a.contains("box") || b.contains("box"), "{a} and {b}");
+                assert!(t > 0.0 && t < 1.0, "{t}");
+                assert!(penetration_m >= 0.0);
+            }
+            other => panic!("{verifier:?}: expected a segment collision, got {other:?}"),
+        }
+        let mut outside = start.clone();
+        outside[1] = model.robot().limits()[1].lower - 0.1;
+        match verifier.verify_path(&model, &[start.clone(), outside]) {
+            Err(v @ Finding::Position { t: 1.0, .. }) => assert!(v.to_string().contains("by 1.000e-1"), "{v}"),
+            other => panic!("expected out of limits, got {other:?}"),
+        }
+        match verifier.verify_path(&model, &[]) {
+            Err(Finding::Malformed { message }) => assert!(message.contains("empty"), "{message}"),
+            other => panic!("expected an empty path, got {other:?}"),
+        }
     }
-    let mut outside = start.clone();
-    outside[1] = model.robot().limits()[1].lower - 0.1;
-    match verify_path(&model, &[start.clone(), outside], 0.005) {
-        Err(v @ Violation::OutOfLimits { index: 1, .. }) => assert!(v.to_string().contains("by 1.000e-1"), "{v}"),
-        other => panic!("expected out of limits, got {other:?}"),
-    }
-    assert!(matches!(verify_path(&model, &[], 0.005), Err(Violation::Empty)));
 }
 
 #[test]
@@ -324,7 +335,8 @@ fn trajectory_of_a_plan_verifies() {
     let (model, start, goal) = irp6_around_box();
     let plan = plan_motion(&model, &start, &Goal::Configuration(goal), &MotionSettings::default()).expect("plan");
     let traj = time_parameterize(&plan.path, model.robot(), 0.001);
-    verify_trajectory(&model, &traj, 0.005).expect("trajectory verifies");
+    Verifier::sampled(0.005).verify_trajectory(&model, &traj).expect("trajectory verifies");
+    Verifier::default().verify_trajectory(&model, &traj).expect("trajectory certified");
     let json = serde_json::to_string(&traj).expect("serialise");
     let back: embodied_planner::trajectory::Trajectory = serde_json::from_str(&json).expect("deserialise");
     assert_eq!(back.t.len(), traj.t.len());

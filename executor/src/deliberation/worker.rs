@@ -2,10 +2,10 @@
 //!
 //! A request starts a planning job on its own thread; the control step only ever calls
 //! [`Deliberator::poll`], which never blocks in [`PlanClock::WallClock`] mode. Every plan is
-//! checked by the planner crate's independent verifier
-//! ([`embodied_planner::verify::verify_trajectory`]: collisions at a fine resolution, position,
-//! velocity and acceleration limits) and against the request's start and goal on the worker
-//! thread, after the planner; a planner panic is caught there and delivered as an outcome. In
+//! checked by the planner crate's independent [`Verifier`] (by default certified: the whole
+//! path between the samples proven collision-free, as strong as the planner's own edge
+//! certificate; position, velocity and acceleration limits) and against the request's start and
+//! goal on the worker thread, after the planner; a planner panic is caught there and delivered as an outcome. In
 //! [`PlanClock::Simulated`] mode the delivery step is computed from the planner's count of work
 //! units (for [`embodied_planner::motion::plan_motion`]: collision checks), so runs replay bit
 //! for bit whatever the thread timing.
@@ -19,7 +19,7 @@ use embodied_models::{CollisionModel, Environment};
 use embodied_planner::deadline::Deadline;
 use embodied_planner::motion::Goal;
 use embodied_planner::trajectory::Trajectory;
-use embodied_planner::verify::verify_trajectory;
+use embodied_planner::verify::Verifier;
 
 /// How planning time is counted.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -192,8 +192,8 @@ struct WorkerResult {
 pub struct PlanVerifier {
     /// The robot and its world (the environment is replaced by the request's, when given).
     pub collision: CollisionModel,
-    /// Collision-check resolution, rad or m.
-    pub resolution: f64,
+    /// The check every plan must pass ([`Verifier::default`]: certified).
+    pub verifier: Verifier,
     /// Largest distance (C-space, or metres and radians for a tool pose) between the plan's end
     /// and its goal.
     pub goal_tolerance: f64,
@@ -389,7 +389,7 @@ fn verify(verifier: &PlanVerifier, request: &PlanRequest, trajectory: Trajectory
     if let Some(why) = misses_goal(robot, last, &request.goal, verifier.goal_tolerance) {
         return PlanOutcome::Rejected(why);
     }
-    match verify_trajectory(&model, &trajectory, verifier.resolution) {
+    match verifier.verifier.verify_trajectory(&model, &trajectory) {
         Ok(()) => PlanOutcome::Ready(Arc::new(trajectory)),
         Err(v) => PlanOutcome::Rejected(v.to_string()),
     }
