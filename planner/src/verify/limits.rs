@@ -234,9 +234,10 @@ mod tests {
         let l = robot.limits();
         let dof = robot.dof();
         let mut c = LimitsChecker::new(&robot, &CheckSettings::default());
-        let mut q = vec![0.0; dof];
+        let middle: Vec<f64> = l.iter().map(|l| 0.5 * (l.lower + l.upper)).collect();
+        let mut q = middle.clone();
         let zero = vec![0.0; dof];
-        assert_eq!(c.push(0.0, &q, &zero), 0);
+        assert_eq!(c.push(0.0, &q, &zero), 0, "{:?}", c.first());
         // Half the velocity limit of joint 0, reached from rest within its acceleration limit.
         let v = 0.5 * l[0].max_velocity;
         let h = 1.1 * v / l[0].max_acceleration;
@@ -268,9 +269,9 @@ mod tests {
         let mut log = LimitsChecker::new(&robot, &CheckSettings::default())
             .with_velocity_source("logged qd")
             .without_position_differences();
-        log.push_with_interval(0.0, f64::NAN, &vec![0.0; dof], &zero);
+        assert_eq!(log.push_with_interval(0.0, f64::NAN, &middle, &zero), 0);
         qd[0] = 2.0 * l[0].max_velocity;
-        assert_eq!(log.push_with_interval(0.001, 0.001, &vec![0.0; dof], &qd), 2, "velocity and acceleration");
+        assert_eq!(log.push_with_interval(0.001, 0.001, &middle, &qd), 2, "velocity and acceleration");
         assert!(matches!(log.first(), Some(Finding::Velocity { source, .. }) if source == "logged qd"));
         let report = log.report();
         assert!(!report.ok && report.violations == 2 && report.samples == 2);
