@@ -148,6 +148,9 @@ impl Verifier {
 
     /// [`Verifier::check_trajectory`] without closed-chain spans, as a yes or the first finding
     /// (limits before collisions).
+    // A finding is returned once, when the check refuses: boxing it would only burden callers'
+    // pattern matching.
+    #[allow(clippy::result_large_err)]
     pub fn verify_trajectory(&self, model: &CollisionModel, traj: &Trajectory) -> Result<(), Finding> {
         let robot = model.robot();
         if let Err(message) = well_formed(robot, traj) {
@@ -168,6 +171,9 @@ impl Verifier {
     /// limits, and the polyline through the waypoints (straight segments, the short way round
     /// on continuous joints) is collision-free by the mode. Findings are placed on the path
     /// parameter: waypoint `k` is at `t = k`.
+    // A finding is returned once, when the check refuses: boxing it would only burden callers'
+    // pattern matching.
+    #[allow(clippy::result_large_err)]
     pub fn verify_path(&self, model: &CollisionModel, path: &[Vec<f64>]) -> Result<(), Finding> {
         let robot = model.robot();
         if path.is_empty() {

@@ -66,6 +66,9 @@ pub(crate) fn sample_collisions(
     report
 }
 
+// A finding is returned once, when the check refuses: boxing it would only burden callers'
+// pattern matching.
+#[allow(clippy::result_large_err)]
 fn walk(
     plain: &CollisionModel,
     models: &[CollisionModel],
