@@ -10,7 +10,8 @@
 use serde::Serialize;
 
 /// One thing wrong with a plan, and where. Times are seconds from the trajectory's start (the
-/// path parameter for an untimed path, see the [module documentation](self)).
+/// path parameter for an untimed path: waypoint `k` is at `t = k`, a point at fraction `f` of the
+/// segment from waypoint `k` on at `t = k + f`).
 #[derive(Debug, Clone, PartialEq, Serialize)]
 #[serde(tag = "kind", rename_all = "snake_case")]
 pub enum Finding {
