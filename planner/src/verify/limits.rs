@@ -29,7 +29,10 @@ pub struct LimitsChecker {
     position_tolerance: f64,
     velocity_source: String,
     position_differences: bool,
-    previous: Option<(f64, Vec<f64>, Vec<f64>)>,
+    /// Time of the previous sample (`None` before the first), and its positions and velocities.
+    previous: Option<f64>,
+    previous_q: Vec<f64>,
+    previous_qd: Vec<f64>,
     first: Option<Finding>,
     violations: usize,
     samples: usize,
@@ -51,6 +54,8 @@ impl LimitsChecker {
             velocity_source: "qd".into(),
             position_differences: true,
             previous: None,
+            previous_q: Vec::new(),
+            previous_qd: Vec::new(),
             first: None,
             violations: 0,
             samples: 0,
@@ -77,7 +82,7 @@ impl LimitsChecker {
     /// differences use the time since the previous sample. Returns the number of limits it
     /// exceeds.
     pub fn push(&mut self, t: f64, q: &[f64], qd: &[f64]) -> usize {
-        let h = self.previous.as_ref().map_or(f64::NAN, |(tp, _, _)| t - tp);
+        let h = self.previous.map_or(f64::NAN, |tp| t - tp);
         self.push_with_interval(t, h, q, qd)
     }
 
@@ -118,11 +123,12 @@ impl LimitsChecker {
             };
             let mut vr = self.max_velocity_ratio;
             velocity(qd[i], &self.velocity_source, &mut found, &mut vr);
-            if let Some((_, pq, pqd)) = &self.previous {
+            if self.previous.is_some() {
                 if self.position_differences {
-                    velocity(self.space.delta(i, pq[i], value) / h, "finite difference of q", &mut found, &mut vr);
+                    let v = self.space.delta(i, self.previous_q[i], value) / h;
+                    velocity(v, "finite difference of q", &mut found, &mut vr);
                 }
-                let a = (qd[i] - pqd[i]) / h;
+                let a = (qd[i] - self.previous_qd[i]) / h;
                 self.max_acceleration_ratio = self.max_acceleration_ratio.max(a.abs() / l.max_acceleration);
                 if a.abs() > l.max_acceleration * rel + 1e-12 {
                     found.push(Finding::Acceleration {
@@ -142,7 +148,11 @@ impl LimitsChecker {
                 }
             }
         }
-        self.previous = Some((t, q.to_vec(), qd.to_vec()));
+        self.previous = Some(t);
+        self.previous_q.clear();
+        self.previous_q.extend_from_slice(q);
+        self.previous_qd.clear();
+        self.previous_qd.extend_from_slice(qd);
         self.violations - before
     }
 
