@@ -1,5 +1,6 @@
-//! Criterion benchmarks of the executor: the runtime's own step overhead (trivial agents) and
-//! 1,000 simple embodied agents at 1 kHz (target: one step well under 1 ms on 2 cores).
+//! Criterion benchmarks of the executor: the runtime's own step overhead (trivial agents),
+//! 1,000 simple embodied agents at 1 kHz (target: one step well under 1 ms on 2 cores), and the
+//! online plan gate's check of one plan, sampled and certified.
 
 use std::hint::black_box;
 use std::time::Duration;
@@ -79,5 +80,32 @@ fn bench(c: &mut Criterion) {
     g.finish();
 }
 
-criterion_group!(benches, bench);
+/// The check the online plan gate runs on every plan (`PlanVerifier`), by mode: one RNT plan
+/// around a ball on the straight line, as the executor's planner makes it (knots only).
+fn plan_gate(c: &mut Criterion) {
+    use embodied_models::{CollisionModel, Environment, Obstacle, Shape};
+    use embodied_planner::motion::{Goal, MotionSettings, plan_motion};
+    use embodied_planner::trajectory::time_parameterize;
+    use embodied_planner::verify::Verifier;
+    let robot = embodied_models::builtin("rnt").expect("built-in robot");
+    let (start, goal) = ([-0.5, -1.4, -1.0, 0.0, 0.3, 0.0], [0.8, -1.2, -1.2, 0.0, 0.5, 0.0]);
+    let mid: Vec<f64> = start.iter().zip(goal).map(|(a, b)| 0.5 * (a + b)).collect();
+    let p = robot.end_effector_poses(&mid, 0).1.translation.vector;
+    let ball = Obstacle::new("ball", nalgebra::Isometry3::translation(p.x, p.y, p.z), Shape::sphere(0.08));
+    let model = CollisionModel::new(&robot, Environment::new().with(ball));
+    let plan = plan_motion(&model, &start, &Goal::Configuration(goal.to_vec()), &MotionSettings::default())
+        .expect("a plan around the ball");
+    let trajectory = time_parameterize(&plan.path, &robot, 0.0);
+    let mut g = c.benchmark_group("plan-gate");
+    g.sample_size(20).measurement_time(Duration::from_secs(3)).warm_up_time(Duration::from_secs(1));
+    for (name, verifier) in [("sampled-0.01", Verifier::sampled(0.01)), ("certified", Verifier::default())] {
+        verifier.verify_trajectory(&model, &trajectory).expect("the plan passes the gate");
+        g.bench_function(BenchmarkId::new("rnt-around-ball", name), |b| {
+            b.iter(|| black_box(verifier.verify_trajectory(&model, &trajectory).is_ok()))
+        });
+    }
+    g.finish();
+}
+
+criterion_group!(benches, bench, plan_gate);
 criterion_main!(benches);

@@ -147,6 +147,9 @@ enum BenchCommand {
         limit: Option<usize>,
         #[arg(long, default_value_t = 1)]
         seed: u64,
+        /// The planner after the straight segment: rrt-connect or lazy-prm.
+        #[arg(long, default_value = "rrt-connect")]
+        algorithm: embodied_planner::motion::PlannerKind,
         /// Check the planner's edges by sampling at this resolution (rad) instead of certifying
         /// them free for the whole continuum (the default).
         #[arg(long)]
@@ -318,10 +321,12 @@ fn run(cli: Cli) -> Result<(), AppError> {
             deadline_ms,
             limit,
             seed,
+            algorithm,
             resolution,
             shortcut_attempts,
         }) => {
             let mut args = embodied::mbm::MbmArgs::new(urdf, srdf, problems);
+            args.algorithm = algorithm;
             if let Some(r) = resolution {
                 args.resolution = r;
                 args.edge_check = embodied_planner::motion::EdgeCheck::Sampled;

@@ -166,7 +166,8 @@ fn plan_output_round_trips_and_passes_the_verifier() {
     // The verifier accepts the trajectory against the scenario's world.
     let sc = embodied::scenario::load_scenario("polycrank-transfer").unwrap();
     let model = embodied_models::collision::CollisionModel::new(&sc.agents[0].robot, sc.initial_environment());
-    embodied_planner::verify::verify_trajectory(&model, &p.trajectory, 0.005).unwrap();
+    embodied_planner::verify::Verifier::sampled(0.005).verify_trajectory(&model, &p.trajectory).unwrap();
+    embodied_planner::verify::Verifier::default().verify_trajectory(&model, &p.trajectory).unwrap();
     // A file that is not a plan is a clear error.
     std::fs::write(&path, "{\"format\": 3}").unwrap();
     let e = embodied::plan::read_plan(&path).unwrap_err().to_string();

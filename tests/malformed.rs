@@ -21,7 +21,7 @@ use embodied::scenario::{BUILTIN_SCENARIOS, load_scenario, parse_scenario};
 use embodied::system::{RunArgs, RunOptions, run_scenario};
 use embodied::verify::{verify_log, verify_plan};
 use embodied_models::urdf::{UrdfOptions, parse_urdf, parse_urdf_with_srdf};
-use embodied_planner::verify::certified::CheckSettings;
+use embodied_planner::verify::CheckSettings;
 use proptest::prelude::*;
 use proptest::test_runner::{RngSeed, TestRunner};
 

@@ -14,7 +14,28 @@ use embodied_models::nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3
 use embodied_models::{Shape, builtin};
 use embodied_planner::carry::{CarriedObject, ClosedChainSpan};
 use embodied_planner::trajectory::Trajectory;
-use embodied_planner::verify::certified::{CheckSettings, Finding, check_closure, check_collisions, check_trajectory};
+use embodied_planner::verify::certified::check_closure;
+use embodied_planner::verify::{CheckSettings, CollisionReport, Finding, TrajectoryReport, Verifier};
+
+/// The certified verifier's collision check (every pair apart, no clearance required).
+fn check_collisions(
+    model: &CollisionModel,
+    traj: &Trajectory,
+    spans: &[ClosedChainSpan],
+    s: &CheckSettings,
+) -> CollisionReport {
+    Verifier::certified(0.0).with_settings(*s).check_collisions(model, traj, spans)
+}
+
+/// Everything the certified verifier checks.
+fn check_trajectory(
+    model: &CollisionModel,
+    traj: &Trajectory,
+    spans: &[ClosedChainSpan],
+    s: &CheckSettings,
+) -> TrajectoryReport {
+    Verifier::certified(0.0).with_settings(*s).check_trajectory(model, traj, spans)
+}
 
 fn temp_dir(name: &str) -> TempDir {
     TempDir::new(name)

@@ -9,7 +9,6 @@ use crate::behaviour::Behaviour;
 use crate::effector::{Effector, SafeHalt, SafetyLimiter, ServoModel};
 use crate::error::ExecutorError;
 use crate::image::{AgentId, Envelope, InputImages, JointCommand, OutputImages, SensorConfig, SensorImage};
-use crate::runtime::AgentRecord;
 use crate::sensor::VirtualSensor;
 use crate::world::{ReceptorReadings, ReceptorSpec, Receptors, World};
 
@@ -145,6 +144,21 @@ impl<C> Agent<C> {
     pub fn is_embodied(&self) -> bool {
         self.effector.is_some()
     }
+}
+
+/// One agent's line in the per-step log.
+#[derive(Debug, Clone, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct AgentRecord {
+    /// The agent's name.
+    pub agent: String,
+    /// Joint positions after the step (empty for a coordinator).
+    pub q: Vec<f64>,
+    /// Joint velocities after the step (empty for a coordinator).
+    pub qd: Vec<f64>,
+    /// Path of the active behaviour, e.g. `main/avoid`.
+    pub behaviour: String,
+    /// What happened in this step.
+    pub events: Vec<crate::Event>,
 }
 
 /// The object-safe face of an agent that the runtime steps.

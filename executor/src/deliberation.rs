@@ -4,8 +4,9 @@
 //!
 //! * [`Deliberator`] (in `c_c`): requests run on their own thread under a
 //!   [`embodied_planner::deadline::Deadline`]; [`Deliberator::poll`] never blocks the control
-//!   step in wall-clock mode; planner panics are caught; every plan passes
-//!   [`verify_trajectory`] before it is delivered as ready.
+//!   step in wall-clock mode; planner panics are caught; every plan passes the
+//!   [`embodied_planner::verify::Verifier`] (certified by default) before it is delivered as
+//!   ready.
 //! * [`PlanClock`]: wall clock for real runs, or simulated time derived from the planner's
 //!   expansion count, so that logs replay bit for bit.
 //! * [`PlanFollower`]: the behaviour that follows a verified plan and otherwise makes a
@@ -14,8 +15,8 @@
 //!   for from the halted state.
 //! * [`PlanMotion`]: the planner, [`embodied_planner::motion::plan_motion`] under the
 //!   request's deadline, its path time-parameterised into an
-//!   [`embodied_planner::trajectory::Trajectory`]; plans are checked by
-//!   [`embodied_planner::verify::verify_trajectory`] before they may drive an effector.
+//!   [`embodied_planner::trajectory::Trajectory`]; plans are checked by the
+//!   [`embodied_planner::verify::Verifier`] before they may drive an effector.
 //! * [`UnmappedObstacle`]: the virtual sensor that reports obstacles missing from the map.
 //! * [`deliberative_agent`]: a scenario agent with a goal, as a deliberative agent.
 //!

@@ -89,6 +89,7 @@ pub mod transition;
 pub mod transmitter;
 pub mod world;
 
+pub use agent::AgentRecord;
 pub use agent::{Agent, ControlSubsystem, Coordinator};
 pub use behaviour::{Behaviour, Primitive, Reactive, Selection, Sequence, Status, boxed};
 pub use composer::Composer;
@@ -103,7 +104,7 @@ pub use image::{
     SensorImage, WORDS,
 };
 pub use motion::{Move, Wait};
-pub use runtime::{AgentRecord, Parallelism, Runtime, RuntimeConfig, StepRecord};
+pub use runtime::{Parallelism, Runtime, RuntimeConfig, StepRecord};
 pub use sensor::{Contact, JointState, NearestObstacle, VirtualSensor};
 pub use transition::{Predicate, TransitionFunction, idle};
 pub use transmitter::{ChannelStats, Link, Transmitter};

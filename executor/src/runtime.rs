@@ -14,7 +14,7 @@
 
 use rayon::prelude::*;
 
-use crate::agent::{Agent, Steppable};
+use crate::agent::{Agent, AgentRecord, Steppable};
 use crate::error::ExecutorError;
 use crate::image::{AgentId, InputImages};
 use crate::transmitter::{ChannelStats, Link, Transmitter};
@@ -62,19 +62,6 @@ impl Default for RuntimeConfig {
             tasks_per_thread: 1,
         }
     }
-}
-
-/// One agent's line in the per-step log.
-#[derive(Debug, Clone, Default, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct AgentRecord {
-    pub agent: String,
-    /// Joint positions after the step (empty for a coordinator).
-    pub q: Vec<f64>,
-    pub qd: Vec<f64>,
-    /// Path of the active behaviour, e.g. `main/avoid`.
-    pub behaviour: String,
-    /// What happened in this step.
-    pub events: Vec<crate::Event>,
 }
 
 /// The log record of one step (one line of JSON Lines).

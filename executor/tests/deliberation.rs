@@ -238,7 +238,10 @@ fn colliding_plan_is_rejected() {
     let mut rt = runtime_with(injected(straight_line(&robot), env));
     let records = run(&mut rt, 1000);
     let ev = events(&records);
-    assert!(ev.iter().any(|(_, e)| e.starts_with("plan_rejected id=1") && e.contains("collision")), "{ev:?}");
+    assert!(
+        ev.iter().any(|(_, e)| e.starts_with("plan_rejected id=1") && e.contains("collide") && e.contains("ball")),
+        "{ev:?}"
+    );
     assert!(first(&records, "plan_landed").is_none());
     assert_safe(&records, 1000, &robot);
 }
@@ -400,4 +403,118 @@ fn simulated_clock_replays_bit_for_bit() {
     let (a, b) = (log(), log());
     assert!(a.contains("plan_landed"));
     assert_eq!(a, b);
+}
+
+/// A keyframe plan from `qa` to `qb`: two samples, at rest at both, slow enough for every
+/// velocity limit (the straight segment between them is the plan's path).
+fn keyframe(robot: &Robot, qa: &[f64], qb: &[f64]) -> embodied_planner::trajectory::Trajectory {
+    let space = robot.config_space();
+    let t = robot
+        .limits()
+        .iter()
+        .enumerate()
+        .map(|(i, l)| 2.0 * space.delta(i, qa[i], qb[i]).abs() / l.max_velocity)
+        .fold(0.1, f64::max);
+    embodied_planner::trajectory::Trajectory {
+        joint_names: robot.joint_names(),
+        t: vec![0.0, t],
+        q: vec![qa.to_vec(), qb.to_vec()],
+        qd: vec![vec![0.0; qa.len()]; 2],
+    }
+}
+
+/// A small sphere that the robot's outermost surface grazes halfway between two configurations
+/// that the sampled check at 0.01 rad looks at, while `START` turns 0.4 rad about the base: the
+/// segment collides (by 0.2 mm) but no checked sample does. Found by placing the sphere against
+/// each link's surface, on the side away from the base axis, and keeping the first placement
+/// that the sampled check misses.
+fn grazing_case(robot: &Robot) -> Option<(Environment, Vec<f64>, Vec<f64>)> {
+    use embodied_models::collision::{Obstacle, shape_separation};
+    use embodied_models::nalgebra::{Isometry3, Point3, Vector3};
+    use embodied_planner::verify::Verifier;
+    let (qa, mut qb) = (START.to_vec(), START.to_vec());
+    qb[0] += 0.4;
+    let space = robot.config_space();
+    let plain = CollisionModel::new(robot, Environment::new());
+    let plan = keyframe(robot, &qa, &qb);
+    let probe = embodied_models::Shape::sphere(0.005);
+    for k in [20, 10, 30, 5, 35, 15, 25] {
+        let qm = space.interpolate(&qa, &qb, (k as f64 + 0.5) / 40.0);
+        let fk = robot.forward_kinematics(&qm);
+        let shapes = plain.link_shapes_world(&qm);
+        for frame in &fk {
+            let p = frame.translation.vector;
+            let radial = Vector3::new(p.x, p.y, 0.0);
+            if radial.norm() < 0.05 {
+                continue;
+            }
+            let c0 = Point3::from(p + radial.normalize() * 0.5);
+            let at = Isometry3::translation(c0.x, c0.y, c0.z);
+            let Some(sep) = shapes
+                .iter()
+                .map(|o| shape_separation(&probe, &at, &o.shape, &o.pose))
+                .min_by(|a, b| a.distance.total_cmp(&b.distance))
+            else {
+                continue;
+            };
+            let dir = (sep.point_b - sep.point_a).normalize();
+            let c = c0 + dir * (sep.distance + 2e-4);
+            let env =
+                Environment::new().with(Obstacle::new("sliver", Isometry3::translation(c.x, c.y, c.z), probe.clone()));
+            let model = CollisionModel::new(robot, env.clone());
+            if model.collides(&qm)
+                && !model.collides(&qa)
+                && !model.collides(&qb)
+                && Verifier::sampled(0.01).verify_trajectory(&model, &plan).is_ok()
+            {
+                return Some((env, qa, qb));
+            }
+        }
+    }
+    None
+}
+
+#[test]
+fn online_gate_certifies_and_refuses_a_plan_the_sampled_check_passes() {
+    use embodied_planner::verify::{Finding, Mode, Verifier};
+    let robot = robot();
+    assert!(
+        matches!(DeliberationSettings::default().plan_check.mode, Mode::Certified { .. }),
+        "the gate certifies by default"
+    );
+    let (env, qa, qb) = grazing_case(&robot).expect("a placement the sampled check misses");
+    let model = CollisionModel::new(&robot, env.clone());
+    let plan = keyframe(&robot, &qa, &qb);
+    // The segment really collides: a dense walk finds it.
+    let space = robot.config_space();
+    assert!((0..=20_000).any(|s| model.collides(&space.interpolate(&qa, &qb, s as f64 / 20_000.0))));
+    // The sampled check at the old gate's resolution passes it; the certificate does not.
+    assert!(Verifier::sampled(0.01).verify_trajectory(&model, &plan).is_ok());
+    match Verifier::default().verify_trajectory(&model, &plan) {
+        Err(Finding::Collision { a, b, .. }) => assert!(a.contains("sliver") || b.contains("sliver"), "{a} and {b}"),
+        Err(f @ Finding::NotCertified { .. }) => assert!(f.to_string().contains("sliver"), "{f}"),
+        other => panic!("the certificate should refuse the plan, got {other:?}"),
+    }
+    // Through the agent: the default gate refuses the plan, a sampled gate would have let it drive.
+    let outcome = |plan_check: Option<Verifier>| {
+        let keyframes = plan.clone();
+        let planner = move |_: &PlanRequest, _: &Deadline| Ok(Planned { trajectory: keyframes.clone(), work: 10 });
+        let mut settings = DeliberationSettings { planner: Some(Arc::new(planner)), max_attempts: 1, ..simulated() };
+        if let Some(v) = plan_check {
+            settings.plan_check = v;
+        }
+        let collision = CollisionModel::new(&robot, env.clone());
+        let agent = deliberative_agent("arm", robot.clone(), collision, &qa, Goal::Configuration(qb.clone()), settings)
+            .expect("agent");
+        let records = run(&mut runtime_with(agent), 300);
+        events(&records)
+    };
+    let certified = outcome(None);
+    assert!(
+        certified.iter().any(|(_, e)| e.starts_with("plan_rejected id=1") && e.contains("sliver")),
+        "{certified:?}"
+    );
+    assert!(!certified.iter().any(|(_, e)| e.starts_with("plan_landed")), "{certified:?}");
+    let sampled = outcome(Some(Verifier::sampled(0.01)));
+    assert!(sampled.iter().any(|(_, e)| e.starts_with("plan_landed id=1")), "{sampled:?}");
 }

@@ -9,9 +9,9 @@ use nalgebra::{Isometry3, Vector3};
 
 use crate::error::ModelError;
 use crate::geometry::{PlacedShape, Shape};
-use crate::ik::{ClosedForm, Irp6Lengths};
+use crate::ik::Irp6Lengths;
 use crate::joint::{Dh, JointKind, JointLimits};
-use crate::robot::{Robot, RobotBuilder};
+use crate::robot::{ClosedForm, Robot, RobotBuilder};
 
 /// Names of the built-in robots, in the order `embodied model --help` lists them.
 pub const BUILTIN_NAMES: [&str; 5] = ["irp6-postument", "irp6-on-track", "two-irp6", "polycrank", "rnt"];

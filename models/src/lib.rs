@@ -30,10 +30,10 @@ pub use collision::{Body, CollisionModel, CollisionScratch, Contact, DistanceRep
 pub use cspace::{ConfigSpace, wrap_angle};
 pub use error::ModelError;
 pub use geometry::{ConvexHull, PlacedShape, Shape};
-pub use ik::{ClosedForm, IkOptions};
+pub use ik::IkOptions;
 pub use joint::{Dh, Joint, JointKind, JointLimits};
 pub use rng::Rng;
-pub use robot::{EndEffector, Link, Robot, RobotBuilder};
+pub use robot::{ClosedForm, EndEffector, Link, Robot, RobotBuilder};
 
 pub use nalgebra;
 pub use parry3d_f64 as parry;

@@ -6,8 +6,31 @@ use nalgebra::{DVector, Isometry3, Matrix6xX, Point3, Vector3};
 
 use crate::error::ModelError;
 use crate::geometry::PlacedShape;
-use crate::ik::{ArmChain, ClosedForm};
 use crate::joint::{Joint, JointKind, JointLimits};
+
+/// An analytic inverse-kinematics solution a robot's builder attaches to an end effector
+/// ([`crate::RobotBuilder::closed_form_ik`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum ClosedForm {
+    /// The IRp-6 arm (shared/robots/README.md 1.3.1): the six revolute joints ending at the
+    /// flange, built from the standard DH table; up to eight solutions per pose.
+    Irp6,
+}
+
+/// A closed form resolved against a built robot: which degrees of freedom it solves and where
+/// its chain starts.
+#[derive(Debug, Clone)]
+pub(crate) struct ArmChain {
+    pub kind: ClosedForm,
+    /// `q` indices of the six arm joints, shoulder first.
+    pub dofs: [usize; 6],
+    /// The link the first arm joint hangs from, and that joint's origin in it (DH frame 0).
+    pub shoulder_link: usize,
+    pub shoulder: Isometry3<f64>,
+    /// Whether the six joints are every degree of freedom that moves the end effector (no track).
+    pub whole: bool,
+}
 
 /// A rigid body of the tree with its collision shapes (in the link frame).
 #[derive(Debug, Clone)]

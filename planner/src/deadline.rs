@@ -130,3 +130,55 @@ impl Deadline {
         self.at.is_some() || self.cancel.is_some()
     }
 }
+
+/// Units of planning work against a [`Deadline`]: samples drawn, tree extensions, A*
+/// expansions. The expansion budget of the deadline bounds this count; the clock and the
+/// cancellation flag are read every few units (a unit costs at most a few collision checks).
+pub(crate) struct Budget<'d> {
+    deadline: &'d Deadline,
+    pub work: u64,
+    since_clock: u32,
+    pub started: Instant,
+    /// The limit that stopped planning, once one has.
+    stopped: Option<Interrupt>,
+}
+
+impl<'d> Budget<'d> {
+    pub fn new(deadline: &'d Deadline) -> Self {
+        Self { deadline, work: 0, since_clock: 0, started: Instant::now(), stopped: None }
+    }
+
+    /// Count `units` of work; true when planning must stop now.
+    #[inline]
+    pub fn spend(&mut self, units: u64) -> bool {
+        self.work += units;
+        self.since_clock += 1;
+        let read_clock = self.since_clock >= 8 && self.deadline.has_clock();
+        if read_clock {
+            self.since_clock = 0;
+        }
+        match self.deadline.check(self.work, read_clock) {
+            Some(cause) => {
+                self.stopped.get_or_insert(cause);
+                true
+            }
+            None => false,
+        }
+    }
+
+    /// True when the deadline has passed (reads the clock now).
+    pub fn expired(&mut self) -> bool {
+        match self.deadline.check(self.work, true) {
+            Some(cause) => {
+                self.stopped.get_or_insert(cause);
+                true
+            }
+            None => false,
+        }
+    }
+
+    /// Which limit stopped planning (asked of the deadline now if none has yet).
+    pub fn cause(&self) -> Interrupt {
+        self.stopped.or_else(|| self.deadline.check(self.work, true)).unwrap_or(Interrupt::ExpansionBudget)
+    }
+}

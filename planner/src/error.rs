@@ -3,7 +3,7 @@
 /// Everything that can go wrong when building or refining a plan.
 ///
 /// An *outcome* of a search (solved, out of time, infeasible) is not an error: see
-/// [`crate::search::SearchOutcome`]. Errors are malformed inputs and failed hooks.
+/// [`crate::outcome::Outcome`]. Errors are malformed inputs and failed hooks.
 #[derive(Debug, thiserror::Error)]
 #[non_exhaustive]
 pub enum PlanError {
@@ -45,7 +45,7 @@ pub enum PlanError {
         "motion planning ran out of time after {:.3} ms ({} samples, {} collision checks)",
         stats.elapsed.as_secs_f64() * 1e3, stats.samples, stats.collision_checks
     )]
-    OutOfTime { stats: crate::motion::MotionStats },
+    OutOfTime { stats: crate::outcome::MotionStats },
     /// Motion planning: the sample budget was used up without connecting start and goal.
     #[error("no collision-free path found with {samples} samples")]
     NoPath { samples: usize },

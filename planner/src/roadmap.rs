@@ -10,15 +10,15 @@
 use std::cmp::Ordering;
 use std::collections::BinaryHeap;
 
-use embodied_models::collision::CollisionModel;
 use embodied_models::{ConfigSpace, Rng, Robot};
 use petgraph::graph::{EdgeIndex, NodeIndex, UnGraph};
 use petgraph::visit::EdgeRef;
 use rayon::prelude::*;
 
-use crate::deadline::Deadline;
+use crate::deadline::{Budget, Deadline};
 use crate::error::PlanError;
-use crate::motion::validity::{Budget, Validity};
+use crate::outcome::{MotionStats, unwrap_path};
+use crate::validity::{CERTIFY_TOLERANCE, DEFAULT_RESOLUTION, EdgeCheck, StateValidity, Validity, check_start};
 
 /// What is known about an edge's straight segment.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
@@ -85,7 +85,7 @@ impl Roadmap {
     /// A roadmap of up to `n_samples` random collision-free configurations (samples that collide
     /// are dropped), each connected to its `k` nearest neighbours by unchecked edges. Sampling
     /// and neighbour search run in parallel (rayon); the result depends on the seed only.
-    pub fn build(model: &CollisionModel, n_samples: usize, k: usize, seed: u64) -> Self {
+    pub fn build<V: StateValidity>(model: &V, n_samples: usize, k: usize, seed: u64) -> Self {
         let mut roadmap = Self::new(model.robot(), k, seed);
         roadmap.grow(model, n_samples, true);
         roadmap
@@ -126,7 +126,7 @@ impl Roadmap {
 
     /// Draw `n_samples` more samples; add the collision-free ones and connect them. Returns the
     /// number of vertices added.
-    pub fn grow(&mut self, model: &CollisionModel, n_samples: usize, parallel: bool) -> usize {
+    pub fn grow<V: StateValidity>(&mut self, model: &V, n_samples: usize, parallel: bool) -> usize {
         let robot = model.robot();
         let chunks = n_samples.div_ceil(CHUNK);
         let streams: Vec<(usize, Rng)> =
@@ -137,7 +137,7 @@ impl Roadmap {
             let mut valid = Vec::new();
             for _ in 0..count {
                 robot.random_configuration_into(&mut rng, &mut q);
-                if !model.collides_with(&q, &mut scratch) {
+                if !model.collides(&q, &mut scratch) {
                     valid.push(q.clone());
                 }
             }
@@ -193,10 +193,10 @@ impl Roadmap {
 
     /// A collision-free path from `start` to `goal` over this roadmap (both are added as
     /// vertices), by lazy A*: search, check the found path's edges shortest first, mark the
-    /// invalid one and search again. The path is unwrapped (see [`crate::motion::MotionPlan`]).
-    pub fn query(
+    /// invalid one and search again. The path is unwrapped (see [`crate::outcome::MotionPlan`]).
+    pub fn query<V: StateValidity>(
         &mut self,
-        model: &CollisionModel,
+        model: &V,
         start: &[f64],
         goal: &[f64],
         deadline: &Deadline,
@@ -205,9 +205,9 @@ impl Roadmap {
     }
 
     /// [`Roadmap::query`] to the nearest reachable of several goals.
-    pub fn query_any(
+    pub fn query_any<V: StateValidity>(
         &mut self,
-        model: &CollisionModel,
+        model: &V,
         start: &[f64],
         goals: &[Vec<f64>],
         deadline: &Deadline,
@@ -216,27 +216,27 @@ impl Roadmap {
             return Err(PlanError::EmptyRoadmap);
         }
         let robot = model.robot();
-        crate::motion::check_start(model, start)?;
+        check_start(model, start)?;
         if goals.is_empty() {
             return Err(PlanError::InvalidInput { message: "the goal set is empty".into() });
         }
         for (index, g) in goals.iter().enumerate() {
             robot.check_configuration(g).map_err(|e| PlanError::GoalUnreachable { reason: e.to_string() })?;
             if let Some(contact) = model.first_collision(g) {
-                return Err(PlanError::GoalInCollision { index, contact: contact.to_string() });
+                return Err(PlanError::GoalInCollision { index, contact });
             }
         }
-        let mut validity = Validity::new(model, crate::motion::DEFAULT_RESOLUTION)
-            .with_edge_check(crate::motion::EdgeCheck::Certified { tolerance: crate::motion::CERTIFY_TOLERANCE });
+        let mut validity = Validity::new(model, DEFAULT_RESOLUTION)
+            .with_edge_check(EdgeCheck::Certified { tolerance: CERTIFY_TOLERANCE });
         let mut budget = Budget::new(deadline);
         let s = self.add_vertex(start.to_vec());
         let gs: Vec<NodeIndex> = goals.iter().map(|g| self.add_vertex(g.clone())).collect();
         let mut counters = QueryCounters::default();
         match self.lazy_search(&mut validity, &mut budget, s, &gs, &mut counters) {
-            LazyOutcome::Found(path) => Ok(crate::motion::unwrap_path(&self.space, self.path_configurations(&path))),
+            LazyOutcome::Found(path) => Ok(unwrap_path(&self.space, self.path_configurations(&path))),
             LazyOutcome::Disconnected => Err(PlanError::NoPath { samples: self.samples }),
             LazyOutcome::Interrupted => Err(PlanError::OutOfTime {
-                stats: crate::motion::MotionStats {
+                stats: MotionStats {
                     elapsed: budget.started.elapsed(),
                     samples: self.samples,
                     edges_checked: validity.edges_checked,
@@ -256,9 +256,9 @@ impl Roadmap {
     }
 
     /// Lazy A*: search over edges not known invalid, validate the found path, repeat.
-    pub(crate) fn lazy_search(
+    pub(crate) fn lazy_search<V: StateValidity>(
         &mut self,
-        validity: &mut Validity<'_>,
+        validity: &mut Validity<'_, V>,
         budget: &mut Budget<'_>,
         start: NodeIndex,
         goals: &[NodeIndex],

@@ -25,6 +25,7 @@ use std::time::{Duration, Instant};
 
 use crate::deadline::{Deadline, Interrupt};
 use crate::error::PlanError;
+pub use crate::outcome::Outcome;
 
 /// A path cost: a non-negative `f64` that is never NaN, hence totally ordered.
 ///
@@ -195,44 +196,9 @@ pub struct PartialPlan<S, O> {
     pub remaining_estimate: f64,
 }
 
-/// What a search produced. It always says what it is: a partial plan is never "solved".
-#[derive(Debug, Clone, PartialEq)]
-pub enum SearchOutcome<S, O> {
-    /// An optimal plan (given an admissible heuristic) ending in a goal state.
-    Solved(Plan<S, O>),
-    /// Deliberation was stopped before deciding; the agent must not assume a plan exists.
-    OutOfTime {
-        /// Path to the expanded state with least heuristic, if any state was expanded.
-        best_so_far: Option<PartialPlan<S, O>>,
-        /// Which limit stopped the search.
-        cause: Interrupt,
-    },
-    /// The whole reachable search space was explored: no goal is reachable.
-    Infeasible,
-}
-
-impl<S, O> SearchOutcome<S, O> {
-    /// The plan, only if solved.
-    pub fn solved(&self) -> Option<&Plan<S, O>> {
-        match self {
-            SearchOutcome::Solved(plan) => Some(plan),
-            _ => None,
-        }
-    }
-
-    /// The plan, only if solved, by value.
-    pub fn into_solved(self) -> Option<Plan<S, O>> {
-        match self {
-            SearchOutcome::Solved(plan) => Some(plan),
-            _ => None,
-        }
-    }
-
-    /// True for [`SearchOutcome::OutOfTime`].
-    pub fn is_out_of_time(&self) -> bool {
-        matches!(self, SearchOutcome::OutOfTime { .. })
-    }
-}
+/// What a search produced: the crate's one [`Outcome`], with a [`Plan`] when solved and the
+/// best [`PartialPlan`] when stopped.
+pub type SearchOutcome<S, O> = Outcome<Plan<S, O>, PartialPlan<S, O>>;
 
 /// Counters of one search.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize)]
@@ -391,7 +357,7 @@ pub fn solve<P: SearchProblem>(problem: &P, deadline: &Deadline) -> SearchReport
     };
 
     if let Some(cause) = deadline.check(0, true) {
-        return finish(SearchOutcome::OutOfTime { best_so_far: None, cause }, stats);
+        return finish(SearchOutcome::OutOfTime { best: None, cause }, stats);
     }
 
     let initial = problem.initial();
@@ -420,7 +386,7 @@ pub fn solve<P: SearchProblem>(problem: &P, deadline: &Deadline) -> SearchReport
         if let Some(cause) = deadline.check(stats.expansions, read_clock) {
             let best_so_far =
                 best.map(|b| PartialPlan { plan: path_to(&nodes, b), remaining_estimate: nodes[b].h.get() });
-            return finish(SearchOutcome::OutOfTime { best_so_far, cause }, stats);
+            return finish(SearchOutcome::OutOfTime { best: best_so_far, cause }, stats);
         }
         stats.expansions += 1;
         if problem.is_goal(&nodes[index].state) {

@@ -3,15 +3,18 @@
 
 use std::time::{Duration, Instant};
 
-use embodied_models::collision::{CollisionModel, Environment, Obstacle};
+use embodied_models::collision::{CollisionModel, CollisionScratch, Environment, Obstacle};
 use embodied_models::nalgebra::Isometry3;
-use embodied_models::{Shape, builtin};
+use embodied_models::{Robot, Shape, builtin};
 use embodied_planner::PlanError;
-use embodied_planner::deadline::Deadline;
-use embodied_planner::motion::{CERTIFY_TOLERANCE, Goal, MotionSettings, PlannerKind, plan_motion};
+use embodied_planner::deadline::{Deadline, Interrupt};
+use embodied_planner::motion::{
+    CERTIFY_TOLERANCE, Goal, LazyPrm, MotionSettings, Outcome, PlannerKind, RrtConnect, StateValidity, plan_motion,
+    plan_with_kind,
+};
 use embodied_planner::roadmap::Roadmap;
 use embodied_planner::trajectory::time_parameterize;
-use embodied_planner::verify::{Violation, verify_path, verify_trajectory};
+use embodied_planner::verify::{Finding, Verifier};
 use proptest::prelude::*;
 
 fn boxed(robot: &str, obstacles: &[(&str, [f64; 3], [f64; 3])]) -> CollisionModel {
@@ -40,7 +43,7 @@ fn assert_plan_ok(model: &CollisionModel, start: &[f64], goal: &[f64], path: &[V
     assert!(space.distance(&path[0], start) < 1e-9, "path starts at {:?}, not {start:?}", path[0]);
     let end = path.last().expect("non-empty path");
     assert!(space.distance(end, goal) < 1e-9, "path ends at {end:?}, not {goal:?}");
-    if let Err(v) = verify_path(model, path, 0.005) {
+    if let Err(v) = Verifier::sampled(0.005).verify_path(model, path) {
         panic!("planned path fails verification: {v}");
     }
 }
@@ -229,7 +232,8 @@ fn tool_pose_goal_is_reached() {
     let dp = (reached.translation.vector - pose.translation.vector).norm();
     let dr = reached.rotation.angle_to(&pose.rotation);
     assert!(dp < 1e-4 && dr < 1e-4, "tool pose missed by {dp} m, {dr} rad");
-    verify_path(&model, &plan.path, 0.005).expect("verified");
+    Verifier::sampled(0.005).verify_path(&model, &plan.path).expect("verified");
+    Verifier::default().verify_path(&model, &plan.path).expect("certified");
 }
 
 #[test]
@@ -306,17 +310,27 @@ fn roadmap_build_is_deterministic_and_queries_lazily() {
 #[test]
 fn verify_path_rejects_bad_paths() {
     let (model, start, goal) = irp6_around_box();
-    match verify_path(&model, &[start.clone(), goal.clone()], 0.005) {
-        Err(Violation::SegmentCollision { index: 0, contact, .. }) => assert!(contact.contains("box"), "{contact}"),
-        other => panic!("expected a segment collision, got {other:?}"),
+    for verifier in [Verifier::sampled(0.005), Verifier::certified(0.0)] {
+        // The segment 0 -> 1 collides with the box: placed strictly inside it on the path parameter.
+        match verifier.verify_path(&model, &[start.clone(), goal.clone()]) {
+            Err(Finding::Collision { t, a, b, penetration_m, .. }) => {
+                assert!(a.contains("box") || b.contains("box"), "{a} and {b}");
+                assert!(t > 0.0 && t < 1.0, "{t}");
+                assert!(penetration_m >= 0.0);
+            }
+            other => panic!("{verifier:?}: expected a segment collision, got {other:?}"),
+        }
+        let mut outside = start.clone();
+        outside[1] = model.robot().limits()[1].lower - 0.1;
+        match verifier.verify_path(&model, &[start.clone(), outside]) {
+            Err(v @ Finding::Position { t: 1.0, .. }) => assert!(v.to_string().contains("by 1.000e-1"), "{v}"),
+            other => panic!("expected out of limits, got {other:?}"),
+        }
+        match verifier.verify_path(&model, &[]) {
+            Err(Finding::Malformed { message }) => assert!(message.contains("empty"), "{message}"),
+            other => panic!("expected an empty path, got {other:?}"),
+        }
     }
-    let mut outside = start.clone();
-    outside[1] = model.robot().limits()[1].lower - 0.1;
-    match verify_path(&model, &[start.clone(), outside], 0.005) {
-        Err(v @ Violation::OutOfLimits { index: 1, .. }) => assert!(v.to_string().contains("by 1.000e-1"), "{v}"),
-        other => panic!("expected out of limits, got {other:?}"),
-    }
-    assert!(matches!(verify_path(&model, &[], 0.005), Err(Violation::Empty)));
 }
 
 #[test]
@@ -324,7 +338,8 @@ fn trajectory_of_a_plan_verifies() {
     let (model, start, goal) = irp6_around_box();
     let plan = plan_motion(&model, &start, &Goal::Configuration(goal), &MotionSettings::default()).expect("plan");
     let traj = time_parameterize(&plan.path, model.robot(), 0.001);
-    verify_trajectory(&model, &traj, 0.005).expect("trajectory verifies");
+    Verifier::sampled(0.005).verify_trajectory(&model, &traj).expect("trajectory verifies");
+    Verifier::default().verify_trajectory(&model, &traj).expect("trajectory certified");
     let json = serde_json::to_string(&traj).expect("serialise");
     let back: embodied_planner::trajectory::Trajectory = serde_json::from_str(&json).expect("deserialise");
     assert_eq!(back.t.len(), traj.t.len());
@@ -402,4 +417,132 @@ fn sampled_acceleration_stays_within_limits_on_a_short_last_interval() {
             assert!(qdd[j].abs() <= limits[j].max_acceleration * (1.0 + 1e-9), "t {t}: qdd[{j}] = {}", qdd[j]);
         }
     }
+}
+
+/// A user's own validity on top of the collision model: a forbidden rectangle of joint space
+/// `(q0, q1)`, with an exact segment test (Liang-Barsky clipping).
+struct Fenced {
+    model: CollisionModel,
+    q0: [f64; 2],
+    q1: [f64; 2],
+}
+
+impl Fenced {
+    fn inside(&self, q: &[f64]) -> bool {
+        (self.q0[0]..=self.q0[1]).contains(&q[0]) && (self.q1[0]..=self.q1[1]).contains(&q[1])
+    }
+
+    /// Whether the straight segment `a`-`b` meets the closed rectangle.
+    fn segment_meets(&self, a: &[f64], b: &[f64]) -> bool {
+        let (mut t0, mut t1) = (0.0f64, 1.0f64);
+        for (i, [lo, hi]) in [(0, self.q0), (1, self.q1)] {
+            let d = b[i] - a[i];
+            for (p, q) in [(-d, a[i] - lo), (d, hi - a[i])] {
+                if p == 0.0 {
+                    if q < 0.0 {
+                        return false;
+                    }
+                } else if p < 0.0 {
+                    t0 = t0.max(q / p);
+                } else {
+                    t1 = t1.min(q / p);
+                }
+            }
+        }
+        t0 <= t1
+    }
+}
+
+impl StateValidity for Fenced {
+    type Scratch = CollisionScratch;
+
+    fn robot(&self) -> &Robot {
+        self.model.robot()
+    }
+
+    fn scratch(&self) -> CollisionScratch {
+        self.model.scratch()
+    }
+
+    fn collides(&self, q: &[f64], scratch: &mut CollisionScratch) -> bool {
+        q.len() < 2 || self.inside(q) || self.model.collides_with(q, scratch)
+    }
+
+    fn first_collision(&self, q: &[f64]) -> Option<String> {
+        if self.inside(q) { Some("the fence".into()) } else { self.model.first_collision(q).map(|c| c.to_string()) }
+    }
+
+    fn certify_motion(
+        &self,
+        qa: &[f64],
+        qb: &[f64],
+        tolerance: f64,
+        check_ends: bool,
+        scratch: &mut CollisionScratch,
+    ) -> (bool, u32) {
+        if self.segment_meets(qa, qb) {
+            return (false, 1);
+        }
+        self.model.certify(qa, qb, tolerance, check_ends, scratch)
+    }
+}
+
+/// Both public planners take any `StateValidity`: around a fence the collision model knows
+/// nothing of, every segment of the path (shortcuts included) stays clear of it.
+#[test]
+fn planners_take_a_user_validity() {
+    let fenced = Fenced { model: boxed("irp6-postument", &[]), q0: [-0.1, 0.1], q1: [-1.7, -1.5] };
+    let (start, goal) = (vec![-0.8, -1.6, 0.1, 0.0, 1.5, 0.0], vec![0.8, -1.6, 0.1, 0.0, 1.5, 0.0]);
+    assert!(fenced.segment_meets(&start, &goal), "test setup: the straight segment crosses the fence");
+    let settings = settings(PlannerKind::RrtConnect);
+    let goal_q = Goal::Configuration(goal.clone());
+    for (name, outcome) in [
+        ("rrt-connect", RrtConnect::new(settings.clone()).plan(&fenced, &start, &goal_q)),
+        ("lazy-prm", LazyPrm::new(settings.clone()).plan(&fenced, &start, &goal_q)),
+    ] {
+        let plan = match outcome {
+            Ok(Outcome::Solved(plan)) => plan,
+            other => panic!("{name}: {other:?}"),
+        };
+        assert!(plan.stats.planner.starts_with(name), "{name}: {}", plan.stats.planner);
+        assert!(plan.path.len() > 2, "{name}: a detour");
+        for w in plan.path.windows(2) {
+            assert!(!fenced.segment_meets(&w[0], &w[1]), "{name}: {:?} -> {:?} crosses the fence", w[0], w[1]);
+        }
+        assert_plan_ok(&fenced.model, &start, &goal, &plan.path);
+    }
+}
+
+/// The one outcome type: solved, out of time with the work so far and what stopped it, and
+/// infeasible when the sample budget is spent.
+#[test]
+fn motion_planners_report_outcomes() {
+    let (model, start, goal) = irp6_around_box();
+    let goal = Goal::Configuration(goal);
+    let base = settings(PlannerKind::RrtConnect);
+    for kind in PlannerKind::ALL {
+        let out_of_time = MotionSettings { deadline: Deadline::expansions(2), ..base.clone() };
+        match plan_with_kind(kind, &model, &start, &goal, &out_of_time) {
+            Ok(Outcome::OutOfTime { best: Some(stats), cause: Interrupt::ExpansionBudget }) => {
+                assert!(stats.collision_checks > 0, "{kind}: {stats:?}")
+            }
+            other => panic!("{kind}: expected out of time, got {other:?}"),
+        }
+        let no_samples = MotionSettings { max_samples: 0, ..base.clone() };
+        assert!(matches!(plan_with_kind(kind, &model, &start, &goal, &no_samples), Ok(Outcome::Infeasible)), "{kind}");
+        assert!(matches!(plan_with_kind(kind, &model, &start, &goal, &base), Ok(Outcome::Solved(_))), "{kind}");
+        // A start in collision is an error, not an outcome.
+        let inside = HIT.to_vec();
+        assert!(matches!(plan_with_kind(kind, &model, &inside, &goal, &base), Err(PlanError::StartInCollision { .. })));
+    }
+}
+
+#[test]
+fn planner_names_round_trip() {
+    for kind in PlannerKind::ALL {
+        assert_eq!(kind.name().parse::<PlannerKind>(), Ok(kind));
+        assert_eq!(kind.to_string(), kind.name());
+    }
+    let err = "rrt".parse::<PlannerKind>().expect_err("unknown");
+    assert!(err.to_string().contains("rrt-connect, lazy-prm"), "{err}");
 }

@@ -139,7 +139,7 @@ proptest! {
         prop_assert_eq!(a.stats.expansions, b.stats.expansions);
         prop_assert_eq!(a.stats.generated, b.stats.generated);
         prop_assert!(a.stats.expansions <= budget);
-        if let SearchOutcome::OutOfTime { best_so_far, cause } = &a.outcome {
+        if let SearchOutcome::OutOfTime { best: best_so_far, cause } = &a.outcome {
             prop_assert_eq!(*cause, Interrupt::ExpansionBudget);
             prop_assert_eq!(a.stats.expansions, budget);
             if let Some(partial) = best_so_far {
@@ -178,7 +178,7 @@ fn zero_deadline_is_out_of_time_without_expanding() {
         assert_eq!(report.stats.expansions, 0);
         assert_eq!(report.stats.generated, 0);
         match report.outcome {
-            SearchOutcome::OutOfTime { best_so_far: None, .. } => {}
+            SearchOutcome::OutOfTime { best: None, .. } => {}
             other => panic!("expected OutOfTime with nothing, got {other:?}"),
         }
     }
@@ -201,7 +201,7 @@ fn wall_clock_deadline_is_honoured() {
         let report = solve(&world, &deadline);
         let late = Instant::now().saturating_duration_since(at);
         match &report.outcome {
-            SearchOutcome::OutOfTime { cause: Interrupt::WallClock, best_so_far } => {
+            SearchOutcome::OutOfTime { cause: Interrupt::WallClock, best: best_so_far } => {
                 assert!(best_so_far.is_some());
                 assert!(report.stats.expansions > 0);
             }

@@ -5,7 +5,7 @@
 //! For every problem this module freezes the joints outside the request's group at their start
 //! values, builds the collision environment from the scene, plans from the start to the goal's
 //! joint constraints under a deadline, and then checks the returned path independently
-//! ([`verify_path`] at [`VERIFY_RESOLUTION`], plus its end points). Only the call to
+//! ([`Verifier::verify_path`] sampled at [`VERIFY_RESOLUTION`], plus its end points). Only the call to
 //! [`plan_motion`] is timed: loading and checking the problem is not planning time.
 //!
 //! Problems whose start or goal is in collision (or outside the joint limits) are reported as
@@ -21,9 +21,9 @@ use embodied_models::urdf::load_urdf;
 use embodied_models::{CollisionModel, ConfigSpace, Robot};
 use embodied_planner::PlanError;
 use embodied_planner::deadline::Deadline;
-use embodied_planner::motion::{CERTIFY_TOLERANCE, EdgeCheck, Goal, MotionSettings, plan_motion};
+use embodied_planner::motion::{CERTIFY_TOLERANCE, EdgeCheck, Goal, MotionSettings, PlannerKind, plan_motion};
 use embodied_planner::moveit::{MoveitError, load_request, load_scene};
-use embodied_planner::verify::verify_path;
+use embodied_planner::verify::Verifier;
 use serde::Serialize;
 
 use crate::SystemError as AppError;
@@ -56,6 +56,8 @@ pub struct MbmArgs {
     pub resolution: f64,
     /// Random shortcut attempts after the greedy shortcut pass (the planner's default: 5).
     pub shortcut_attempts: usize,
+    /// The planner after the straight segment (default: RRT-Connect).
+    pub algorithm: PlannerKind,
     /// Only these families (all when `None`).
     pub families: Option<Vec<String>>,
     /// At most this many problems per family (the lowest indices).
@@ -80,6 +82,7 @@ impl MbmArgs {
             edge_check: EdgeCheck::Certified { tolerance: CERTIFY_TOLERANCE },
             resolution: VERIFY_RESOLUTION,
             shortcut_attempts: MotionSettings::default().shortcut_attempts,
+            algorithm: PlannerKind::RrtConnect,
             families: None,
             limit: None,
             progress: false,
@@ -165,6 +168,8 @@ pub struct MbmSettings {
     pub edge_check: EdgeCheck,
     pub resolution: f64,
     pub shortcut_attempts: usize,
+    /// The planner after the straight segment.
+    pub algorithm: PlannerKind,
     pub verify_resolution: f64,
     /// Self-collision pairs disabled because they touch in every sampled configuration.
     pub always_colliding_disabled: Vec<(String, String)>,
@@ -336,7 +341,7 @@ fn check_path(model: &CollisionModel, path: &[Vec<f64>], start: &[f64], goal: &[
     if d_goal.is_nan() || d_goal > ENDPOINT_TOLERANCE {
         return Err(format!("the path ends {d_goal:.3e} rad away from the request's goal"));
     }
-    verify_path(model, path, VERIFY_RESOLUTION).map_err(|v| format!("verification failed: {v}"))
+    Verifier::sampled(VERIFY_RESOLUTION).verify_path(model, path).map_err(|v| format!("verification failed: {v}"))
 }
 
 /// A per-problem seed: the base seed mixed with the family and index (SplitMix64 finaliser), so
@@ -468,6 +473,7 @@ fn run_problem(args: &MbmArgs, loaded: &Loaded, p: &ProblemFiles) -> Result<Prob
         edge_check: args.edge_check,
         deadline: Deadline::after(budget),
         shortcut_attempts: args.shortcut_attempts,
+        planner: args.algorithm,
         ..MotionSettings::default()
     };
     let goal = Goal::Configuration(resolved.goal.clone());
@@ -543,6 +549,7 @@ pub fn run_mbm(args: &MbmArgs, on_progress: &mut dyn FnMut(usize, usize)) -> Res
             edge_check: args.edge_check,
             resolution: args.resolution,
             shortcut_attempts: args.shortcut_attempts,
+            algorithm: args.algorithm,
             verify_resolution: VERIFY_RESOLUTION,
             always_colliding_disabled: loaded.always_colliding.clone(),
             never_colliding_disabled: loaded.never_colliding.clone(),

@@ -12,8 +12,7 @@ use embodied_planner::carry::{ClosedChainSpan, plan_carry};
 use embodied_planner::deadline::Deadline;
 use embodied_planner::motion::{CERTIFY_TOLERANCE, EdgeCheck, Goal, MotionSettings, MotionStats, plan_motion};
 use embodied_planner::trajectory::{Trajectory, time_parameterize};
-use embodied_planner::verify::certified::{CheckSettings, check_trajectory};
-use embodied_planner::verify::verify_trajectory;
+use embodied_planner::verify::Verifier;
 use serde::{Deserialize, Serialize};
 
 use crate::SystemError;
@@ -154,7 +153,7 @@ pub fn plan_scenario(scenario: &Scenario, deadline_ms: Option<f64>) -> Result<Pl
             .map_err(|e| SystemError::Failed(format!("scenario `{}`: agent `{}`: {e}", scenario.name, agent.name)))?;
         let trajectory = time_parameterize(&plan.path, &agent.robot, 0.001);
         // The verifier, not the planner, says whether the plan may drive an effector.
-        verify_trajectory(&model, &trajectory, scenario.planner.resolution.min(0.01)).map_err(|v| {
+        Verifier::default().verify_trajectory(&model, &trajectory).map_err(|v| {
             SystemError::Failed(format!(
                 "scenario `{}`: agent `{}`: plan rejected by the verifier: {v}",
                 scenario.name, agent.name
@@ -181,8 +180,7 @@ pub fn plan_scenario(scenario: &Scenario, deadline_ms: Option<f64>) -> Result<Pl
         })?;
         // The certified checker, not the planner, says whether the plan may drive an effector.
         let model = agent_problem(scenario, carry.agent, &resting);
-        let report =
-            check_trajectory(&model, &plan.trajectory, std::slice::from_ref(&plan.span), &CheckSettings::default());
+        let report = Verifier::default().check_trajectory(&model, &plan.trajectory, std::slice::from_ref(&plan.span));
         if !report.certified {
             return Err(SystemError::Failed(format!(
                 "scenario `{}`: agent `{}`: carry plan rejected by the verifier: {:?}",

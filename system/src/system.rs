@@ -293,6 +293,7 @@ pub fn deliberation_settings(scenario: &Scenario, clock: ClockSpec, dt: f64) -> 
         motion: motion_settings(scenario, Deadline::none()),
         planner: None,
         verify_resolution: scenario.planner.resolution.min(0.01),
+        plan_check: embodied_planner::verify::Verifier::default(),
         goal_tolerance: 1e-3,
         retry_after_steps: 100,
         max_attempts: 3,

@@ -5,7 +5,7 @@
 //! SHA-256 of the scenario text is a *warning*: the plan is then checked against the scenario as
 //! it is now, which is what certification means). Every agent plan must name an agent of the
 //! scenario, its robot, and the robot's joint names in order (else an error naming the place).
-//! Each trajectory is checked by [`embodied_planner::verify::certified::check_trajectory`]
+//! Each trajectory is checked by the certified [`embodied_planner::verify::Verifier`]
 //! (limits, continuous collisions with a certificate, closed-chain spans) plus the timing and
 //! endpoints here: it starts at `t = 0` at rest at the scenario's start configuration and ends
 //! at rest.
@@ -30,7 +30,8 @@ use std::time::Instant;
 use embodied_executor::Event;
 use embodied_models::Robot;
 use embodied_models::nalgebra::Isometry3;
-use embodied_planner::verify::certified::{CheckSettings, Finding, TrajectoryReport, check_trajectory, pose_error};
+use embodied_planner::verify::certified::pose_error;
+use embodied_planner::verify::{CheckSettings, Finding, LimitsChecker, TrajectoryReport, Verifier};
 use serde::Serialize;
 use serde_json::Value;
 
@@ -215,7 +216,8 @@ pub fn verify_plan(
             }
         }
         let model = agent_problem(scenario, k, &occupied);
-        let report = check_trajectory(&model, &p.trajectory, &p.closed_chain, settings);
+        let report =
+            Verifier::certified(0.0).with_settings(*settings).check_trajectory(&model, &p.trajectory, &p.closed_chain);
         let timing = timing(scenario, k, p);
         agents.push(AgentVerification {
             agent: p.agent.clone(),
@@ -359,9 +361,9 @@ pub struct LogVerification {
 struct AgentState<'a> {
     name: String,
     robot: &'a Robot,
-    limits: Vec<embodied_models::JointLimits>,
+    limits: LimitsChecker,
     names: Vec<String>,
-    prev: Option<(u64, Vec<f64>)>,
+    prev_step: Option<u64>,
     out: LogAgent,
     closure: Option<(usize, usize)>,
     holding: Option<Isometry3<f64>>,
@@ -445,9 +447,11 @@ pub fn verify_log(scenario: &Scenario, file: &Path, settings: &CheckSettings) ->
         agents.push(AgentState {
             name: a.clone(),
             robot: &agent.robot,
-            limits,
+            limits: LimitsChecker::new(&agent.robot, settings)
+                .with_velocity_source("logged qd")
+                .without_position_differences(),
             names,
-            prev: None,
+            prev_step: None,
             out: LogAgent {
                 agent: a.clone(),
                 certified: true,
@@ -555,7 +559,9 @@ pub fn verify_log(scenario: &Scenario, file: &Path, settings: &CheckSettings) ->
             };
             let (q, qd) = (vec("q")?, vec("qd")?);
             st.out.steps += 1;
-            check_log_step(st, step, t, step_s, &q, &qd, settings);
+            let h = st.prev_step.map_or(f64::NAN, |p| step.saturating_sub(p).max(1) as f64 * step_s);
+            st.limits.push_with_interval(t, h, &q, &qd);
+            st.prev_step = Some(step);
             let events: Vec<Event> = match a.get("events") {
                 None => Vec::new(),
                 Some(v) => serde_json::from_value(v.clone()).map_err(|e| {
@@ -601,6 +607,10 @@ pub fn verify_log(scenario: &Scenario, file: &Path, settings: &CheckSettings) ->
         .into_iter()
         .map(|st| {
             let mut a = st.out;
+            a.violation = st.limits.first().cloned();
+            a.violations = st.limits.violations();
+            a.max_velocity_ratio = st.limits.max_velocity_ratio();
+            a.max_acceleration_ratio = st.limits.max_acceleration_ratio();
             a.certified = a.violation.is_none() && a.closure.as_ref().is_none_or(|c| c.ok);
             a
         })
@@ -617,55 +627,6 @@ pub fn verify_log(scenario: &Scenario, file: &Path, settings: &CheckSettings) ->
         agents,
         time_s: start.elapsed().as_secs_f64(),
     })
-}
-
-fn check_log_step(st: &mut AgentState, step: u64, t: f64, step_s: f64, q: &[f64], qd: &[f64], s: &CheckSettings) {
-    let rel = 1.0 + s.limit_tolerance;
-    let mut found: Vec<Finding> = Vec::new();
-    for (i, l) in st.limits.iter().enumerate() {
-        let joint = st.names[i].clone();
-        let excess = (l.lower - q[i]).max(q[i] - l.upper);
-        if excess > s.position_tolerance {
-            found.push(Finding::Position {
-                t,
-                joint: joint.clone(),
-                value: q[i],
-                lower: l.lower,
-                upper: l.upper,
-                excess,
-            });
-        }
-        st.out.max_velocity_ratio = st.out.max_velocity_ratio.max(qd[i].abs() / l.max_velocity);
-        if qd[i].abs() > l.max_velocity * rel + 1e-12 {
-            found.push(Finding::Velocity {
-                t,
-                joint: joint.clone(),
-                value: qd[i],
-                limit: l.max_velocity,
-                excess: qd[i].abs() - l.max_velocity,
-                source: "logged qd".into(),
-            });
-        }
-        if let Some((prev_step, prev)) = &st.prev {
-            let h = step.saturating_sub(*prev_step).max(1) as f64 * step_s;
-            let a = (qd[i] - prev[i]) / h;
-            st.out.max_acceleration_ratio = st.out.max_acceleration_ratio.max(a.abs() / l.max_acceleration);
-            if a.abs() > l.max_acceleration * rel + 1e-12 {
-                found.push(Finding::Acceleration {
-                    t,
-                    joint,
-                    value: a,
-                    limit: l.max_acceleration,
-                    excess: a.abs() - l.max_acceleration,
-                });
-            }
-        }
-    }
-    st.out.violations += found.len();
-    if st.out.violation.is_none() {
-        st.out.violation = found.into_iter().next();
-    }
-    st.prev = Some((step, qd.to_vec()));
 }
 
 /// The log report as text.

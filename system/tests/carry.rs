@@ -197,7 +197,7 @@ fn the_default_run_carries_the_bar_with_the_chain_closed_and_its_log_verifies() 
     }
     // The independent checker agrees: limits and closure within tolerance.
     let scenario = load_scenario("two-irp6-carry").unwrap();
-    let settings = embodied_planner::verify::certified::CheckSettings::default();
+    let settings = embodied_planner::verify::CheckSettings::default();
     let v = embodied_system::verify::verify_log(&scenario, &log, &settings).unwrap();
     assert!(v.certified, "{}", embodied_system::verify::render_log(&v));
 }

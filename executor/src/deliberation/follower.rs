@@ -7,6 +7,7 @@ use std::sync::Arc;
 use embodied_models::{CollisionModel, Environment, Obstacle, Robot, Shape};
 use embodied_planner::motion::{Goal, MotionSettings};
 use embodied_planner::trajectory::Trajectory;
+use embodied_planner::verify::Verifier;
 use nalgebra::Isometry3;
 
 use crate::agent::Agent;
@@ -33,8 +34,12 @@ pub struct DeliberationSettings {
     pub motion: MotionSettings,
     /// An injected planner instead of [`PlanMotion`].
     pub planner: Option<Arc<dyn MotionPlanner>>,
-    /// Collision-check resolution of the verifier, rad or m.
+    /// Collision-check resolution (rad or m) of the check of the rest of the plan being
+    /// followed when the world changes (on the control thread).
     pub verify_resolution: f64,
+    /// The check every plan must pass before it may drive the effector (the online plan gate,
+    /// on the planning thread). [`Verifier::default`]: certified, touching counts as collision.
+    pub plan_check: Verifier,
     /// Largest distance between a plan's end and its goal that the verifier accepts.
     pub goal_tolerance: f64,
     /// Steps to wait after a failed, rejected or panicked plan before asking again.
@@ -61,6 +66,7 @@ impl Default for DeliberationSettings {
             motion: MotionSettings::default(),
             planner: None,
             verify_resolution: 0.01,
+            plan_check: Verifier::default(),
             goal_tolerance: 1e-6,
             retry_after_steps: 100,
             max_attempts: 3,
@@ -134,7 +140,7 @@ impl DeliberativeState {
         };
         let verifier = PlanVerifier {
             collision: collision.clone(),
-            resolution: settings.verify_resolution,
+            verifier: settings.plan_check,
             goal_tolerance: settings.goal_tolerance,
         };
         let dof = robot.dof();

@@ -1,5 +1,5 @@
 //! The motion planner deliberative agents use: the planner crate's
-//! [`embodied_planner::motion::plan_motion`] (straight segment, RRT-Connect or lazy PRM,
+//! [`embodied_planner::motion::plan_with_kind`] (straight segment, RRT-Connect or lazy PRM,
 //! shortcuts) under the request's [`Deadline`], time-parameterised by
 //! [`embodied_planner::trajectory::time_parameterize`] (knots only).
 //!
@@ -8,13 +8,12 @@
 
 use embodied_models::CollisionModel;
 use embodied_planner::deadline::Deadline;
-use embodied_planner::error::PlanError;
-use embodied_planner::motion::{MotionSettings, plan_motion};
+use embodied_planner::motion::{MotionSettings, Outcome, plan_with_kind};
 use embodied_planner::trajectory::time_parameterize;
 
-use super::worker::{MotionPlanner, PlanFailure, PlanRequest, Planned};
+use embodied_planner::request::{MotionPlanner, PlanFailure, PlanRequest, Planned};
 
-/// [`plan_motion`] as a [`MotionPlanner`]: `model` gives the robot (and the environment when the
+/// [`plan_with_kind`] as a [`MotionPlanner`]: `model` gives the robot (and the environment when the
 /// request has none); `settings` everything but the deadline, which comes with each request.
 /// Each request plans with seed `settings.seed + request id`, so a replan is a fresh draw and a
 /// run is still reproducible.
@@ -41,8 +40,8 @@ impl MotionPlanner for PlanMotion {
             deadline: deadline.clone(),
             ..self.settings.clone()
         };
-        match plan_motion(&model, &request.start, &request.goal, &settings) {
-            Ok(plan) => {
+        match plan_with_kind(settings.planner, &model, &request.start, &request.goal, &settings) {
+            Ok(Outcome::Solved(plan)) => {
                 // Knots only (every point where the acceleration changes): the follower's
                 // Hermite sampling reproduces the motion exactly at any control period, and the
                 // verifier checks a few knots and the straight segments between them instead of
@@ -50,11 +49,14 @@ impl MotionPlanner for PlanMotion {
                 let trajectory = time_parameterize(&plan.path, model.robot(), 0.0);
                 Ok(Planned { trajectory, work: plan.stats.collision_checks })
             }
-            Err(PlanError::OutOfTime { stats }) => Err(PlanFailure::OutOfTime {
-                work: stats.collision_checks,
-                reason: format!("{} samples, {} collision checks", stats.samples, stats.collision_checks),
-            }),
-            Err(PlanError::NoPath { samples }) => Err(PlanFailure::Infeasible { work: samples as u64 }),
+            Ok(Outcome::OutOfTime { best, .. }) => {
+                let stats = best.unwrap_or_default();
+                Err(PlanFailure::OutOfTime {
+                    work: stats.collision_checks,
+                    reason: format!("{} samples, {} collision checks", stats.samples, stats.collision_checks),
+                })
+            }
+            Ok(Outcome::Infeasible) => Err(PlanFailure::Infeasible { work: settings.max_samples as u64 }),
             Err(e) => Err(PlanFailure::Error(e.to_string())),
         }
     }

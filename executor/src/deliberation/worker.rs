@@ -2,10 +2,10 @@
 //!
 //! A request starts a planning job on its own thread; the control step only ever calls
 //! [`Deliberator::poll`], which never blocks in [`PlanClock::WallClock`] mode. Every plan is
-//! checked by the planner crate's independent verifier
-//! ([`embodied_planner::verify::verify_trajectory`]: collisions at a fine resolution, position,
-//! velocity and acceleration limits) and against the request's start and goal on the worker
-//! thread, after the planner; a planner panic is caught there and delivered as an outcome. In
+//! checked by the planner crate's independent [`Verifier`] (by default certified: the whole
+//! path between the samples proven collision-free, as strong as the planner's own edge
+//! certificate; position, velocity and acceleration limits) and against the request's start and
+//! goal on the worker thread, after the planner; a planner panic is caught there and delivered as an outcome. In
 //! [`PlanClock::Simulated`] mode the delivery step is computed from the planner's count of work
 //! units (for [`embodied_planner::motion::plan_motion`]: collision checks), so runs replay bit
 //! for bit whatever the thread timing.
@@ -15,11 +15,12 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{Receiver, TryRecvError, channel};
 use std::time::{Duration, Instant};
 
-use embodied_models::{CollisionModel, Environment};
+use embodied_models::CollisionModel;
 use embodied_planner::deadline::Deadline;
 use embodied_planner::motion::Goal;
+pub use embodied_planner::request::{MotionPlanner, PlanBudget, PlanFailure, PlanRequest, Planned};
 use embodied_planner::trajectory::Trajectory;
-use embodied_planner::verify::verify_trajectory;
+use embodied_planner::verify::Verifier;
 
 /// How planning time is counted.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -31,106 +32,6 @@ pub enum PlanClock {
     /// (at least one). The control step waits for the worker's result (only in this mode) to
     /// learn the work count.
     Simulated { steps_per_unit: f64, fixed_steps: u64 },
-}
-
-/// How long a plan may take: when it is needed, and when the search gives up.
-#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct PlanBudget {
-    /// The deadline, in control steps after the request: the step at which the plan is needed.
-    /// A plan not in `c_c` by then is late: the agent halts safely and waits for it.
-    pub steps: u64,
-    /// [`PlanClock::WallClock`] mode: the search is stopped this long after the request.
-    pub wall: Option<Duration>,
-    /// [`PlanClock::Simulated`] mode: a search whose simulated time exceeds this many steps is
-    /// delivered as out of time at that step.
-    pub give_up_steps: Option<u64>,
-    /// Work budget given to the search (deterministic in both modes).
-    pub work: Option<u64>,
-}
-
-impl Default for PlanBudget {
-    fn default() -> Self {
-        Self { steps: 50, wall: Some(Duration::from_millis(50)), give_up_steps: Some(50), work: None }
-    }
-}
-
-impl PlanBudget {
-    /// The same deadline in both clocks: needed after `steps` steps of `dt` seconds, the search
-    /// stopped then.
-    pub fn hard(steps: u64, dt: f64) -> Self {
-        Self {
-            steps,
-            wall: Some(Duration::from_secs_f64((steps as f64 * dt).max(0.0))),
-            give_up_steps: Some(steps),
-            work: None,
-        }
-    }
-}
-
-/// A request for a plan, stamped so that a late answer can be recognised as stale.
-#[derive(Debug, Clone)]
-pub struct PlanRequest {
-    /// Increases with every request of one deliberator.
-    pub id: u64,
-    /// Version of the agent's world model when the request was made.
-    pub world_version: u64,
-    /// Step at which the request was made.
-    pub step: u64,
-    /// Start configuration (the agent is at rest there).
-    pub start: Vec<f64>,
-    /// Where the motion must end.
-    pub goal: Goal,
-    /// Control period, s (the trajectory's sampling period).
-    pub dt: f64,
-    /// The environment as the agent knows it (base environment plus sensed obstacles); `None`
-    /// means the planner's own.
-    pub environment: Option<Environment>,
-    pub budget: PlanBudget,
-}
-
-/// A successful plan and the work it took (units of the planner's choosing, deterministic:
-/// [`super::PlanMotion`] counts collision checks).
-#[derive(Debug, Clone)]
-pub struct Planned {
-    pub trajectory: Trajectory,
-    pub work: u64,
-}
-
-/// Why no plan came back.
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
-#[non_exhaustive]
-pub enum PlanFailure {
-    #[error("out of time after {work} work units ({reason})")]
-    OutOfTime { work: u64, reason: String },
-    #[error("infeasible after {work} work units")]
-    Infeasible { work: u64 },
-    #[error("{0}")]
-    Error(String),
-}
-
-impl PlanFailure {
-    fn work(&self) -> u64 {
-        match self {
-            PlanFailure::OutOfTime { work, .. } | PlanFailure::Infeasible { work } => *work,
-            PlanFailure::Error(_) => 0,
-        }
-    }
-}
-
-/// A motion planner: anything that turns a request into a trajectory under a deadline.
-/// Closures `Fn(&PlanRequest, &Deadline) -> Result<Planned, PlanFailure>` are planners, so tests
-/// can inject panicking, slow or wrong ones.
-pub trait MotionPlanner: Send + Sync {
-    fn plan(&self, request: &PlanRequest, deadline: &Deadline) -> Result<Planned, PlanFailure>;
-}
-
-impl<F> MotionPlanner for F
-where
-    F: Fn(&PlanRequest, &Deadline) -> Result<Planned, PlanFailure> + Send + Sync,
-{
-    fn plan(&self, request: &PlanRequest, deadline: &Deadline) -> Result<Planned, PlanFailure> {
-        self(request, deadline)
-    }
 }
 
 /// What came back for a request.
@@ -192,8 +93,8 @@ struct WorkerResult {
 pub struct PlanVerifier {
     /// The robot and its world (the environment is replaced by the request's, when given).
     pub collision: CollisionModel,
-    /// Collision-check resolution, rad or m.
-    pub resolution: f64,
+    /// The check every plan must pass ([`Verifier::default`]: certified).
+    pub verifier: Verifier,
     /// Largest distance (C-space, or metres and radians for a tool pose) between the plan's end
     /// and its goal.
     pub goal_tolerance: f64,
@@ -389,7 +290,7 @@ fn verify(verifier: &PlanVerifier, request: &PlanRequest, trajectory: Trajectory
     if let Some(why) = misses_goal(robot, last, &request.goal, verifier.goal_tolerance) {
         return PlanOutcome::Rejected(why);
     }
-    match verify_trajectory(&model, &trajectory, verifier.resolution) {
+    match verifier.verifier.verify_trajectory(&model, &trajectory) {
         Ok(()) => PlanOutcome::Ready(Arc::new(trajectory)),
         Err(v) => PlanOutcome::Rejected(v.to_string()),
     }

@@ -9,22 +9,19 @@
 
 pub(crate) mod rrt_connect;
 pub(crate) mod shortcut;
-pub(crate) mod validity;
-
-use std::time::Duration;
 
 use embodied_models::collision::CollisionModel;
-use embodied_models::{ConfigSpace, IkOptions, Rng, Robot};
+use embodied_models::{IkOptions, Rng, Robot};
 use nalgebra::Isometry3;
 use petgraph::graph::NodeIndex;
 
-use crate::deadline::Deadline;
+use crate::deadline::{Budget, Deadline};
 use crate::error::PlanError;
+use crate::outcome::unwrap_path;
+pub use crate::outcome::{MotionPlan, MotionStats, Outcome, path_length};
 use crate::roadmap::{LazyOutcome, QueryCounters, Roadmap};
-use validity::{Budget, Validity};
-
-/// Largest joint step (rad or m) between collision-checked points of a segment, by default.
-pub const DEFAULT_RESOLUTION: f64 = 0.02;
+pub use crate::validity::{CERTIFY_TOLERANCE, DEFAULT_RESOLUTION, EdgeCheck, StateValidity};
+use crate::validity::{Validity, check_start};
 
 /// Where a motion must end.
 #[derive(Debug, Clone)]
@@ -37,22 +34,6 @@ pub enum Goal {
     ToolPose { end_effector: usize, pose: Isometry3<f64> },
 }
 
-/// How a straight segment between two free configurations is judged free.
-#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
-pub enum EdgeCheck {
-    /// The conservative certificate of
-    /// [`CollisionModel::motion_is_certified_free`]: the whole continuum of configurations
-    /// is free, not only sampled ones. Motions that pass within about `tolerance` (m) of
-    /// contact are refused.
-    Certified { tolerance: f64 },
-    /// Configurations no more than [`MotionSettings::resolution`] apart in every joint are
-    /// checked (the classic discrete check; a thin obstacle between samples can be missed).
-    Sampled,
-}
-
-/// Default tolerance of [`EdgeCheck::Certified`] (m).
-pub const CERTIFY_TOLERANCE: f64 = 1e-4;
-
 /// Default [`MotionSettings::lazy_probe`] (rad or m).
 pub const DEFAULT_LAZY_PROBE: f64 = 0.1;
 
@@ -63,6 +44,122 @@ pub enum PlannerKind {
     RrtConnect,
     /// Lazy PRM grown in batches with A* and lazy edge checks.
     LazyPrm,
+}
+
+impl PlannerKind {
+    /// Every planner, in the order of their names.
+    pub const ALL: [PlannerKind; 2] = [PlannerKind::RrtConnect, PlannerKind::LazyPrm];
+
+    /// The planner's name: `rrt-connect` or `lazy-prm` (what [`std::str::FromStr`] reads).
+    pub fn name(self) -> &'static str {
+        match self {
+            PlannerKind::RrtConnect => "rrt-connect",
+            PlannerKind::LazyPrm => "lazy-prm",
+        }
+    }
+}
+
+impl std::fmt::Display for PlannerKind {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// A planner name that is not one of [`PlannerKind::ALL`].
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("unknown planner `{0}` (expected one of: rrt-connect, lazy-prm)")]
+pub struct UnknownPlanner(pub String);
+
+impl std::str::FromStr for PlannerKind {
+    type Err = UnknownPlanner;
+
+    fn from_str(s: &str) -> Result<Self, UnknownPlanner> {
+        PlannerKind::ALL.into_iter().find(|k| k.name() == s).ok_or_else(|| UnknownPlanner(s.to_string()))
+    }
+}
+
+/// The outcome of a motion planner: a plan, out of time (with the work done so far), or no
+/// path within the sample budget.
+pub type MotionOutcome = Outcome<MotionPlan, MotionStats>;
+
+/// Bidirectional RRT-Connect (after the straight segment, then shortcuts), with its settings.
+///
+/// `settings.planner` is ignored: this is the RRT-Connect planner. Its own settings are
+/// [`MotionSettings::rrt_range`] and [`MotionSettings::lazy_probe`]; the others are shared by
+/// every planner.
+#[derive(Debug, Clone, Default)]
+pub struct RrtConnect {
+    /// Seed, edge check, deadline, shortcuts, range and probe.
+    pub settings: MotionSettings,
+}
+
+/// Lazy PRM grown in batches with A* and lazy edge checks (after the straight segment, then
+/// shortcuts), with its settings.
+///
+/// `settings.planner` is ignored: this is the lazy PRM planner. Its own settings are
+/// [`MotionSettings::batch_size`], [`MotionSettings::k_neighbours`] and
+/// [`MotionSettings::parallel`]; the others are shared by every planner.
+#[derive(Debug, Clone, Default)]
+pub struct LazyPrm {
+    /// Seed, edge check, deadline, shortcuts, batch size, neighbours and parallelism.
+    pub settings: MotionSettings,
+}
+
+impl RrtConnect {
+    /// RRT-Connect with `settings`.
+    pub fn new(settings: MotionSettings) -> Self {
+        Self { settings }
+    }
+
+    /// Plan from `start` to `goal` against `validity`. Malformed input (and a start or goal in
+    /// collision) is an error; running out of time or samples is an outcome.
+    pub fn plan<V: StateValidity>(&self, validity: &V, start: &[f64], goal: &Goal) -> Result<MotionOutcome, PlanError> {
+        let settings = MotionSettings { planner: PlannerKind::RrtConnect, ..self.settings.clone() };
+        outcome_of(plan_motion_with(validity, start, goal, &settings), &settings.deadline)
+    }
+}
+
+impl LazyPrm {
+    /// Lazy PRM with `settings`.
+    pub fn new(settings: MotionSettings) -> Self {
+        Self { settings }
+    }
+
+    /// Plan from `start` to `goal` against `validity`. Malformed input (and a start or goal in
+    /// collision) is an error; running out of time or samples is an outcome.
+    pub fn plan<V: StateValidity>(&self, validity: &V, start: &[f64], goal: &Goal) -> Result<MotionOutcome, PlanError> {
+        let settings = MotionSettings { planner: PlannerKind::LazyPrm, ..self.settings.clone() };
+        outcome_of(plan_motion_with(validity, start, goal, &settings), &settings.deadline)
+    }
+}
+
+/// The planner `kind` with `settings`, as an outcome: [`RrtConnect::plan`] or [`LazyPrm::plan`].
+pub fn plan_with_kind<V: StateValidity>(
+    kind: PlannerKind,
+    validity: &V,
+    start: &[f64],
+    goal: &Goal,
+    settings: &MotionSettings,
+) -> Result<MotionOutcome, PlanError> {
+    match kind {
+        PlannerKind::RrtConnect => RrtConnect::new(settings.clone()).plan(validity, start, goal),
+        PlannerKind::LazyPrm => LazyPrm::new(settings.clone()).plan(validity, start, goal),
+    }
+}
+
+/// Out of time and out of samples as outcomes. The limit that stopped planning is read from
+/// the deadline afterwards: a passed clock and a raised flag stay so; otherwise it was the
+/// expansion budget.
+fn outcome_of(result: Result<MotionPlan, PlanError>, deadline: &Deadline) -> Result<MotionOutcome, PlanError> {
+    match result {
+        Ok(plan) => Ok(Outcome::Solved(plan)),
+        Err(PlanError::OutOfTime { stats }) => Ok(Outcome::OutOfTime {
+            best: Some(stats),
+            cause: deadline.check(0, true).unwrap_or(crate::deadline::Interrupt::ExpansionBudget),
+        }),
+        Err(PlanError::NoPath { .. }) => Ok(Outcome::Infeasible),
+        Err(e) => Err(e),
+    }
 }
 
 /// Settings of [`plan_motion`].
@@ -134,39 +231,6 @@ impl Default for MotionSettings {
     }
 }
 
-/// A collision-free path and how it was found.
-#[derive(Debug, Clone, serde::Serialize)]
-pub struct MotionPlan {
-    /// Waypoints from the start to a goal. Continuous joints are unwrapped: consecutive
-    /// waypoints differ by the short way, so the last waypoint may differ from the goal by whole
-    /// turns on a continuous joint (3.283 for a goal of -3.0 reached from 3.0).
-    pub path: Vec<Vec<f64>>,
-    pub stats: MotionStats,
-}
-
-/// What planning cost.
-#[derive(Debug, Clone, Default, serde::Serialize)]
-pub struct MotionStats {
-    pub elapsed: Duration,
-    /// Random samples drawn (PRM) or tree extension targets (RRT).
-    pub samples: usize,
-    /// Straight segments collision-checked.
-    pub edges_checked: usize,
-    /// Calls of the collision check.
-    pub collision_checks: u64,
-    pub astar_expansions: usize,
-    /// A* searches run (lazy PRM re-searches after each invalid edge).
-    pub searches: usize,
-    /// Which planner produced the path: "direct", "rrt-connect", "lazy-prm" (plus "+shortcut").
-    pub planner: &'static str,
-    /// C-space length of the returned path.
-    pub path_length: f64,
-    /// Collision checks of lazy RRT-Connect's probes of tree edges (part of `collision_checks`).
-    pub probe_checks: u64,
-    /// Lazy RRT-Connect: tree edges cut off because their certificate failed on a found path.
-    pub cut_edges: usize,
-}
-
 /// Plan a collision-free path for `model`'s robot from `start` to `goal`.
 ///
 /// Errors say why: [`PlanError::InvalidInput`] (wrong length, NaN, start outside limits),
@@ -176,6 +240,16 @@ pub struct MotionStats {
 /// used up).
 pub fn plan_motion(
     model: &CollisionModel,
+    start: &[f64],
+    goal: &Goal,
+    settings: &MotionSettings,
+) -> Result<MotionPlan, PlanError> {
+    plan_motion_with(model, start, goal, settings)
+}
+
+/// [`plan_motion`] against any [`StateValidity`] instead of a [`CollisionModel`].
+pub fn plan_motion_with<V: StateValidity>(
+    model: &V,
     start: &[f64],
     goal: &Goal,
     settings: &MotionSettings,
@@ -204,7 +278,7 @@ pub fn plan_motion(
     let mut rng = Rng::new(settings.seed);
     let goals = resolve_goals(model, start, goal, settings, &mut rng)?;
     let mut stats = MotionStats::default();
-    let out_of_time = |budget: &Budget<'_>, validity: &Validity<'_>, stats: &MotionStats| PlanError::OutOfTime {
+    let out_of_time = |budget: &Budget<'_>, validity: &Validity<'_, V>, stats: &MotionStats| PlanError::OutOfTime {
         stats: MotionStats {
             elapsed: budget.started.elapsed(),
             edges_checked: validity.edges_checked,
@@ -247,9 +321,9 @@ pub fn plan_motion(
                 .map(|p| (p, "lazy-prm")),
         };
         match found {
-            Search::Found(p) => raw = Some(p),
-            Search::OutOfTime => return Err(out_of_time(&budget, &validity, &stats)),
-            Search::Exhausted => return Err(PlanError::NoPath { samples: stats.samples }),
+            Outcome::Solved(p) => raw = Some(p),
+            Outcome::OutOfTime { .. } => return Err(out_of_time(&budget, &validity, &stats)),
+            Outcome::Infeasible => return Err(PlanError::NoPath { samples: stats.samples }),
         }
     }
     let Some((mut path, mut planner)) = raw else {
@@ -278,33 +352,16 @@ pub fn plan_motion(
     Ok(MotionPlan { path, stats })
 }
 
-/// Outcome of the search stage.
-pub(crate) enum Search<T> {
-    Found(T),
-    OutOfTime,
-    Exhausted,
-}
-
-impl<T> Search<T> {
-    fn map<U>(self, f: impl FnOnce(T) -> U) -> Search<U> {
-        match self {
-            Search::Found(t) => Search::Found(f(t)),
-            Search::OutOfTime => Search::OutOfTime,
-            Search::Exhausted => Search::Exhausted,
-        }
-    }
-}
-
 /// Lazy PRM grown in batches: add start and goals, then grow, search, grow...
-fn lazy_prm(
-    model: &CollisionModel,
-    validity: &mut Validity<'_>,
+fn lazy_prm<V: StateValidity>(
+    model: &V,
+    validity: &mut Validity<'_, V>,
     budget: &mut Budget<'_>,
     start: &[f64],
     goals: &[Vec<f64>],
     settings: &MotionSettings,
     stats: &mut MotionStats,
-) -> Search<Vec<Vec<f64>>> {
+) -> Outcome<Vec<Vec<f64>>, ()> {
     let mut roadmap = Roadmap::new(model.robot(), settings.k_neighbours, settings.seed ^ 0x5eed_f9a7);
     let s = roadmap.add_vertex(start.to_vec());
     let gs: Vec<NodeIndex> = goals.iter().map(|g| roadmap.add_vertex(g.clone())).collect();
@@ -313,39 +370,30 @@ fn lazy_prm(
     loop {
         if roadmap.samples() >= settings.max_samples {
             stats.samples = roadmap.samples();
-            return Search::Exhausted;
+            return Outcome::Infeasible;
         }
         let n = batch.min(settings.max_samples - roadmap.samples());
         roadmap.grow(model, n, settings.parallel);
         stats.samples = roadmap.samples();
         validity.collision_checks += n as u64;
         if budget.spend(n as u64) {
-            return Search::OutOfTime;
+            return Outcome::OutOfTime { best: None, cause: budget.cause() };
         }
         let outcome = roadmap.lazy_search(validity, budget, s, &gs, &mut counters);
         stats.astar_expansions = counters.astar_expansions;
         stats.searches = counters.searches;
         match outcome {
-            LazyOutcome::Found(p) => return Search::Found(roadmap.path_configurations(&p)),
-            LazyOutcome::Interrupted => return Search::OutOfTime,
+            LazyOutcome::Found(p) => return Outcome::Solved(roadmap.path_configurations(&p)),
+            LazyOutcome::Interrupted => return Outcome::OutOfTime { best: None, cause: budget.cause() },
             LazyOutcome::Disconnected => {}
         }
     }
 }
 
-/// Check a start configuration: length, finiteness, limits, collisions.
-pub(crate) fn check_start(model: &CollisionModel, start: &[f64]) -> Result<(), PlanError> {
-    model.robot().check_configuration(start).map_err(|e| PlanError::InvalidInput { message: format!("start: {e}") })?;
-    if let Some(contact) = model.first_collision(start) {
-        return Err(PlanError::StartInCollision { contact: contact.to_string() });
-    }
-    Ok(())
-}
-
 /// The goal configurations to aim for: valid (within limits, collision-free) members of the
 /// goal, or IK solutions of a tool pose.
-fn resolve_goals(
-    model: &CollisionModel,
+fn resolve_goals<V: StateValidity>(
+    model: &V,
     start: &[f64],
     goal: &Goal,
     settings: &MotionSettings,
@@ -371,7 +419,7 @@ fn resolve_goals(
         let error = if let Err(e) = robot.check_configuration(&q) {
             Some(PlanError::GoalUnreachable { reason: format!("goal {index} is outside the joint limits: {e}") })
         } else {
-            model.first_collision(&q).map(|c| PlanError::GoalInCollision { index, contact: c.to_string() })
+            model.first_collision(&q).map(|contact| PlanError::GoalInCollision { index, contact })
         };
         match error {
             None => valid.push(q),
@@ -452,22 +500,4 @@ fn tool_pose_goals(
         return Err(PlanError::GoalUnreachable { reason });
     }
     Ok(solutions)
-}
-
-/// Rewrite continuous joints so that each waypoint differs from the previous by the short way.
-pub(crate) fn unwrap_path(space: &ConfigSpace, path: Vec<Vec<f64>>) -> Vec<Vec<f64>> {
-    let mut out: Vec<Vec<f64>> = Vec::with_capacity(path.len());
-    for q in path {
-        let next = match out.last() {
-            Some(prev) => space.unwrap_towards(prev, &q),
-            None => q,
-        };
-        out.push(next);
-    }
-    out
-}
-
-/// C-space length of a path.
-pub fn path_length(space: &ConfigSpace, path: &[Vec<f64>]) -> f64 {
-    path.windows(2).map(|w| space.distance(&w[0], &w[1])).sum()
 }

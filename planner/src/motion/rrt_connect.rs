@@ -11,9 +11,11 @@
 
 use embodied_models::{ConfigSpace, Rng};
 
+use super::MotionSettings;
 use super::shortcut::{OutOfTime, farthest_visible};
-use super::validity::{Budget, Validity};
-use super::{MotionSettings, MotionStats, Search};
+use crate::deadline::Budget;
+use crate::outcome::{MotionStats, Outcome};
+use crate::validity::{StateValidity, Validity};
 
 /// A tree of configurations stored flat (`dof` values per node), with parent links.
 struct Tree {
@@ -93,9 +95,9 @@ enum Step {
 /// new edge is probed at this joint step instead of certified; `target_checked`: `target` is
 /// known to be free (a tree node).
 #[allow(clippy::too_many_arguments)]
-fn extend(
+fn extend<V: StateValidity>(
     tree: &mut Tree,
-    validity: &mut Validity<'_>,
+    validity: &mut Validity<'_, V>,
     target: &[f64],
     range: f64,
     from: Option<usize>,
@@ -141,8 +143,8 @@ fn extend(
 /// tree edges at `settings.lazy_probe` and certify them once on a path, there with the greedy
 /// shortcut pass when `settings.shortcut`.
 #[allow(clippy::too_many_arguments)]
-pub(crate) fn plan(
-    validity: &mut Validity<'_>,
+pub(crate) fn plan<V: StateValidity>(
+    validity: &mut Validity<'_, V>,
     budget: &mut Budget<'_>,
     rng: &mut Rng,
     start: &[f64],
@@ -150,7 +152,7 @@ pub(crate) fn plan(
     settings: &MotionSettings,
     lazy: bool,
     stats: &mut MotionStats,
-) -> Search<Vec<Vec<f64>>> {
+) -> Outcome<Vec<Vec<f64>>, ()> {
     let robot = validity.model.robot();
     let dof = robot.dof();
     let range = if settings.rrt_range.is_finite() && settings.rrt_range > 0.0 { settings.rrt_range } else { 1.0 };
@@ -167,10 +169,10 @@ pub(crate) fn plan(
     let mut start_is_a = true;
     loop {
         if stats.samples >= settings.max_samples {
-            return Search::Exhausted;
+            return Outcome::Infeasible;
         }
         if budget.spend(1) {
-            return Search::OutOfTime;
+            return Outcome::OutOfTime { best: None, cause: budget.cause() };
         }
         stats.samples += 1;
         robot.random_configuration_into(rng, &mut sample);
@@ -199,7 +201,7 @@ pub(crate) fn plan(
                             .map(|&(s, k)| if s { from_start.node(k) } else { from_goal.node(k) }.to_vec())
                             .collect();
                         if !lazy {
-                            return Search::Found(path);
+                            return Outcome::Solved(path);
                         }
                         // The tree edge (in the start tree, child node) behind path edge `e`.
                         let edge = |e: usize| -> (bool, usize) {
@@ -223,8 +225,8 @@ pub(crate) fn plan(
                             }
                         }
                         match outcome {
-                            Certified::Path(p) => return Search::Found(p),
-                            Certified::OutOfTime => return Search::OutOfTime,
+                            Certified::Path(p) => return Outcome::Solved(p),
+                            Certified::OutOfTime => return Outcome::OutOfTime { best: None, cause: budget.cause() },
                             Certified::Blocked(e) => {
                                 stats.cut_edges += 1;
                                 match edge(e) {
@@ -239,7 +241,7 @@ pub(crate) fn plan(
                     Step::Trapped => break,
                 }
                 if budget.spend(1) {
-                    return Search::OutOfTime;
+                    return Outcome::OutOfTime { best: None, cause: budget.cause() };
                 }
             }
         }
@@ -262,10 +264,10 @@ enum Certified {
 /// certificates stop at their first hit and cost a few checks), then the edge to the next vertex
 /// when none does; edges skipped are never certified. Unlike the eager greedy pass, there is
 /// no cap on the path's length: skipping edges here saves their certificates.
-fn certify_path(
+fn certify_path<V: StateValidity>(
     path: Vec<Vec<f64>>,
     certified: &mut [bool],
-    validity: &mut Validity<'_>,
+    validity: &mut Validity<'_, V>,
     budget: &mut Budget<'_>,
     greedy: bool,
 ) -> Certified {

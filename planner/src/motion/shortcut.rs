@@ -4,14 +4,15 @@
 
 use embodied_models::Rng;
 
-use super::validity::{Budget, Validity};
+use crate::deadline::Budget;
+use crate::validity::{StateValidity, Validity};
 
 /// Shorten `path` with the greedy pass (when `greedy`: lazy RRT-Connect has run it already)
 /// and up to `attempts` shortcut tries between random points of the path (vertices or points
 /// inside segments).
-pub(crate) fn shortcut(
+pub(crate) fn shortcut<V: StateValidity>(
     mut path: Vec<Vec<f64>>,
-    validity: &mut Validity<'_>,
+    validity: &mut Validity<'_, V>,
     budget: &mut Budget<'_>,
     rng: &mut Rng,
     greedy: bool,
@@ -62,7 +63,11 @@ pub(crate) fn shortcut(
 }
 
 /// The greedy pass from the start: skip to the farthest directly visible vertex.
-fn greedy_pass(path: Vec<Vec<f64>>, validity: &mut Validity<'_>, budget: &mut Budget<'_>) -> Vec<Vec<f64>> {
+fn greedy_pass<V: StateValidity>(
+    path: Vec<Vec<f64>>,
+    validity: &mut Validity<'_, V>,
+    budget: &mut Budget<'_>,
+) -> Vec<Vec<f64>> {
     let mut i = 0;
     let mut greedy = vec![path[0].clone()];
     while i + 1 < path.len() {
@@ -85,10 +90,10 @@ pub(crate) struct OutOfTime;
 /// The greedy pass's step from vertex `i`: the farthest vertex `j > i + 1` whose straight
 /// segment from `path[i]` is free, tried farthest first (a failing segment stops at its first
 /// hit and costs a few checks); `None` when none is.
-pub(crate) fn farthest_visible(
+pub(crate) fn farthest_visible<V: StateValidity>(
     path: &[Vec<f64>],
     i: usize,
-    validity: &mut Validity<'_>,
+    validity: &mut Validity<'_, V>,
     budget: &mut Budget<'_>,
 ) -> Result<Option<usize>, OutOfTime> {
     for j in (i + 2..path.len()).rev() {

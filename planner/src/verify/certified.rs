@@ -1,5 +1,5 @@
-//! The certified plan checker: limits, continuous collision freedom with a distance
-//! certificate, the closed-chain constraint and timing, for one agent's timed trajectory.
+//! The certificate behind [`super::Mode::Certified`]: continuous collision freedom with a
+//! distance certificate, and the closed-chain constraint, for one agent's timed trajectory.
 //!
 //! It shares no code path with the planner's validity checks (`certify`, `motion_is_free`,
 //! `collides`): it poses the robot's shapes itself from [`Robot::forward_kinematics`], measures
@@ -42,351 +42,15 @@
 
 use std::time::Instant;
 
+use super::finding::Finding;
+use super::report::{CheckSettings, ClosureReport, CollisionReport};
+use crate::carry::ClosedChainSpan;
+use crate::trajectory::Trajectory;
 use embodied_models::ConfigSpace;
 use embodied_models::Robot;
 use embodied_models::collision::{CollisionModel, shape_separation};
 use embodied_models::geometry::Shape;
 use embodied_models::nalgebra::{Isometry3, Point3};
-use serde::Serialize;
-
-use crate::carry::ClosedChainSpan;
-use crate::trajectory::Trajectory;
-
-/// Tolerances and caps of the checker.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
-pub struct CheckSettings {
-    /// Relative tolerance on velocity and acceleration limits (rounding in the profiles).
-    pub limit_tolerance: f64,
-    /// Absolute tolerance on joint position limits, rad or m.
-    pub position_tolerance: f64,
-    /// Pairs whose bounding spheres are closer than this (m) are measured exactly.
-    pub exact_within: f64,
-    /// Largest bisection depth of one sample-to-sample segment.
-    pub max_depth: u32,
-    /// Largest number of distance evaluations spent bisecting one segment.
-    pub max_evaluations_per_segment: usize,
-}
-
-impl Default for CheckSettings {
-    fn default() -> Self {
-        CheckSettings {
-            limit_tolerance: 1e-6,
-            position_tolerance: 1e-9,
-            exact_within: 0.2,
-            max_depth: 30,
-            max_evaluations_per_segment: 20_000,
-        }
-    }
-}
-
-/// The first thing wrong with a plan, and where. Times are seconds from the trajectory's start.
-#[derive(Debug, Clone, PartialEq, Serialize)]
-#[serde(tag = "kind", rename_all = "snake_case")]
-pub enum Finding {
-    /// The trajectory itself is not well formed (lengths, DOF, non-finite values, time order,
-    /// unknown end effectors).
-    Malformed { message: String },
-    /// A joint outside its position limits.
-    Position { t: f64, joint: String, value: f64, lower: f64, upper: f64, excess: f64 },
-    /// A joint faster than its velocity limit; `source`: `qd` (the stated velocity) or
-    /// `finite difference of q`.
-    Velocity { t: f64, joint: String, value: f64, limit: f64, excess: f64, source: String },
-    /// A joint accelerating harder than its limit (finite difference of the stated `qd`).
-    Acceleration { t: f64, joint: String, value: f64, limit: f64, excess: f64 },
-    /// A configuration on the path in collision: the pair and how deep (m, >= 0).
-    Collision { t: f64, q: Vec<f64>, a: String, b: String, penetration_m: f64 },
-    /// A piece of the path that the certificate could neither prove free nor show in collision
-    /// within the caps: the piece, and the pair closest at its ends.
-    NotCertified {
-        t_from: f64,
-        t_to: f64,
-        q_from: Vec<f64>,
-        q_to: Vec<f64>,
-        a: String,
-        b: String,
-        clearance_m: f64,
-        reason: String,
-    },
-    /// The pose of the second tool frame relative to the first drifted from its value at the
-    /// start of the closed-chain span.
-    ClosureDrift {
-        t: f64,
-        span: usize,
-        position_error_m: f64,
-        angle_error_rad: f64,
-        tolerance_m: f64,
-        tolerance_rad: f64,
-    },
-}
-
-impl std::fmt::Display for Finding {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        match self {
-            Finding::Malformed { message } => write!(f, "malformed: {message}"),
-            Finding::Position { t, joint, value, lower, upper, excess } => write!(
-                f,
-                "t = {t:.4} s: joint `{joint}` = {value:.6} is outside [{lower:.6}, {upper:.6}] by {excess:.3e}"
-            ),
-            Finding::Velocity { t, joint, value, limit, excess, source } => write!(
-                f,
-                "t = {t:.4} s: joint `{joint}` velocity {value:.6} ({source}) exceeds {limit:.6} by {excess:.3e}"
-            ),
-            Finding::Acceleration { t, joint, value, limit, excess } => {
-                write!(f, "t = {t:.4} s: joint `{joint}` acceleration {value:.6} exceeds {limit:.6} by {excess:.3e}")
-            }
-            Finding::Collision { t, q, a, b, penetration_m } => {
-                write!(f, "t = {t:.4} s: {a} and {b} collide (penetration {penetration_m:.3e} m) at q = {}", fmt_q(q))
-            }
-            Finding::NotCertified { t_from, t_to, q_from, a, b, clearance_m, reason, .. } => write!(
-                f,
-                "t = {t_from:.4}..{t_to:.4} s: not certified ({reason}); closest pair {a} and {b}, \
-                 clearance {clearance_m:.3e} m at q = {}",
-                fmt_q(q_from)
-            ),
-            Finding::ClosureDrift { t, span, position_error_m, angle_error_rad, tolerance_m, tolerance_rad } => {
-                write!(
-                    f,
-                    "t = {t:.4} s: closed-chain span {span}: relative tool pose drifted by {position_error_m:.3e} m \
-                     (tolerance {tolerance_m:.3e}) and {angle_error_rad:.3e} rad (tolerance {tolerance_rad:.3e})"
-                )
-            }
-        }
-    }
-}
-
-fn fmt_q(q: &[f64]) -> String {
-    let v: Vec<String> = q.iter().map(|x| format!("{x:.4}")).collect();
-    format!("[{}]", v.join(", "))
-}
-
-/// Position, velocity and acceleration limits along the timed trajectory.
-#[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct LimitsReport {
-    pub ok: bool,
-    /// The earliest violation.
-    pub violation: Option<Finding>,
-    /// Samples (and joints) over a limit, counted once per sample and joint and kind.
-    pub violations: usize,
-    pub samples: usize,
-    /// Largest |velocity| / limit and |acceleration| / limit over the trajectory.
-    pub max_velocity_ratio: f64,
-    pub max_acceleration_ratio: f64,
-    pub time_s: f64,
-}
-
-/// Continuous collision freedom.
-#[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct CollisionReport {
-    pub ok: bool,
-    pub violation: Option<Finding>,
-    /// Sample-to-sample segments, and how many are certified free.
-    pub segments: usize,
-    pub certified_segments: usize,
-    /// Configurations at which every pair was measured (anchors, segment ends, midpoints).
-    pub distance_evaluations: usize,
-    /// Bisection midpoints evaluated, and the deepest bisection.
-    pub subdivisions: usize,
-    pub max_depth: u32,
-    /// Pairs checked (link-obstacle plus self-collision pairs), in the plain model.
-    pub pairs: usize,
-    /// Smallest distance measured at any evaluated configuration (exact when below
-    /// `exact_within`, m), and the smallest certified lower bound over the whole path.
-    pub min_clearance_m: f64,
-    pub certified_clearance_m: f64,
-    /// The pair at the smallest measured distance.
-    pub closest_pair: Option<[String; 2]>,
-    pub time_s: f64,
-}
-
-/// The closed-chain constraint over the plan's spans.
-#[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct ClosureReport {
-    pub ok: bool,
-    pub violation: Option<Finding>,
-    pub spans: usize,
-    /// Samples inside spans.
-    pub samples: usize,
-    pub max_position_error_m: f64,
-    pub max_angle_error_rad: f64,
-    pub time_s: f64,
-}
-
-/// Everything checked for one agent's trajectory.
-#[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct TrajectoryReport {
-    pub certified: bool,
-    pub duration_s: f64,
-    pub samples: usize,
-    pub limits: LimitsReport,
-    pub collision: CollisionReport,
-    pub closure: ClosureReport,
-}
-
-impl TrajectoryReport {
-    /// The first finding of each check, in the order limits, collision, closure.
-    pub fn findings(&self) -> Vec<&Finding> {
-        [&self.limits.violation, &self.collision.violation, &self.closure.violation].into_iter().flatten().collect()
-    }
-}
-
-/// Check one agent's timed trajectory against `model` (robot and environment): the trajectory
-/// is well formed; positions, velocities and accelerations within limits; the path through
-/// the samples is certified collision-free; every closed-chain span keeps its relative tool
-/// pose. Inside a span with an object, collisions are checked with the object attached.
-pub fn check_trajectory(
-    model: &CollisionModel,
-    traj: &Trajectory,
-    spans: &[ClosedChainSpan],
-    settings: &CheckSettings,
-) -> TrajectoryReport {
-    let robot = model.robot();
-    let samples = traj.t.len();
-    let malformed = well_formed(robot, traj).err().map(|message| Finding::Malformed { message });
-    let limits = match &malformed {
-        Some(m) => LimitsReport {
-            ok: false,
-            violation: Some(m.clone()),
-            violations: 1,
-            samples,
-            max_velocity_ratio: f64::NAN,
-            max_acceleration_ratio: f64::NAN,
-            time_s: 0.0,
-        },
-        None => check_limits(robot, traj, settings),
-    };
-    let (collision, closure) = match &malformed {
-        Some(m) => (
-            CollisionReport {
-                ok: false,
-                violation: Some(m.clone()),
-                segments: samples.saturating_sub(1),
-                certified_segments: 0,
-                distance_evaluations: 0,
-                subdivisions: 0,
-                max_depth: 0,
-                pairs: 0,
-                min_clearance_m: f64::NAN,
-                certified_clearance_m: f64::NAN,
-                closest_pair: None,
-                time_s: 0.0,
-            },
-            ClosureReport {
-                ok: false,
-                violation: Some(m.clone()),
-                spans: spans.len(),
-                samples: 0,
-                max_position_error_m: f64::NAN,
-                max_angle_error_rad: f64::NAN,
-                time_s: 0.0,
-            },
-        ),
-        None => (check_collisions(model, traj, spans, settings), check_closure(robot, traj, spans)),
-    };
-    TrajectoryReport {
-        certified: limits.ok && collision.ok && closure.ok,
-        duration_s: traj.duration(),
-        samples,
-        limits,
-        collision,
-        closure,
-    }
-}
-
-/// Lengths, DOF, finite values and strictly increasing times.
-fn well_formed(robot: &Robot, traj: &Trajectory) -> Result<(), String> {
-    let n = traj.t.len();
-    if n == 0 {
-        return Err("the trajectory has no samples".into());
-    }
-    if traj.q.len() != n || traj.qd.len() != n {
-        return Err(format!("{} times, {} positions and {} velocities", n, traj.q.len(), traj.qd.len()));
-    }
-    let dof = robot.dof();
-    for k in 0..n {
-        for (what, v) in [("q", &traj.q[k]), ("qd", &traj.qd[k])] {
-            if v.len() != dof {
-                return Err(format!("sample {k}: {what} has {} values, the robot has {dof} joints", v.len()));
-            }
-            if let Some(i) = v.iter().position(|x| !x.is_finite()) {
-                return Err(format!("sample {k}: {what}[{i}] = {} is not a finite number", v[i]));
-            }
-        }
-        if !traj.t[k].is_finite() {
-            return Err(format!("sample {k}: t = {} is not a finite number", traj.t[k]));
-        }
-        if k > 0 && traj.t[k] <= traj.t[k - 1] {
-            return Err(format!("sample {k}: t = {} s does not come after t = {} s", traj.t[k], traj.t[k - 1]));
-        }
-    }
-    Ok(())
-}
-
-fn check_limits(robot: &Robot, traj: &Trajectory, settings: &CheckSettings) -> LimitsReport {
-    let start = Instant::now();
-    let limits = robot.limits();
-    let names = robot.joint_names();
-    let space = robot.config_space();
-    let rel = 1.0 + settings.limit_tolerance;
-    let mut first: Option<Finding> = None;
-    let mut violations = 0;
-    let (mut vr, mut ar) = (0.0f64, 0.0f64);
-    let mut note = |f: Finding, first: &mut Option<Finding>| {
-        violations += 1;
-        if first.is_none() {
-            *first = Some(f);
-        }
-    };
-    for k in 0..traj.t.len() {
-        let t = traj.t[k];
-        let h = if k > 0 { t - traj.t[k - 1] } else { f64::NAN };
-        for (i, l) in limits.iter().enumerate() {
-            let joint = || names[i].clone();
-            let value = traj.q[k][i];
-            let excess = (l.lower - value).max(value - l.upper);
-            if excess > settings.position_tolerance {
-                let f = Finding::Position { t, joint: joint(), value, lower: l.lower, upper: l.upper, excess };
-                note(f, &mut first);
-            }
-            let mut velocity = |value: f64, source: &str, first: &mut Option<Finding>| {
-                vr = vr.max(value.abs() / l.max_velocity);
-                if value.abs() > l.max_velocity * rel + 1e-12 {
-                    let excess = value.abs() - l.max_velocity;
-                    let f = Finding::Velocity {
-                        t,
-                        joint: joint(),
-                        value,
-                        limit: l.max_velocity,
-                        excess,
-                        source: source.into(),
-                    };
-                    note(f, first);
-                }
-            };
-            velocity(traj.qd[k][i], "qd", &mut first);
-            if k > 0 {
-                velocity(space.delta(i, traj.q[k - 1][i], value) / h, "finite difference of q", &mut first);
-                let a = (traj.qd[k][i] - traj.qd[k - 1][i]) / h;
-                ar = ar.max(a.abs() / l.max_acceleration);
-                if a.abs() > l.max_acceleration * rel + 1e-12 {
-                    let excess = a.abs() - l.max_acceleration;
-                    note(
-                        Finding::Acceleration { t, joint: joint(), value: a, limit: l.max_acceleration, excess },
-                        &mut first,
-                    );
-                }
-            }
-        }
-    }
-    LimitsReport {
-        ok: first.is_none(),
-        violation: first,
-        violations,
-        samples: traj.t.len(),
-        max_velocity_ratio: vr,
-        max_acceleration_ratio: ar,
-        time_s: start.elapsed().as_secs_f64(),
-    }
-}
 
 // ---------------------------------------------------------------------------------------------
 // Collision certificate.
@@ -575,6 +239,8 @@ struct Walk<'a> {
     model: &'a CollisionModel,
     pairs: Pairs,
     settings: &'a CheckSettings,
+    /// The clearance required (m): distances are certified above it, not above zero.
+    tolerance: f64,
     report: CollisionReport,
     scratch: Vec<f64>,
 }
@@ -582,11 +248,16 @@ struct Walk<'a> {
 impl Walk<'_> {
     fn eval(&mut self, q: &[f64]) -> Eval {
         self.report.distance_evaluations += 1;
-        let e = self.pairs.eval(self.model.robot(), q, self.settings.exact_within);
+        let mut e = self.pairs.eval(self.model.robot(), q, self.settings.exact_within);
         if e.min < self.report.min_clearance_m {
             self.report.min_clearance_m = e.min;
             let (a, b) = self.pairs.names(e.nearest);
             self.report.closest_pair = Some([a, b]);
+        }
+        // The certificate proves every distance above the required clearance.
+        if self.tolerance > 0.0 {
+            e.d.iter_mut().for_each(|d| *d -= self.tolerance);
+            e.min -= self.tolerance;
         }
         e
     }
@@ -596,7 +267,12 @@ impl Walk<'_> {
             return None;
         }
         let (a, b) = self.pairs.names(e.nearest);
-        Some(Box::new(Finding::Collision { t, q: q.to_vec(), a, b, penetration_m: -e.min }))
+        let distance = e.min + self.tolerance;
+        Some(Box::new(if distance <= 0.0 {
+            Finding::Collision { t, q: q.to_vec(), a, b, penetration_m: -distance }
+        } else {
+            Finding::TooClose { t, q: q.to_vec(), a, b, distance_m: distance, required_m: self.tolerance }
+        }))
     }
 
     /// Certify samples `i0..=i1` of the trajectory (one model throughout).
@@ -626,7 +302,7 @@ impl Walk<'_> {
             if ok {
                 acc.iter_mut().zip(&seg).for_each(|(a, s)| *a += s);
                 self.report.certified_segments += 1;
-                self.report.certified_clearance_m = self.report.certified_clearance_m.min(lowest);
+                self.report.certified_clearance_m = self.report.certified_clearance_m.min(lowest + self.tolerance);
                 k += 1;
                 continue;
             }
@@ -680,7 +356,7 @@ impl Walk<'_> {
         }
         self.scratch = travel;
         if ok {
-            self.report.certified_clearance_m = self.report.certified_clearance_m.min(lowest);
+            self.report.certified_clearance_m = self.report.certified_clearance_m.min(lowest + self.tolerance);
             return Ok(());
         }
         if depth >= self.settings.max_depth || *budget == 0 {
@@ -698,7 +374,7 @@ impl Walk<'_> {
                 q_to: qb.to_vec(),
                 a,
                 b,
-                clearance_m: e.min,
+                clearance_m: e.min + self.tolerance,
                 reason,
             }));
         }
@@ -737,12 +413,39 @@ fn ee_indices(robot: &Robot, span: &ClosedChainSpan) -> Result<[usize; 2], Strin
     Ok([find(&span.end_effectors[0])?, find(&span.end_effectors[1])?])
 }
 
-/// Certify the polyline through the trajectory's samples free of collisions.
-pub fn check_collisions(
+/// For each sample-to-sample segment of `traj`, the model its collisions are checked with: an
+/// index into the returned models (the span's, object attached) when the segment overlaps a
+/// closed-chain span with an object, else `usize::MAX` (the plain model).
+pub(crate) fn segment_models(
+    model: &CollisionModel,
+    traj: &Trajectory,
+    spans: &[ClosedChainSpan],
+) -> Result<(Vec<CollisionModel>, Vec<usize>), String> {
+    let n = traj.t.len();
+    let mut models: Vec<CollisionModel> = Vec::new();
+    let mut which = vec![usize::MAX; n.saturating_sub(1)];
+    for span in spans {
+        if let Some(m) = span_model(model, span)? {
+            models.push(m);
+            let id = models.len() - 1;
+            for (k, w) in which.iter_mut().enumerate() {
+                if traj.t[k + 1] > span.from_s && traj.t[k] < span.to_s {
+                    *w = id;
+                }
+            }
+        }
+    }
+    Ok((models, which))
+}
+
+/// Certify the polyline through the trajectory's samples free of collisions, every pair at
+/// least `tolerance` (m) apart (0: touching counts as collision).
+pub(crate) fn certify_collisions(
     model: &CollisionModel,
     traj: &Trajectory,
     spans: &[ClosedChainSpan],
     settings: &CheckSettings,
+    tolerance: f64,
 ) -> CollisionReport {
     let start = Instant::now();
     let n = traj.t.len();
@@ -763,31 +466,18 @@ pub fn check_collisions(
     };
     // Which model each segment uses: the span's (object attached) when the segment overlaps a
     // span with an object, else the plain one. Runs of segments with one model are walked.
-    let mut models: Vec<CollisionModel> = Vec::new();
-    let mut which = vec![usize::MAX; n.saturating_sub(1)];
-    for span in spans {
-        match span_model(model, span) {
-            Ok(Some(m)) => {
-                models.push(m);
-                let id = models.len() - 1;
-                for (k, w) in which.iter_mut().enumerate() {
-                    if traj.t[k + 1] > span.from_s && traj.t[k] < span.to_s {
-                        *w = id;
-                    }
-                }
-            }
-            Ok(None) => {}
-            Err(message) => {
-                report.ok = false;
-                report.violation = Some(Finding::Malformed { message });
-                report.time_s = start.elapsed().as_secs_f64();
-                return report;
-            }
+    let (models, which) = match segment_models(model, traj, spans) {
+        Ok(m) => m,
+        Err(message) => {
+            report.ok = false;
+            report.violation = Some(Finding::Malformed { message });
+            report.time_s = start.elapsed().as_secs_f64();
+            return report;
         }
-    }
+    };
     let mut result = Ok(());
     if n == 1 {
-        let mut walk = Walk { model, pairs: plain, settings, report, scratch: Vec::new() };
+        let mut walk = Walk { model, pairs: plain, settings, tolerance, report, scratch: Vec::new() };
         result = walk.run(&traj.t, &traj.q, 0, 0);
         report = walk.report;
     } else {
@@ -804,7 +494,7 @@ pub fn check_collisions(
             } else {
                 (&models[id], Pairs::new(&models[id]))
             };
-            let mut walk = Walk { model: m, pairs, settings, report, scratch: Vec::new() };
+            let mut walk = Walk { model: m, pairs, settings, tolerance, report, scratch: Vec::new() };
             result = walk.run(&traj.t, &traj.q, i, j);
             report = walk.report;
             if id == usize::MAX {
@@ -942,11 +632,12 @@ mod tests {
                 let dir = random();
                 // Short and long segments.
                 let qb = space.interpolate(&qa, &dir, 0.3);
-                let r = check_collisions(
+                let r = certify_collisions(
                     &model,
                     &two_samples(&robot, qa.clone(), qb.clone()),
                     &[],
                     &CheckSettings::default(),
+                    0.0,
                 );
                 match &r.violation {
                     None => {

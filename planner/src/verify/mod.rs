@@ -1,156 +1,278 @@
-//! An independent checker of paths and trajectories against a collision model.
+//! The one checker of paths and trajectories: a [`Verifier`] in one of two [`Mode`]s, one
+//! vocabulary of [`Finding`]s, and one streaming [`LimitsChecker`].
 //!
-//! It shares nothing with the planner's validity checks but the model's geometric queries:
-//! waypoints are checked with `first_collision` (to name the pair), segments with the model's
-//! own `motion_is_free` at the caller's resolution, then walked in order to say where.
+//! It shares nothing with the planner's validity checks but the model's geometric queries.
+//! What it checks of a timed trajectory: that it is well formed (lengths, DOF, finite values,
+//! increasing times); positions, velocities and accelerations within the robot's limits (the
+//! [`LimitsChecker`], fed sample by sample); the path through the samples free of collisions;
+//! and every closed-chain span keeping its relative tool pose ([`certified::check_closure`]).
+//! The collision check depends on the mode:
 //!
-//! [`certified`] is the certified checker behind `embodied verify`: continuous collision
-//! freedom with a distance certificate, limits, the closed-chain constraint and timing.
+//! * [`Mode::Certified`] proves the whole continuum of configurations between the samples free,
+//!   every pair at least `tolerance` apart, with a distance certificate that poses the shapes
+//!   itself (see [`certified`]). This is what `embodied verify` runs, and what the executor's
+//!   online plan gate runs by default: the planner certifies its own edges, so the gate must not
+//!   be weaker.
+//! * [`Mode::Sampled`] checks configurations no more than `resolution` apart in every joint
+//!   (the model's `first_collision` and `motion_is_free`). Cheaper; a thin obstacle between two
+//!   checked configurations is missed.
+//!
+//! A path (a list of waypoints, no times) is checked as a trajectory whose waypoint `k` is at
+//! `t = k` ([`Verifier::verify_path`]), without velocity or acceleration limits.
 
 pub mod certified;
+mod finding;
+mod limits;
+mod report;
+mod sampled;
 
-use embodied_models::ConfigSpace;
+use embodied_models::Robot;
 use embodied_models::collision::CollisionModel;
+use serde::Serialize;
 
+pub use finding::Finding;
+pub use limits::LimitsChecker;
+pub use report::{CheckSettings, ClosureReport, CollisionReport, LimitsReport, TrajectoryReport};
+
+use crate::carry::ClosedChainSpan;
 use crate::trajectory::Trajectory;
 
-/// Relative tolerance on velocity and acceleration limits (rounding in the profiles).
+/// Relative tolerance on velocity and acceleration limits (rounding in the profiles): the
+/// default [`CheckSettings::limit_tolerance`].
 pub const LIMIT_TOLERANCE: f64 = 1e-6;
 
-/// What is wrong with a path or trajectory, and where.
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
-#[non_exhaustive]
-pub enum Violation {
-    #[error("the path is empty")]
-    Empty,
-    #[error("waypoint {index} has {got} joint values, the robot has {expected}")]
-    WrongDof { index: usize, expected: usize, got: usize },
-    #[error("waypoint {index}: joint `{joint}` is {value}, not a finite number")]
-    NotFinite { index: usize, joint: String, value: f64 },
-    #[error("waypoint {index}: joint `{joint}` = {value:.6} is outside [{lower:.6}, {upper:.6}] by {by:.3e}")]
-    OutOfLimits { index: usize, joint: String, value: f64, lower: f64, upper: f64, by: f64 },
-    #[error("waypoint {index} is in collision: {contact}")]
-    WaypointCollision { index: usize, contact: String },
-    #[error("segment {index} -> {} collides at fraction {fraction:.4}: {contact}", index + 1)]
-    SegmentCollision { index: usize, fraction: f64, contact: String },
-    #[error("trajectory: sample {index} at t = {t} s does not come after t = {previous} s")]
-    TimeNotIncreasing { index: usize, t: f64, previous: f64 },
-    #[error("trajectory: {what} has {got} entries for {expected} samples")]
-    LengthMismatch { what: &'static str, expected: usize, got: usize },
-    #[error("trajectory at t = {t:.4} s: joint `{joint}` velocity {value:.6} exceeds {limit:.6} by {by:.3e}")]
-    Velocity { t: f64, joint: String, value: f64, limit: f64, by: f64 },
-    #[error("trajectory at t = {t:.4} s: joint `{joint}` acceleration {value:.6} exceeds {limit:.6} by {by:.3e}")]
-    Acceleration { t: f64, joint: String, value: f64, limit: f64, by: f64 },
+/// How the [`Verifier`] checks that the path between samples is free.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+#[serde(tag = "mode", rename_all = "snake_case")]
+pub enum Mode {
+    /// Configurations no more than `resolution` (rad or m) apart in every joint are checked.
+    Sampled {
+        /// Largest joint step between two checked configurations, rad or m.
+        resolution: f64,
+    },
+    /// The whole continuum is certified free with every pair at least `tolerance` (m) apart
+    /// (0: free, touching counts as collision).
+    Certified {
+        /// Clearance the certificate must prove, m.
+        tolerance: f64,
+    },
 }
 
-/// Check a path: every waypoint has the robot's DOF, is finite, within the position limits
-/// and collision-free, and every straight segment (short way on continuous joints) is
-/// collision-free at `resolution` (largest joint step between checked points).
-pub fn verify_path(model: &CollisionModel, path: &[Vec<f64>], resolution: f64) -> Result<(), Violation> {
-    if path.is_empty() {
-        return Err(Violation::Empty);
-    }
-    for (index, q) in path.iter().enumerate() {
-        check_waypoint(model, index, q)?;
-    }
-    let space = model.robot().config_space();
-    for (index, w) in path.windows(2).enumerate() {
-        check_segment(model, &space, index, &w[0], &w[1], resolution)?;
-    }
-    Ok(())
+/// The checker of paths and trajectories against a collision model (see the
+/// [module documentation](self)).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Verifier {
+    /// How collisions between samples are checked.
+    pub mode: Mode,
+    /// Tolerances on limits and caps of the certificate.
+    pub settings: CheckSettings,
 }
 
-/// Check a trajectory: its path (every sample and the segments between them) as
-/// [`verify_path`], increasing times, and joint velocities and accelerations within the
-/// limits (sampled velocities, and finite differences of positions and velocities) up to
-/// [`LIMIT_TOLERANCE`] relative.
-pub fn verify_trajectory(model: &CollisionModel, traj: &Trajectory, resolution: f64) -> Result<(), Violation> {
+impl Default for Verifier {
+    /// Certified, touching counts as collision, default settings.
+    fn default() -> Self {
+        Self::certified(0.0)
+    }
+}
+
+impl Verifier {
+    /// A sampled verifier at `resolution` (rad or m), default settings.
+    pub fn sampled(resolution: f64) -> Self {
+        Self { mode: Mode::Sampled { resolution }, settings: CheckSettings::default() }
+    }
+
+    /// A certifying verifier that requires `tolerance` (m) of clearance, default settings.
+    pub fn certified(tolerance: f64) -> Self {
+        Self { mode: Mode::Certified { tolerance }, settings: CheckSettings::default() }
+    }
+
+    /// The same verifier with other tolerances and caps.
+    pub fn with_settings(mut self, settings: CheckSettings) -> Self {
+        self.settings = settings;
+        self
+    }
+
+    /// A streaming limits checker for `robot` with this verifier's tolerances.
+    pub fn limits_checker(&self, robot: &Robot) -> LimitsChecker {
+        LimitsChecker::new(robot, &self.settings)
+    }
+
+    /// Check one agent's timed trajectory against `model` (robot and environment): the
+    /// trajectory is well formed; positions, velocities and accelerations within limits; the
+    /// path through the samples collision-free (by the mode); every closed-chain span keeps its
+    /// relative tool pose. Inside a span with an object, collisions are checked with the object
+    /// attached.
+    pub fn check_trajectory(
+        &self,
+        model: &CollisionModel,
+        traj: &Trajectory,
+        spans: &[ClosedChainSpan],
+    ) -> TrajectoryReport {
+        let robot = model.robot();
+        let samples = traj.t.len();
+        if let Err(message) = well_formed(robot, traj) {
+            return malformed(Finding::Malformed { message }, traj, spans);
+        }
+        let mut limits = self.limits_checker(robot);
+        for k in 0..samples {
+            limits.push(traj.t[k], &traj.q[k], &traj.qd[k]);
+        }
+        let limits = limits.report();
+        let collision = self.check_collisions(model, traj, spans);
+        let closure = certified::check_closure(robot, traj, spans);
+        TrajectoryReport {
+            certified: limits.ok && collision.ok && closure.ok,
+            duration_s: traj.duration(),
+            samples,
+            limits,
+            collision,
+            closure,
+        }
+    }
+
+    /// Only the collision check of [`Verifier::check_trajectory`] (the trajectory is assumed
+    /// well formed: lengths and DOF are not checked here).
+    pub fn check_collisions(
+        &self,
+        model: &CollisionModel,
+        traj: &Trajectory,
+        spans: &[ClosedChainSpan],
+    ) -> CollisionReport {
+        match self.mode {
+            Mode::Sampled { resolution } => sampled::sample_collisions(model, traj, spans, resolution),
+            Mode::Certified { tolerance } => {
+                certified::certify_collisions(model, traj, spans, &self.settings, tolerance.max(0.0))
+            }
+        }
+    }
+
+    /// [`Verifier::check_trajectory`] without closed-chain spans, as a yes or the first finding
+    /// (limits before collisions).
+    // A finding is returned once, when the check refuses: boxing it would only burden callers'
+    // pattern matching.
+    #[allow(clippy::result_large_err)]
+    pub fn verify_trajectory(&self, model: &CollisionModel, traj: &Trajectory) -> Result<(), Finding> {
+        let robot = model.robot();
+        if let Err(message) = well_formed(robot, traj) {
+            return Err(Finding::Malformed { message });
+        }
+        let mut limits = self.limits_checker(robot);
+        for k in 0..traj.t.len() {
+            limits.push(traj.t[k], &traj.q[k], &traj.qd[k]);
+        }
+        if let Some(f) = limits.first() {
+            return Err(f.clone());
+        }
+        let collision = self.check_collisions(model, traj, &[]);
+        collision.violation.map_or(Ok(()), Err)
+    }
+
+    /// Check a path: every waypoint has the robot's DOF, is finite and within the position
+    /// limits, and the polyline through the waypoints (straight segments, the short way round
+    /// on continuous joints) is collision-free by the mode. Findings are placed on the path
+    /// parameter: waypoint `k` is at `t = k`.
+    // A finding is returned once, when the check refuses: boxing it would only burden callers'
+    // pattern matching.
+    #[allow(clippy::result_large_err)]
+    pub fn verify_path(&self, model: &CollisionModel, path: &[Vec<f64>]) -> Result<(), Finding> {
+        let robot = model.robot();
+        if path.is_empty() {
+            return Err(Finding::Malformed { message: "the path is empty".into() });
+        }
+        let dof = robot.dof();
+        let mut limits = self.limits_checker(robot);
+        for (index, q) in path.iter().enumerate() {
+            if q.len() != dof {
+                let message = format!("waypoint {index} has {} joint values, the robot has {dof}", q.len());
+                return Err(Finding::Malformed { message });
+            }
+            if let Some(i) = q.iter().position(|x| !x.is_finite()) {
+                let joint = &robot.dof_joint(i).name;
+                let message = format!("waypoint {index}: joint `{joint}` is {}, not a finite number", q[i]);
+                return Err(Finding::Malformed { message });
+            }
+            limits.push_positions(index as f64, q);
+            if let Some(f) = limits.first() {
+                return Err(f.clone());
+            }
+        }
+        let traj = Trajectory {
+            joint_names: robot.joint_names(),
+            t: (0..path.len()).map(|k| k as f64).collect(),
+            q: path.to_vec(),
+            qd: Vec::new(),
+        };
+        self.check_collisions(model, &traj, &[]).violation.map_or(Ok(()), Err)
+    }
+}
+
+/// Lengths, DOF, finite values and strictly increasing times.
+fn well_formed(robot: &Robot, traj: &Trajectory) -> Result<(), String> {
     let n = traj.t.len();
-    for (what, got) in [("q", traj.q.len()), ("qd", traj.qd.len())] {
-        if got != n {
-            return Err(Violation::LengthMismatch { what, expected: n, got });
-        }
+    if n == 0 {
+        return Err("the trajectory has no samples".into());
     }
-    verify_path(model, &traj.q, resolution)?;
-    let robot = model.robot();
-    let limits = robot.limits();
-    let names = robot.joint_names();
-    let space = robot.config_space();
-    for (index, qd) in traj.qd.iter().enumerate() {
-        if qd.len() != limits.len() {
-            return Err(Violation::WrongDof { index, expected: limits.len(), got: qd.len() });
-        }
-        for (i, &v) in qd.iter().enumerate() {
-            over(v, limits[i].max_velocity, traj.t[index], &names[i], true)?;
-        }
+    if traj.q.len() != n || traj.qd.len() != n {
+        return Err(format!("{} times, {} positions and {} velocities", n, traj.q.len(), traj.qd.len()));
     }
-    for k in 1..n {
-        let h = traj.t[k] - traj.t[k - 1];
-        if h.is_nan() || h <= 0.0 {
-            return Err(Violation::TimeNotIncreasing { index: k, t: traj.t[k], previous: traj.t[k - 1] });
+    let dof = robot.dof();
+    for k in 0..n {
+        for (what, v) in [("q", &traj.q[k]), ("qd", &traj.qd[k])] {
+            if v.len() != dof {
+                return Err(format!("sample {k}: {what} has {} values, the robot has {dof} joints", v.len()));
+            }
+            if let Some(i) = v.iter().position(|x| !x.is_finite()) {
+                return Err(format!("sample {k}: {what}[{i}] = {} is not a finite number", v[i]));
+            }
         }
-        for i in 0..limits.len() {
-            let v = space.delta(i, traj.q[k - 1][i], traj.q[k][i]) / h;
-            over(v, limits[i].max_velocity, traj.t[k], &names[i], true)?;
-            let a = (traj.qd[k][i] - traj.qd[k - 1][i]) / h;
-            over(a, limits[i].max_acceleration, traj.t[k], &names[i], false)?;
+        if !traj.t[k].is_finite() {
+            return Err(format!("sample {k}: t = {} is not a finite number", traj.t[k]));
+        }
+        if k > 0 && traj.t[k] <= traj.t[k - 1] {
+            return Err(format!("sample {k}: t = {} s does not come after t = {} s", traj.t[k], traj.t[k - 1]));
         }
     }
     Ok(())
 }
 
-fn over(value: f64, limit: f64, t: f64, joint: &str, velocity: bool) -> Result<(), Violation> {
-    let allowed = limit * (1.0 + LIMIT_TOLERANCE) + 1e-9;
-    if value.abs() <= allowed {
-        return Ok(());
+/// The report of a malformed trajectory: every check fails with the same finding.
+fn malformed(m: Finding, traj: &Trajectory, spans: &[ClosedChainSpan]) -> TrajectoryReport {
+    let samples = traj.t.len();
+    TrajectoryReport {
+        certified: false,
+        duration_s: traj.duration(),
+        samples,
+        limits: LimitsReport {
+            ok: false,
+            violation: Some(m.clone()),
+            violations: 1,
+            samples,
+            max_velocity_ratio: f64::NAN,
+            max_acceleration_ratio: f64::NAN,
+            time_s: 0.0,
+        },
+        collision: CollisionReport {
+            ok: false,
+            violation: Some(m.clone()),
+            segments: samples.saturating_sub(1),
+            certified_segments: 0,
+            distance_evaluations: 0,
+            subdivisions: 0,
+            max_depth: 0,
+            pairs: 0,
+            min_clearance_m: f64::NAN,
+            certified_clearance_m: f64::NAN,
+            closest_pair: None,
+            time_s: 0.0,
+        },
+        closure: ClosureReport {
+            ok: false,
+            violation: Some(m),
+            spans: spans.len(),
+            samples: 0,
+            max_position_error_m: f64::NAN,
+            max_angle_error_rad: f64::NAN,
+            time_s: 0.0,
+        },
     }
-    let (joint, by) = (joint.to_string(), value.abs() - limit);
-    Err(if velocity {
-        Violation::Velocity { t, joint, value, limit, by }
-    } else {
-        Violation::Acceleration { t, joint, value, limit, by }
-    })
-}
-
-fn check_waypoint(model: &CollisionModel, index: usize, q: &[f64]) -> Result<(), Violation> {
-    let robot = model.robot();
-    if q.len() != robot.dof() {
-        return Err(Violation::WrongDof { index, expected: robot.dof(), got: q.len() });
-    }
-    for (i, (&value, l)) in q.iter().zip(robot.limits()).enumerate() {
-        let joint = || robot.dof_joint(i).name.clone();
-        if !value.is_finite() {
-            return Err(Violation::NotFinite { index, joint: joint(), value });
-        }
-        let by = (l.lower - value).max(value - l.upper);
-        if by > 1e-9 {
-            return Err(Violation::OutOfLimits { index, joint: joint(), value, lower: l.lower, upper: l.upper, by });
-        }
-    }
-    if let Some(contact) = model.first_collision(q) {
-        return Err(Violation::WaypointCollision { index, contact: contact.to_string() });
-    }
-    Ok(())
-}
-
-fn check_segment(
-    model: &CollisionModel,
-    space: &ConfigSpace,
-    index: usize,
-    a: &[f64],
-    b: &[f64],
-    resolution: f64,
-) -> Result<(), Violation> {
-    if model.motion_is_free(a, b, resolution) {
-        return Ok(());
-    }
-    // Find the first colliding point in order, to say where.
-    let steps = (space.max_joint_step(a, b) / resolution).ceil().clamp(1.0, 1e7) as usize;
-    for k in 0..=steps {
-        let fraction = k as f64 / steps as f64;
-        if let Some(contact) = model.first_collision(&space.interpolate(a, b, fraction)) {
-            return Err(Violation::SegmentCollision { index, fraction, contact: contact.to_string() });
-        }
-    }
-    Err(Violation::SegmentCollision { index, fraction: f64::NAN, contact: "reported by motion_is_free".into() })
 }

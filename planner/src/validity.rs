@@ -1,0 +1,243 @@
+//! What planners ask of the world, and the counted queries they make.
+//!
+//! [`StateValidity`] is the extension point: a configuration check, a certified motion check
+//! and (optionally) a distance, with per-thread working memory. [`CollisionModel`] implements
+//! it; the planners ([`crate::motion::RrtConnect`], [`crate::motion::LazyPrm`], the shortcut
+//! pass, [`crate::roadmap::Roadmap`]) take any implementation.
+//!
+//! Inside the crate, `Validity` counts the queries of one planning run. Segments are certified
+//! by default (`CollisionModel::certify`: free for the whole continuum of configurations
+//! between their ends). With [`EdgeCheck::Sampled`] they are sampled at the resolution instead,
+//! in bisection order (midpoint first, then quarter points...) because a colliding segment
+//! usually collides somewhere in the middle: the first hit ends the check. The independent
+//! checker in [`crate::verify`] walks segments its own way.
+//!
+//! `Validity::segment_probed` is the cheap, incomplete test of lazy RRT-Connect: plain
+//! collision checks of sampled configurations, before a segment is certified (or instead of it,
+//! for tree edges that never end up on a path).
+
+use embodied_models::collision::{CollisionModel, CollisionScratch};
+use embodied_models::{ConfigSpace, Robot};
+
+use crate::error::PlanError;
+
+/// Largest joint step (rad or m) between collision-checked points of a segment, by default.
+pub const DEFAULT_RESOLUTION: f64 = 0.02;
+
+/// Default tolerance of [`EdgeCheck::Certified`] (m).
+pub const CERTIFY_TOLERANCE: f64 = 1e-4;
+
+/// How a straight segment between two free configurations is judged free.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub enum EdgeCheck {
+    /// The conservative certificate of [`StateValidity::certify_motion`] (for a
+    /// [`CollisionModel`]: [`CollisionModel::motion_is_certified_free`]): the whole continuum of
+    /// configurations is free, not only sampled ones. Motions that pass within about
+    /// `tolerance` (m) of contact are refused.
+    Certified {
+        /// Clearance below which a motion is refused, m.
+        tolerance: f64,
+    },
+    /// Configurations no more than [`crate::motion::MotionSettings::resolution`] apart in every
+    /// joint are checked (the classic discrete check; a thin obstacle between samples can be
+    /// missed).
+    Sampled,
+}
+
+/// The validity of robot states and motions, as a planner needs it.
+///
+/// Positions within the joint limits are the planner's business (it asks the [`Robot`]); an
+/// implementation says whether a configuration of the right length is free, whether a straight
+/// joint-space motion (the short way round on continuous joints) is certified free, and, if it
+/// can, how far a configuration is from the nearest invalid one. Queries take per-thread
+/// working memory ([`StateValidity::Scratch`]) so that planners can check in parallel.
+pub trait StateValidity: Sync {
+    /// Working memory of one thread's queries.
+    type Scratch: Send;
+
+    /// The robot whose states are checked.
+    fn robot(&self) -> &Robot;
+
+    /// Fresh working memory.
+    fn scratch(&self) -> Self::Scratch;
+
+    /// Whether `q` is invalid (in collision). A `q` of the wrong length is invalid.
+    fn collides(&self, q: &[f64], scratch: &mut Self::Scratch) -> bool;
+
+    /// Why `q` is invalid, in words (for errors: "link `a` and obstacle `b`"); `None` when valid.
+    fn first_collision(&self, q: &[f64]) -> Option<String>;
+
+    /// Whether the straight motion `qa -> qb` is certified valid, every point of it, with a
+    /// margin of about `tolerance` (m); `check_ends`: check the end configurations too. Returns
+    /// the answer and the number of configuration checks it spent.
+    fn certify_motion(
+        &self,
+        qa: &[f64],
+        qb: &[f64],
+        tolerance: f64,
+        check_ends: bool,
+        scratch: &mut Self::Scratch,
+    ) -> (bool, u32);
+
+    /// Signed distance (m) from `q` to the nearest invalid state, when the implementation can
+    /// measure it (negative: penetration depth). `None` by default.
+    fn distance(&self, q: &[f64]) -> Option<f64> {
+        let _ = q;
+        None
+    }
+}
+
+impl StateValidity for CollisionModel {
+    type Scratch = CollisionScratch;
+
+    fn robot(&self) -> &Robot {
+        CollisionModel::robot(self)
+    }
+
+    fn scratch(&self) -> CollisionScratch {
+        CollisionModel::scratch(self)
+    }
+
+    fn collides(&self, q: &[f64], scratch: &mut CollisionScratch) -> bool {
+        self.collides_with(q, scratch)
+    }
+
+    fn first_collision(&self, q: &[f64]) -> Option<String> {
+        CollisionModel::first_collision(self, q).map(|c| c.to_string())
+    }
+
+    fn certify_motion(
+        &self,
+        qa: &[f64],
+        qb: &[f64],
+        tolerance: f64,
+        check_ends: bool,
+        scratch: &mut CollisionScratch,
+    ) -> (bool, u32) {
+        self.certify(qa, qb, tolerance, check_ends, scratch)
+    }
+
+    fn distance(&self, q: &[f64]) -> Option<f64> {
+        Some(CollisionModel::distance(self, q).distance)
+    }
+}
+
+/// Check a start configuration: length, finiteness, limits, collisions.
+pub(crate) fn check_start<V: StateValidity>(model: &V, start: &[f64]) -> Result<(), PlanError> {
+    model.robot().check_configuration(start).map_err(|e| PlanError::InvalidInput { message: format!("start: {e}") })?;
+    if let Some(contact) = model.first_collision(start) {
+        return Err(PlanError::StartInCollision { contact });
+    }
+    Ok(())
+}
+
+/// Counted validity queries against one collision model at one resolution.
+pub(crate) struct Validity<'m, V: StateValidity> {
+    pub model: &'m V,
+    pub space: ConfigSpace,
+    pub resolution: f64,
+    /// `Some(tolerance)`: segments are certified, not sampled.
+    certify: Option<f64>,
+    scratch: V::Scratch,
+    buf: Vec<f64>,
+    pub collision_checks: u64,
+    pub edges_checked: usize,
+    /// Collision checks of [`Self::segment_probed`] (also counted in `collision_checks`).
+    pub probe_checks: u64,
+}
+
+impl<'m, V: StateValidity> Validity<'m, V> {
+    pub fn new(model: &'m V, resolution: f64) -> Self {
+        let robot = model.robot();
+        Self {
+            model,
+            space: robot.config_space(),
+            resolution,
+            certify: None,
+            scratch: model.scratch(),
+            buf: vec![0.0; robot.dof()],
+            collision_checks: 0,
+            edges_checked: 0,
+            probe_checks: 0,
+        }
+    }
+
+    /// Check segments as `check` says.
+    pub fn with_edge_check(mut self, check: EdgeCheck) -> Self {
+        self.certify = match check {
+            EdgeCheck::Certified { tolerance } => Some(tolerance),
+            EdgeCheck::Sampled => None,
+        };
+        self
+    }
+
+    /// Within the position limits and collision-free.
+    pub fn config_free(&mut self, q: &[f64]) -> bool {
+        if !self.model.robot().within_limits(q) {
+            return false;
+        }
+        self.collision_checks += 1;
+        !self.model.collides(q, &mut self.scratch)
+    }
+
+    /// The straight C-space segment `a`-`b` (short way on continuous joints) is collision-free
+    /// at `resolution` (largest joint step between checked points). The end points are taken as
+    /// already checked.
+    pub fn segment_free(&mut self, a: &[f64], b: &[f64]) -> bool {
+        self.edges_checked += 1;
+        if let Some(tolerance) = self.certify {
+            let (free, checks) = self.model.certify_motion(a, b, tolerance, false, &mut self.scratch);
+            self.collision_checks += u64::from(checks);
+            return free;
+        }
+        self.sampled(a, b, self.resolution)
+    }
+
+    /// No sampled configuration of the segment `a`-`b` collides, at `resolution` (largest joint
+    /// step), ends excluded. A probe, not a certificate: an obstacle between samples is missed.
+    pub fn segment_probed(&mut self, a: &[f64], b: &[f64], resolution: f64) -> bool {
+        let before = self.collision_checks;
+        let free = self.sampled(a, b, resolution);
+        self.probe_checks += self.collision_checks - before;
+        free
+    }
+
+    /// Sampled check of the segment's inner points, in bisection order.
+    fn sampled(&mut self, a: &[f64], b: &[f64], resolution: f64) -> bool {
+        let n = steps(&self.space, a, b, resolution);
+        if n < 2 {
+            return true;
+        }
+        let mut stride = 1usize;
+        while stride * 2 < n {
+            stride *= 2;
+        }
+        let mut first_level = true;
+        loop {
+            let mut i = stride;
+            while i < n {
+                if first_level || (i / stride) % 2 == 1 {
+                    let t = i as f64 / n as f64;
+                    self.space.interpolate_into(a, b, t, &mut self.buf);
+                    self.collision_checks += 1;
+                    if self.model.collides(&self.buf, &mut self.scratch) {
+                        return false;
+                    }
+                }
+                i += stride;
+            }
+            if stride == 1 {
+                return true;
+            }
+            stride /= 2;
+            first_level = false;
+        }
+    }
+}
+
+/// Number of equal steps so that no joint moves more than `resolution` per step (at least 1).
+pub(crate) fn steps(space: &ConfigSpace, a: &[f64], b: &[f64], resolution: f64) -> usize {
+    let max = space.max_joint_step(a, b);
+    let n = (max / resolution).ceil();
+    if n.is_finite() && n >= 1.0 { n.min(1e7) as usize } else { 1 }
+}

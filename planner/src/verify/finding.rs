@@ -1,0 +1,120 @@
+//! The one vocabulary of what a check found wrong: what, where in time, which joint or pair,
+//! and by how much.
+//!
+//! Every check of the [`super::Verifier`] (limits, sampled or certified collisions, the
+//! closed-chain constraint) and the streaming [`super::LimitsChecker`] report a [`Finding`].
+//! Times are seconds from the trajectory's start; for an untimed path (a list of waypoints) the
+//! time is the *path parameter*: waypoint `k` is at `t = k`, and a point at fraction `f` of the
+//! segment from waypoint `k` to `k + 1` is at `t = k + f`.
+
+use serde::Serialize;
+
+/// One thing wrong with a plan, and where. Times are seconds from the trajectory's start (the
+/// path parameter for an untimed path: waypoint `k` is at `t = k`, a point at fraction `f` of the
+/// segment from waypoint `k` on at `t = k + f`).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+#[serde(tag = "kind", rename_all = "snake_case")]
+pub enum Finding {
+    /// The trajectory itself is not well formed (lengths, DOF, non-finite values, time order,
+    /// unknown end effectors).
+    Malformed { message: String },
+    /// A joint outside its position limits.
+    Position { t: f64, joint: String, value: f64, lower: f64, upper: f64, excess: f64 },
+    /// A joint faster than its velocity limit; `source`: `qd` (the stated velocity) or
+    /// `finite difference of q`.
+    Velocity { t: f64, joint: String, value: f64, limit: f64, excess: f64, source: String },
+    /// A joint accelerating harder than its limit (finite difference of the stated `qd`).
+    Acceleration { t: f64, joint: String, value: f64, limit: f64, excess: f64 },
+    /// A configuration on the path in collision: the pair and how deep (m, >= 0).
+    Collision { t: f64, q: Vec<f64>, a: String, b: String, penetration_m: f64 },
+    /// A configuration on the path that is free but closer than the clearance the check
+    /// requires ([`super::Mode::Certified`]'s `tolerance`): the pair, its distance and the
+    /// required clearance (m).
+    TooClose { t: f64, q: Vec<f64>, a: String, b: String, distance_m: f64, required_m: f64 },
+    /// A piece of the path that the certificate could neither prove free nor show in collision
+    /// within the caps: the piece, and the pair closest at its ends.
+    NotCertified {
+        t_from: f64,
+        t_to: f64,
+        q_from: Vec<f64>,
+        q_to: Vec<f64>,
+        a: String,
+        b: String,
+        clearance_m: f64,
+        reason: String,
+    },
+    /// The pose of the second tool frame relative to the first drifted from its value at the
+    /// start of the closed-chain span.
+    ClosureDrift {
+        t: f64,
+        span: usize,
+        position_error_m: f64,
+        angle_error_rad: f64,
+        tolerance_m: f64,
+        tolerance_rad: f64,
+    },
+}
+
+impl std::fmt::Display for Finding {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Finding::Malformed { message } => write!(f, "malformed: {message}"),
+            Finding::Position { t, joint, value, lower, upper, excess } => write!(
+                f,
+                "t = {t:.4} s: joint `{joint}` = {value:.6} is outside [{lower:.6}, {upper:.6}] by {excess:.3e}"
+            ),
+            Finding::Velocity { t, joint, value, limit, excess, source } => write!(
+                f,
+                "t = {t:.4} s: joint `{joint}` velocity {value:.6} ({source}) exceeds {limit:.6} by {excess:.3e}"
+            ),
+            Finding::Acceleration { t, joint, value, limit, excess } => {
+                write!(f, "t = {t:.4} s: joint `{joint}` acceleration {value:.6} exceeds {limit:.6} by {excess:.3e}")
+            }
+            Finding::Collision { t, q, a, b, penetration_m } => {
+                write!(f, "t = {t:.4} s: {a} and {b} collide (penetration {penetration_m:.3e} m) at q = {}", fmt_q(q))
+            }
+            Finding::TooClose { t, q, a, b, distance_m, required_m } => write!(
+                f,
+                "t = {t:.4} s: {a} and {b} are {distance_m:.3e} m apart, closer than the required {required_m:.3e} m, at q = {}",
+                fmt_q(q)
+            ),
+            Finding::NotCertified { t_from, t_to, q_from, a, b, clearance_m, reason, .. } => write!(
+                f,
+                "t = {t_from:.4}..{t_to:.4} s: not certified ({reason}); closest pair {a} and {b}, \
+                 clearance {clearance_m:.3e} m at q = {}",
+                fmt_q(q_from)
+            ),
+            Finding::ClosureDrift { t, span, position_error_m, angle_error_rad, tolerance_m, tolerance_rad } => {
+                write!(
+                    f,
+                    "t = {t:.4} s: closed-chain span {span}: relative tool pose drifted by {position_error_m:.3e} m \
+                     (tolerance {tolerance_m:.3e}) and {angle_error_rad:.3e} rad (tolerance {tolerance_rad:.3e})"
+                )
+            }
+        }
+    }
+}
+
+fn fmt_q(q: &[f64]) -> String {
+    let v: Vec<String> = q.iter().map(|x| format!("{x:.4}")).collect();
+    format!("[{}]", v.join(", "))
+}
+
+impl std::error::Error for Finding {}
+
+impl Finding {
+    /// When it happens: seconds from the start (the path parameter for a path); for a piece
+    /// that could not be certified, its start; `None` for a malformed input.
+    pub fn time(&self) -> Option<f64> {
+        match self {
+            Finding::Malformed { .. } => None,
+            Finding::Position { t, .. }
+            | Finding::Velocity { t, .. }
+            | Finding::Acceleration { t, .. }
+            | Finding::Collision { t, .. }
+            | Finding::TooClose { t, .. }
+            | Finding::ClosureDrift { t, .. } => Some(*t),
+            Finding::NotCertified { t_from, .. } => Some(*t_from),
+        }
+    }
+}
