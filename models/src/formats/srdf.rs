@@ -1,11 +1,13 @@
-//! SRDF (MoveIt's Semantic Robot Description Format): planning groups, named group states,
-//! end effectors and self-collision pairs to ignore.
+//! SRDF (MoveIt's Semantic Robot Description Format), read as MoveIt's own parser reads it.
 //!
-//! Only what a planner needs is read: `<group>` (chains, joints, links, subgroups),
-//! `<group_state>`, `<end_effector>` and `<disable_collisions>`. Other elements
-//! (`<virtual_joint>`, `<passive_joint>`, `<link_sphere_approximation>`, ...) are ignored.
-//! Every reference to a group inside the file (a subgroup, a group state's group, an end
-//! effector's group) must name a group of the file; errors name `file:line:column`.
+//! Read: `<group>` (with `<chain>`, `<joint>`, `<link>`, `<group>` and `<passive_joint>`
+//! members), `<group_state>` (joints with one value, or several for a multi-value joint such as
+//! a floating or planar virtual joint), `<virtual_joint>`, `<end_effector>`, `<passive_joint>`,
+//! `<disable_collisions>`, `<enable_collisions>` and `<disable_default_collisions>`.
+//! `<link_sphere_approximation>` is known and skipped. Unknown elements and attributes are
+//! warnings ([`Srdf::warnings`]), never errors. Malformed XML, a missing required attribute, a
+//! value that is not a number, and a reference to a group the file does not define are errors
+//! naming `file:line:column`.
 //!
 //! ```
 //! use std::path::Path;
@@ -20,20 +22,35 @@
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
 
-use crate::error::ModelError;
+use roxmltree::Node;
+
+use super::xml::Xml;
+use crate::error::{ModelError, Warning};
 use crate::robot::Robot;
-use crate::urdf::Xml;
 
 /// The content of an SRDF file.
 #[derive(Debug, Clone, Default)]
 pub struct Srdf {
     /// The `name` of the `<robot>` element (normally the URDF's robot name; not checked).
     pub robot_name: String,
+    /// Planning groups, in file order.
     pub groups: Vec<Group>,
     /// `<disable_collisions link1 link2>` pairs, in file order.
     pub disabled: Vec<(String, String)>,
+    /// `<enable_collisions link1 link2>` pairs: checked even if disabled elsewhere.
+    pub enabled: Vec<(String, String)>,
+    /// `<disable_default_collisions link>`: links whose collisions are off by default.
+    pub disabled_default: Vec<String>,
+    /// Named group configurations.
     pub group_states: Vec<GroupState>,
+    /// End effectors.
     pub end_effectors: Vec<SrdfEndEffector>,
+    /// Virtual joints between a world frame and the robot's root.
+    pub virtual_joints: Vec<VirtualJoint>,
+    /// Passive joints (top level or inside a group): never planned.
+    pub passive_joints: Vec<String>,
+    /// What was read but not understood (unknown elements and attributes).
+    pub warnings: Vec<Warning>,
     /// The file the SRDF was read from (used in error messages).
     pub file: PathBuf,
 }
@@ -41,34 +58,62 @@ pub struct Srdf {
 /// A planning group: the union of its chains, joints, links and subgroups.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct Group {
+    /// The group's name.
     pub name: String,
     /// `(base_link, tip_link)` of each `<chain>`.
     pub chains: Vec<(String, String)>,
+    /// `<joint name>` members.
     pub joints: Vec<String>,
+    /// `<link name>` members.
     pub links: Vec<String>,
+    /// `<group name>` members.
     pub subgroups: Vec<String>,
 }
 
 /// A named configuration of a group (`<group_state name group>`).
 #[derive(Debug, Clone, PartialEq)]
 pub struct GroupState {
+    /// The state's name.
     pub name: String,
+    /// The group it configures.
     pub group: String,
-    /// `(joint name, value)` in file order.
-    pub values: Vec<(String, f64)>,
+    /// `(joint name, values)` in file order: one value for a one-degree-of-freedom joint,
+    /// several for a multi-value (floating, planar) joint.
+    pub values: Vec<(String, Vec<f64>)>,
     /// Line of the `<group_state>` element in [`Srdf::file`].
     pub line: u32,
+    /// Column of the `<group_state>` element.
+    pub column: u32,
 }
 
 /// An `<end_effector name parent_link group [parent_group]>`.
 #[derive(Debug, Clone, PartialEq)]
 pub struct SrdfEndEffector {
+    /// The end effector's name.
     pub name: String,
+    /// The link it is attached to.
     pub parent_link: String,
+    /// The group of its own links and joints.
     pub group: String,
+    /// The group it hangs from, if given.
     pub parent_group: Option<String>,
     /// Line of the `<end_effector>` element in [`Srdf::file`].
     pub line: u32,
+    /// Column of the `<end_effector>` element.
+    pub column: u32,
+}
+
+/// A `<virtual_joint name type parent_frame child_link>`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct VirtualJoint {
+    /// The joint's name.
+    pub name: String,
+    /// `fixed`, `floating` or `planar`.
+    pub kind: String,
+    /// The outside frame (e.g. `world`, `odom_combined`).
+    pub parent_frame: String,
+    /// The robot's root link.
+    pub child_link: String,
 }
 
 /// Read and parse an SRDF file.
@@ -77,23 +122,74 @@ pub fn load_srdf(path: &Path) -> Result<Srdf, ModelError> {
     parse_srdf(&text, path)
 }
 
+/// The attributes MoveIt's parser reads on each element; others are warned about.
+fn known_attributes(tag: &str) -> &'static [&'static str] {
+    match tag {
+        "robot" => &["name"],
+        "group" | "joint" | "link" | "passive_joint" => &["name"],
+        "chain" => &["base_link", "tip_link"],
+        "group_state" => &["name", "group"],
+        "end_effector" => &["name", "parent_link", "group", "parent_group"],
+        "virtual_joint" => &["name", "type", "parent_frame", "child_link"],
+        "disable_collisions" | "enable_collisions" => &["link1", "link2", "reason"],
+        "disable_default_collisions" => &["link"],
+        _ => &[],
+    }
+}
+
+struct Reader<'x, 'i> {
+    x: &'x Xml<'i>,
+    warnings: Vec<Warning>,
+}
+
+impl Reader<'_, '_> {
+    fn warn(&mut self, node: Node, message: String) {
+        let (line, column) = self.x.position(node);
+        self.warnings.push(Warning { file: self.x.file.clone(), line, column, message });
+    }
+
+    /// Warn about attributes of `node` the SRDF format does not define.
+    fn check_attributes(&mut self, node: Node) {
+        let tag = node.tag_name().name();
+        let known = known_attributes(tag);
+        for a in node.attributes() {
+            if a.namespace().is_none() && !known.contains(&a.name()) {
+                self.warn(
+                    node,
+                    format!(
+                        "unknown attribute `{}` on <{tag}> ignored (expected: {})",
+                        a.name(),
+                        known.join(", ")
+                    ),
+                );
+            }
+        }
+    }
+}
+
 /// Parse SRDF text; `file` is used in error messages.
 pub fn parse_srdf(text: &str, file: &Path) -> Result<Srdf, ModelError> {
     let doc = Xml::parse(text, file)?;
     let x = &doc;
+    let mut r = Reader { x, warnings: Vec::new() };
     let root = doc.doc.root_element();
     if root.tag_name().name() != "robot" {
         return Err(x.err(root, format!("expected a <robot> root element, found <{}>", root.tag_name().name())));
     }
+    r.check_attributes(root);
     let mut srdf = Srdf {
-        robot_name: x.attr(root, "name", "the robot's name")?.to_string(),
+        robot_name: root.attribute("name").unwrap_or_default().to_string(),
         file: file.to_path_buf(),
         ..Srdf::default()
     };
     // Group references are checked once every group is known: (node, referenced group name).
     let mut references = Vec::new();
     for node in root.children().filter(|n| n.is_element()) {
-        match node.tag_name().name() {
+        let tag = node.tag_name().name();
+        if !known_attributes(tag).is_empty() {
+            r.check_attributes(node);
+        }
+        match tag {
             "group" => {
                 let name = x.attr(node, "name", "the group's name")?.to_string();
                 if srdf.groups.iter().any(|g| g.name == name) {
@@ -101,6 +197,7 @@ pub fn parse_srdf(text: &str, file: &Path) -> Result<Srdf, ModelError> {
                 }
                 let mut group = Group { name, ..Group::default() };
                 for member in node.children().filter(|n| n.is_element()) {
+                    r.check_attributes(member);
                     match member.tag_name().name() {
                         "chain" => group.chains.push((
                             x.attr(member, "base_link", "the chain's base link name")?.to_string(),
@@ -113,14 +210,15 @@ pub fn parse_srdf(text: &str, file: &Path) -> Result<Srdf, ModelError> {
                             references.push((member, sub.clone()));
                             group.subgroups.push(sub);
                         }
-                        other => {
-                            return Err(x.err(
-                                member,
-                                format!(
-                                    "unexpected <{other}> in <group> (expected <chain>, <joint>, <link> or <group>)"
-                                ),
-                            ));
+                        "passive_joint" => {
+                            srdf.passive_joints.push(x.attr(member, "name", "a joint name")?.to_string());
                         }
+                        other => r.warn(
+                            member,
+                            format!(
+                                "unknown <{other}> in <group> ignored (expected <chain>, <joint>, <link>, <group> or <passive_joint>)"
+                            ),
+                        ),
                     }
                 }
                 srdf.groups.push(group);
@@ -130,12 +228,20 @@ pub fn parse_srdf(text: &str, file: &Path) -> Result<Srdf, ModelError> {
                 let group = x.attr(node, "group", "the name of a group")?.to_string();
                 references.push((node, group.clone()));
                 let mut values = Vec::new();
-                for j in node.children().filter(|n| n.is_element() && n.tag_name().name() == "joint") {
+                for j in node.children().filter(|n| n.is_element()) {
+                    if j.tag_name().name() != "joint" {
+                        r.warn(j, format!("unknown <{}> in <group_state> ignored (expected <joint>)", j.tag_name().name()));
+                        continue;
+                    }
+                    r.check_attributes_of_state_joint(j);
                     let joint = x.attr(j, "name", "a joint name")?.to_string();
-                    let value = x.number(j, "value", "one number (radians or metres)")?;
-                    values.push((joint, value));
+                    let text = x.attr(j, "value", "one number, or several for a multi-value joint")?;
+                    let n = text.split_whitespace().count().max(1);
+                    let v = x.numbers(j, "value", text, n, "numbers (radians or metres)")?;
+                    values.push((joint, v));
                 }
-                srdf.group_states.push(GroupState { name, group, values, line: x.line(node) });
+                let (line, column) = x.position(node);
+                srdf.group_states.push(GroupState { name, group, values, line, column });
             }
             "end_effector" => {
                 let group = x.attr(node, "group", "the name of the end effector's group")?.to_string();
@@ -147,19 +253,45 @@ pub fn parse_srdf(text: &str, file: &Path) -> Result<Srdf, ModelError> {
                     }
                     None => None,
                 };
+                let (line, column) = x.position(node);
                 srdf.end_effectors.push(SrdfEndEffector {
                     name: x.attr(node, "name", "the end effector's name")?.to_string(),
                     parent_link: x.attr(node, "parent_link", "the link the end effector is attached to")?.to_string(),
                     group,
                     parent_group,
-                    line: x.line(node),
+                    line,
+                    column,
                 });
             }
+            "virtual_joint" => {
+                let kind = x.attr(node, "type", "fixed, floating or planar")?;
+                if !matches!(kind, "fixed" | "floating" | "planar") {
+                    return Err(x.err(
+                        node,
+                        format!("virtual joint type `{kind}` (expected fixed, floating or planar)"),
+                    ));
+                }
+                srdf.virtual_joints.push(VirtualJoint {
+                    name: x.attr(node, "name", "the virtual joint's name")?.to_string(),
+                    kind: kind.to_string(),
+                    parent_frame: x.attr(node, "parent_frame", "the outside frame's name")?.to_string(),
+                    child_link: x.attr(node, "child_link", "the robot's root link")?.to_string(),
+                });
+            }
+            "passive_joint" => srdf.passive_joints.push(x.attr(node, "name", "a joint name")?.to_string()),
             "disable_collisions" => srdf.disabled.push((
                 x.attr(node, "link1", "a link name")?.to_string(),
                 x.attr(node, "link2", "a link name")?.to_string(),
             )),
-            _ => {}
+            "enable_collisions" => srdf.enabled.push((
+                x.attr(node, "link1", "a link name")?.to_string(),
+                x.attr(node, "link2", "a link name")?.to_string(),
+            )),
+            "disable_default_collisions" => {
+                srdf.disabled_default.push(x.attr(node, "link", "a link name")?.to_string());
+            }
+            "link_sphere_approximation" => {}
+            other => r.warn(node, format!("unknown SRDF element <{other}> ignored")),
         }
     }
     for (node, name) in references {
@@ -174,7 +306,18 @@ pub fn parse_srdf(text: &str, file: &Path) -> Result<Srdf, ModelError> {
             ));
         }
     }
+    srdf.warnings = r.warnings;
     Ok(srdf)
+}
+
+impl Reader<'_, '_> {
+    fn check_attributes_of_state_joint(&mut self, node: Node) {
+        for a in node.attributes() {
+            if a.namespace().is_none() && !matches!(a.name(), "name" | "value") {
+                self.warn(node, format!("unknown attribute `{}` on <joint> ignored (expected: name, value)", a.name()));
+            }
+        }
+    }
 }
 
 impl Srdf {
@@ -191,14 +334,18 @@ impl Srdf {
     /// The active joints (degrees of freedom of `robot`: not fixed, not mimic) of a group, in
     /// the robot's `q` order.
     ///
-    /// Membership follows MoveIt: a `<chain>` contributes the joints on the tree path from its
+    /// Passive joints are left out. Membership follows MoveIt: a `<chain>` contributes the joints on the tree path from its
     /// base link down to its tip link (the base link must be an ancestor of the tip); a
     /// `<joint>` itself; a `<link>` its parent joint; a `<group>` its own joints, recursively.
     pub fn group_joints(&self, robot: &Robot, group: &str) -> Result<Vec<String>, ModelError> {
         let mut joints = BTreeSet::new();
         let mut stack = Vec::new();
         self.collect_joints(robot, group, &mut stack, &mut joints)?;
-        let mut dofs: Vec<usize> = joints.into_iter().filter_map(|j| robot.joints()[j].dof_index).collect();
+        let mut dofs: Vec<usize> = joints
+            .into_iter()
+            .filter(|&j| !self.passive_joints.contains(&robot.joints()[j].name))
+            .filter_map(|j| robot.joints()[j].dof_index)
+            .collect();
         dofs.sort_unstable();
         dofs.dedup();
         Ok(dofs.into_iter().map(|d| robot.dof_joint(d).name.clone()).collect())
@@ -278,12 +425,46 @@ impl Srdf {
     }
 }
 
-/// Disable self-collision checking for every `<disable_collisions>` pair of `srdf` whose two
-/// links exist in `robot` (pairs naming other links are skipped, as MoveIt does).
+/// Apply the SRDF's collision settings to `robot`: every `<disable_collisions>` pair and every
+/// pair with a `<disable_default_collisions>` link is disabled, then `<enable_collisions>` pairs
+/// are enabled again (pairs naming links the robot does not have are skipped, as MoveIt does).
 pub fn apply_srdf(robot: &mut Robot, srdf: &Srdf) {
-    for (a, b) in &srdf.disabled {
-        if let (Some(a), Some(b)) = (robot.link_index(a), robot.link_index(b)) {
-            robot.disable_pair(a, b);
+    for (a, b) in srdf.disabled_pairs(robot) {
+        robot.disable_pair(a, b);
+    }
+}
+
+impl Srdf {
+    /// The link index pairs `(a, b)` with `a < b` whose collisions the SRDF turns off for
+    /// `robot`, after `<disable_default_collisions>` and `<enable_collisions>`.
+    pub fn disabled_pairs(&self, robot: &Robot) -> Vec<(usize, usize)> {
+        let idx = |n: &str| robot.link_index(n);
+        let ordered = |a: usize, b: usize| (a.min(b), a.max(b));
+        let mut out = BTreeSet::new();
+        for (a, b) in &self.disabled {
+            if let (Some(a), Some(b)) = (idx(a), idx(b))
+                && a != b
+            {
+                out.insert(ordered(a, b));
+            }
         }
+        for l in &self.disabled_default {
+            if let Some(a) = idx(l) {
+                for b in (0..robot.links().len()).filter(|&b| b != a) {
+                    out.insert(ordered(a, b));
+                }
+            }
+        }
+        for (a, b) in &self.enabled {
+            if let (Some(a), Some(b)) = (idx(a), idx(b)) {
+                out.remove(&ordered(a, b));
+            }
+        }
+        out.into_iter().collect()
+    }
+
+    /// The names of the SRDF's virtual joints (not joints of the URDF).
+    pub fn is_virtual_joint(&self, name: &str) -> bool {
+        self.virtual_joints.iter().any(|v| v.name == name)
     }
 }

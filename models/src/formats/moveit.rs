@@ -21,7 +21,7 @@
 //!
 //! ```
 //! use std::path::Path;
-//! use embodied_planner::moveit::parse_scene;
+//! use embodied_models::formats::moveit::parse_scene;
 //! let text = "world:\n  collision_objects:\n    - id: table\n      primitives:\n        - type: box\n          dimensions: [1.0, 2.0, 0.1]\n      primitive_poses:\n        - position: [0.5, 0, 0.4]\n          orientation: [0, 0, 0, 1]\n";
 //! let scene = parse_scene(text, Path::new("scene.yaml")).unwrap();
 //! let obstacles = scene.obstacles();
@@ -31,37 +31,20 @@
 
 use std::path::{Path, PathBuf};
 
-use embodied_models::collision::{Environment, Obstacle};
-use embodied_models::nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion};
-use embodied_models::srdf::Srdf;
-use embodied_models::{ModelError, Robot, Shape};
-use saphyr::{LoadableYamlNode, MarkedYamlOwned, ScalarOwned, YamlDataOwned};
+use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion};
+
+use super::srdf::Srdf;
+use crate::collision::{Environment, Obstacle};
+use crate::error::ModelError;
+use crate::geometry::Shape;
+use crate::robot::Robot;
+use saphyr::{ScalarOwned, YamlDataOwned};
+
+use super::yaml::{Doc, Node, YamlError, describe, is_null};
+pub use super::yaml::Location;
 
 /// What can go wrong reading a MoveIt scene or request.
-#[derive(Debug, thiserror::Error)]
-#[non_exhaustive]
-pub enum MoveitError {
-    /// Malformed YAML or content that is not what a scene/request holds; 1-based line and column.
-    #[error("{}:{line}:{column}: {message}", file.display())]
-    Parse { file: PathBuf, line: usize, column: usize, message: String },
-    /// A file that could not be read.
-    #[error("cannot read {}: {source}", file.display())]
-    Io {
-        file: PathBuf,
-        #[source]
-        source: std::io::Error,
-    },
-    /// The robot model refused something (unknown group, joint that cannot be frozen, ...).
-    #[error(transparent)]
-    Model(#[from] ModelError),
-}
-
-/// A 1-based line and column in the source file.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub struct Location {
-    pub line: usize,
-    pub column: usize,
-}
+pub type MoveitError = YamlError;
 
 /// A `sensor_msgs/JointState` (names and positions only).
 #[derive(Debug, Clone, PartialEq, Default)]
@@ -447,149 +430,9 @@ impl PlanningScene {
 }
 
 // ---------------------------------------------------------------------------------------------
-// YAML access with positions.
+// MoveIt messages read with positions.
 
-type Node = MarkedYamlOwned;
-
-fn is_null(n: &Node) -> bool {
-    matches!(n.data, YamlDataOwned::Value(ScalarOwned::Null))
-}
-
-/// A short description of a node's kind and value for "got ..." in error messages.
-fn describe(n: &Node) -> String {
-    match &n.data {
-        YamlDataOwned::Value(ScalarOwned::Null) => "nothing (null)".into(),
-        YamlDataOwned::Value(ScalarOwned::Boolean(b)) => format!("the boolean {b}"),
-        YamlDataOwned::Value(ScalarOwned::Integer(i)) => format!("the number {i}"),
-        YamlDataOwned::Value(ScalarOwned::FloatingPoint(f)) => format!("the number {}", f.0),
-        YamlDataOwned::Value(ScalarOwned::String(s)) => format!("the string `{s}`"),
-        YamlDataOwned::Representation(s, _, _) => format!("`{s}`"),
-        YamlDataOwned::Sequence(s) => format!("a list of {} item{}", s.len(), if s.len() == 1 { "" } else { "s" }),
-        YamlDataOwned::Mapping(_) => "a mapping".into(),
-        YamlDataOwned::Tagged(tag, _) => format!("a value tagged {tag}"),
-        YamlDataOwned::Alias(_) => "an alias".into(),
-        YamlDataOwned::BadValue => "an invalid value".into(),
-    }
-}
-
-struct Doc<'a> {
-    file: &'a Path,
-    docs: Vec<Node>,
-}
-
-impl<'a> Doc<'a> {
-    fn load(text: &str, file: &'a Path) -> Result<Self, MoveitError> {
-        match Node::load_from_str(text) {
-            Ok(docs) => Ok(Self { file, docs }),
-            Err(e) => {
-                let m = e.marker();
-                Err(MoveitError::Parse {
-                    file: file.to_path_buf(),
-                    line: m.line(),
-                    column: m.col() + 1,
-                    message: format!("invalid YAML: {}", e.info()),
-                })
-            }
-        }
-    }
-
-    fn root(&self) -> Result<&Node, MoveitError> {
-        match self.docs.as_slice() {
-            [one] => Ok(one),
-            [] => Err(MoveitError::Parse {
-                file: self.file.to_path_buf(),
-                line: 1,
-                column: 1,
-                message: "expected a YAML document, the file is empty".into(),
-            }),
-            [_, second, ..] => Err(self.err(second, "expected one YAML document, found several")),
-        }
-    }
-
-    fn loc(&self, n: &Node) -> Location {
-        Location { line: n.span.start.line().max(1), column: n.span.start.col() + 1 }
-    }
-
-    fn err(&self, n: &Node, message: &str) -> MoveitError {
-        let at = self.loc(n);
-        MoveitError::Parse {
-            file: self.file.to_path_buf(),
-            line: at.line,
-            column: at.column,
-            message: message.to_string(),
-        }
-    }
-
-    fn expect_mapping(&self, n: &Node, what: &str) -> Result<(), MoveitError> {
-        if n.data.is_mapping() { Ok(()) } else { Err(self.err(n, &format!("expected {what}, got {}", describe(n)))) }
-    }
-
-    fn get<'n>(&self, map: &'n Node, key: &str) -> Option<&'n Node> {
-        match &map.data {
-            YamlDataOwned::Mapping(m) => m.iter().find_map(|(k, v)| match &k.data {
-                YamlDataOwned::Value(ScalarOwned::String(s)) if s == key => Some(v),
-                YamlDataOwned::Representation(s, _, _) if s == key => Some(v),
-                _ => None,
-            }),
-            _ => None,
-        }
-    }
-
-    fn require<'n>(&self, map: &'n Node, key: &str, what: &str) -> Result<&'n Node, MoveitError> {
-        self.expect_mapping(map, &format!("a mapping with `{key}`"))?;
-        self.get(map, key).ok_or_else(|| self.err(map, &format!("missing `{key}` ({what})")))
-    }
-
-    fn seq<'n>(&self, n: &'n Node, what: &str) -> Result<&'n [Node], MoveitError> {
-        match &n.data {
-            YamlDataOwned::Sequence(s) => Ok(s.as_slice()),
-            _ => Err(self.err(n, &format!("expected a list for {what}, got {}", describe(n)))),
-        }
-    }
-
-    fn string(&self, n: &Node, what: &str) -> Result<String, MoveitError> {
-        match &n.data {
-            YamlDataOwned::Value(ScalarOwned::String(s)) => Ok(s.clone()),
-            YamlDataOwned::Representation(s, _, _) => Ok(s.clone()),
-            // Names like `1` are valid ROS names only as strings, but be forgiving.
-            YamlDataOwned::Value(ScalarOwned::Integer(i)) => Ok(i.to_string()),
-            _ => Err(self.err(n, &format!("expected a string for {what}, got {}", describe(n)))),
-        }
-    }
-
-    fn number(&self, n: &Node, what: &str) -> Result<f64, MoveitError> {
-        let v = match &n.data {
-            YamlDataOwned::Value(ScalarOwned::Integer(i)) => *i as f64,
-            YamlDataOwned::Value(ScalarOwned::FloatingPoint(f)) => f.0,
-            YamlDataOwned::Representation(s, _, _) => match s.trim().parse::<f64>() {
-                Ok(v) => v,
-                Err(_) => return Err(self.err(n, &format!("expected a number for {what}, got `{s}`"))),
-            },
-            _ => return Err(self.err(n, &format!("expected a number for {what}, got {}", describe(n)))),
-        };
-        if !v.is_finite() {
-            return Err(self.err(n, &format!("expected a finite number for {what}, got {v}")));
-        }
-        Ok(v)
-    }
-
-    /// A list of exactly `len` numbers (any length when `len` is `None`).
-    fn numbers(&self, n: &Node, len: Option<usize>, what: &str) -> Result<Vec<f64>, MoveitError> {
-        let expected = match len {
-            Some(k) => format!("a list of {k} number{}", if k == 1 { "" } else { "s" }),
-            None => "a list of numbers".to_string(),
-        };
-        let YamlDataOwned::Sequence(items) = &n.data else {
-            return Err(self.err(n, &format!("expected {expected} for {what}, got {}", describe(n))));
-        };
-        if let Some(k) = len
-            && items.len() != k
-        {
-            return Err(self.err(n, &format!("expected {expected} for {what}, got {}", items.len())));
-        }
-        items.iter().map(|x| self.number(x, what)).collect()
-    }
-
+impl Doc<'_> {
     fn joint_state(&self, js: &Node, what: &str) -> Result<JointState, MoveitError> {
         self.expect_mapping(js, &format!("{what} (a mapping with `name` and `position`)"))?;
         let Some(names_node) = self.get(js, "name").filter(|n| !is_null(n)) else {
