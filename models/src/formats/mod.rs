@@ -71,7 +71,9 @@ fn describe(text: &str, file: &Path, options: &UrdfOptions, srdf: Option<Srdf>) 
     let load = parse_urdf_with(text, file, options, sem.as_ref())?;
     let mut robot = load.robot;
     let mut warnings = load.warnings;
-    if let Some(s) = &srdf {
+    let mut srdf = srdf;
+    if let Some(s) = &mut srdf {
+        s.reconcile(&robot);
         for (a, b) in s.disabled_pairs(&robot) {
             robot.disable_pair(a, b);
         }

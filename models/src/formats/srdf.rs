@@ -5,9 +5,11 @@
 //! a floating or planar virtual joint), `<virtual_joint>`, `<end_effector>`, `<passive_joint>`,
 //! `<disable_collisions>`, `<enable_collisions>` and `<disable_default_collisions>`.
 //! `<link_sphere_approximation>` is known and skipped. Unknown elements and attributes are
-//! warnings ([`Srdf::warnings`]), never errors. Malformed XML, a missing required attribute, a
-//! value that is not a number, and a reference to a group the file does not define are errors
-//! naming `file:line:column`.
+//! warnings ([`Srdf::warnings`]), never errors. As in MoveIt's parser, a reference to a group the
+//! file does not define is a warning and the referring element (subgroup, group state, end
+//! effector) is dropped; [`Srdf::reconcile`] does the same for joint and link names the URDF
+//! does not have. Malformed XML, a missing required attribute and a value that is not a number
+//! are errors naming `file:line:column`.
 //!
 //! ```
 //! use std::path::Path;
@@ -68,6 +70,8 @@ pub struct Group {
     pub links: Vec<String>,
     /// `<group name>` members.
     pub subgroups: Vec<String>,
+    /// Line and column of the `<group>` element in [`Srdf::file`].
+    pub position: (u32, u32),
 }
 
 /// A named configuration of a group (`<group_state name group>`).
@@ -182,8 +186,8 @@ pub fn parse_srdf(text: &str, file: &Path) -> Result<Srdf, ModelError> {
         file: file.to_path_buf(),
         ..Srdf::default()
     };
-    // Group references are checked once every group is known: (node, referenced group name).
-    let mut references = Vec::new();
+    // Group references are checked once every group is known.
+    let mut references: Vec<(Node, String, Reference)> = Vec::new();
     for node in root.children().filter(|n| n.is_element()) {
         let tag = node.tag_name().name();
         if !known_attributes(tag).is_empty() {
@@ -195,7 +199,7 @@ pub fn parse_srdf(text: &str, file: &Path) -> Result<Srdf, ModelError> {
                 if srdf.groups.iter().any(|g| g.name == name) {
                     return Err(x.err(node, format!("a second group named `{name}` (group names must be unique)")));
                 }
-                let mut group = Group { name, ..Group::default() };
+                let mut group = Group { name, position: x.position(node), ..Group::default() };
                 for member in node.children().filter(|n| n.is_element()) {
                     r.check_attributes(member);
                     match member.tag_name().name() {
@@ -207,7 +211,7 @@ pub fn parse_srdf(text: &str, file: &Path) -> Result<Srdf, ModelError> {
                         "link" => group.links.push(x.attr(member, "name", "a link name")?.to_string()),
                         "group" => {
                             let sub = x.attr(member, "name", "a group name")?.to_string();
-                            references.push((member, sub.clone()));
+                            references.push((member, sub.clone(), Reference::Subgroup(srdf.groups.len())));
                             group.subgroups.push(sub);
                         }
                         "passive_joint" => {
@@ -226,7 +230,7 @@ pub fn parse_srdf(text: &str, file: &Path) -> Result<Srdf, ModelError> {
             "group_state" => {
                 let name = x.attr(node, "name", "the state's name")?.to_string();
                 let group = x.attr(node, "group", "the name of a group")?.to_string();
-                references.push((node, group.clone()));
+                references.push((node, group.clone(), Reference::State(srdf.group_states.len())));
                 let mut values = Vec::new();
                 for j in node.children().filter(|n| n.is_element()) {
                     if j.tag_name().name() != "joint" {
@@ -245,10 +249,10 @@ pub fn parse_srdf(text: &str, file: &Path) -> Result<Srdf, ModelError> {
             }
             "end_effector" => {
                 let group = x.attr(node, "group", "the name of the end effector's group")?.to_string();
-                references.push((node, group.clone()));
+                references.push((node, group.clone(), Reference::EndEffector(srdf.end_effectors.len())));
                 let parent_group = match node.attribute("parent_group") {
                     Some(g) => {
-                        references.push((node, g.to_string()));
+                        references.push((node, g.to_string(), Reference::ParentGroup(srdf.end_effectors.len())));
                         Some(g.to_string())
                     }
                     None => None,
@@ -294,20 +298,59 @@ pub fn parse_srdf(text: &str, file: &Path) -> Result<Srdf, ModelError> {
             other => r.warn(node, format!("unknown SRDF element <{other}> ignored")),
         }
     }
-    for (node, name) in references {
-        if !srdf.groups.iter().any(|g| g.name == name) {
-            let known: Vec<&str> = srdf.groups.iter().map(|g| g.name.as_str()).collect();
-            return Err(x.err(
-                node,
-                format!(
-                    "unknown group `{name}` (expected one of the groups defined in the file: {})",
-                    known.join(", ")
-                ),
-            ));
+    let known: Vec<String> = srdf.groups.iter().map(|g| g.name.clone()).collect();
+    let (mut drop_states, mut drop_effectors) = (Vec::new(), Vec::new());
+    for (node, name, what) in references {
+        if known.contains(&name) {
+            continue;
         }
+        let dropped = match what {
+            Reference::Subgroup(g) => {
+                srdf.groups[g].subgroups.retain(|s| *s != name);
+                "subgroup ignored"
+            }
+            Reference::State(i) => {
+                drop_states.push(i);
+                "group state ignored"
+            }
+            Reference::EndEffector(i) => {
+                drop_effectors.push(i);
+                "end effector ignored"
+            }
+            Reference::ParentGroup(i) => {
+                srdf.end_effectors[i].parent_group = None;
+                "parent group ignored"
+            }
+        };
+        r.warn(
+            node,
+            format!(
+                "unknown group `{name}`, {dropped} (expected one of the groups defined in the file: {})",
+                known.join(", ")
+            ),
+        );
     }
+    let mut k = 0;
+    srdf.group_states.retain(|_| {
+        k += 1;
+        !drop_states.contains(&(k - 1))
+    });
+    let mut k = 0;
+    srdf.end_effectors.retain(|_| {
+        k += 1;
+        !drop_effectors.contains(&(k - 1))
+    });
     srdf.warnings = r.warnings;
     Ok(srdf)
+}
+
+/// What refers to a group, to drop it if the group is unknown.
+#[derive(Clone, Copy)]
+enum Reference {
+    Subgroup(usize),
+    State(usize),
+    EndEffector(usize),
+    ParentGroup(usize),
 }
 
 impl Reader<'_, '_> {
@@ -334,7 +377,7 @@ impl Srdf {
     /// The active joints (degrees of freedom of `robot`: not fixed, not mimic) of a group, in
     /// the robot's `q` order.
     ///
-    /// Passive joints are left out. Membership follows MoveIt: a `<chain>` contributes the joints on the tree path from its
+    /// Passive joints and the SRDF's virtual joints are left out. Membership follows MoveIt: a `<chain>` contributes the joints on the tree path from its
     /// base link down to its tip link (the base link must be an ancestor of the tip); a
     /// `<joint>` itself; a `<link>` its parent joint; a `<group>` its own joints, recursively.
     pub fn group_joints(&self, robot: &Robot, group: &str) -> Result<Vec<String>, ModelError> {
@@ -404,7 +447,8 @@ impl Srdf {
             };
             out.extend(&chain[start..]);
         }
-        for j in &g.joints {
+        // A virtual joint (world to root) is not a joint of the URDF: nothing to plan there.
+        for j in g.joints.iter().filter(|j| !self.is_virtual_joint(j)) {
             let ji = robot.joint_index(j).ok_or_else(|| ModelError::NoSuchName {
                 robot: robot.name().to_string(),
                 what: "joint",
@@ -461,6 +505,41 @@ impl Srdf {
             }
         }
         out.into_iter().collect()
+    }
+
+    /// Drop what names joints or links `robot` does not have (group members, chains, group
+    /// state values), as MoveIt does when it reads an SRDF against its URDF, and return one
+    /// warning per dropped name (also appended to [`Srdf::warnings`]).
+    pub fn reconcile(&mut self, robot: &Robot) -> Vec<Warning> {
+        let mut out = Vec::new();
+        let file = self.file.clone();
+        let mut warn = |(line, column): (u32, u32), message: String| {
+            out.push(Warning { file: file.clone(), line, column, message });
+        };
+        let virtuals: Vec<String> = self.virtual_joints.iter().map(|v| v.name.clone()).collect();
+        let joint_ok = |j: &String| virtuals.contains(j) || robot.joint_index(j).is_some();
+        for g in &mut self.groups {
+            for j in g.joints.iter().filter(|j| !joint_ok(j)) {
+                warn(g.position, format!("group `{}`: joint `{j}` is not in the URDF, ignored", g.name));
+            }
+            g.joints.retain(|j| joint_ok(j));
+            for l in g.links.iter().filter(|l| robot.link_index(l).is_none()) {
+                warn(g.position, format!("group `{}`: link `{l}` is not in the URDF, ignored", g.name));
+            }
+            g.links.retain(|l| robot.link_index(l).is_some());
+            for (b, t) in g.chains.iter().filter(|(b, t)| robot.link_index(b).is_none() || robot.link_index(t).is_none()) {
+                warn(g.position, format!("group `{}`: chain `{b}` -> `{t}` names a link not in the URDF, ignored", g.name));
+            }
+            g.chains.retain(|(b, t)| robot.link_index(b).is_some() && robot.link_index(t).is_some());
+        }
+        for s in &mut self.group_states {
+            for (j, _) in s.values.iter().filter(|(j, _)| !joint_ok(j)) {
+                warn((s.line, s.column), format!("group state `{}`: joint `{j}` is not in the URDF, ignored", s.name));
+            }
+            s.values.retain(|(j, _)| joint_ok(j));
+        }
+        self.warnings.extend(out.iter().cloned());
+        out
     }
 
     /// The names of the SRDF's virtual joints (not joints of the URDF).

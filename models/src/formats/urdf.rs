@@ -645,12 +645,16 @@ fn build(text: &str, file: &Path, options: &UrdfOptions, srdf: Option<&Semantics
     if let Some(s) = srdf {
         for (ee_name, parent_link, line, column) in &s.end_effectors {
             let Some(l) = probe.link_index(parent_link) else {
-                return Err(srdf_err(
-                    (*line, *column),
-                    format!(
-                        "end effector `{ee_name}` has parent link `{parent_link}`, which the URDF does not have (expected a link of robot `{robot_name}`)"
+                // MoveIt ignores such an end effector too.
+                warnings.push(Warning {
+                    file: srdf_doc(),
+                    line: *line,
+                    column: *column,
+                    message: format!(
+                        "end effector `{ee_name}` has parent link `{parent_link}`, which robot `{robot_name}` does not have; ignored"
                     ),
-                ));
+                });
+                continue;
             };
             if !ee_links.contains(&l) {
                 ee_links.push(l);
@@ -692,12 +696,15 @@ fn build(text: &str, file: &Path, options: &UrdfOptions, srdf: Option<&Semantics
         let mut home = probe.home().to_vec();
         for (joint, value) in values {
             let Some(ji) = probe.joint_index(joint) else {
-                return Err(srdf_err(
-                    at,
-                    format!(
-                        "group state `home` sets joint `{joint}`, which the URDF does not have (expected a joint of robot `{robot_name}`)"
+                warnings.push(Warning {
+                    file: srdf_doc(),
+                    line: at.0,
+                    column: at.1,
+                    message: format!(
+                        "group state `home` sets joint `{joint}`, which robot `{robot_name}` does not have; ignored"
                     ),
-                ));
+                });
+                continue;
             };
             let j = &probe.joints()[ji];
             if let Some(d) = j.dof_index {
