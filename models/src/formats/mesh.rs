@@ -8,8 +8,10 @@
 //! [`Decomposition::volume_ratio`] times its enclosed volume". Only closed (watertight) meshes
 //! have an enclosed volume; open meshes always get their single hull.
 //!
-//! Collada files are read with their node transforms and `<unit meter>` applied (as ROS tools
-//! do); `<up_axis>` is not applied (nor is it by RViz or MoveIt).
+//! Collada files are read with their node transforms and `<unit meter>` applied; `<up_axis>` is
+//! not applied. One difference from the assimp-based ROS tools: mesh-loader scales vertices by
+//! `<unit>` but not the translations of scene nodes, so a file with a unit other than metres
+//! *and* translated nodes is placed differently (none of the corpus files is such a file).
 
 use std::collections::HashMap;
 use std::path::Path;
