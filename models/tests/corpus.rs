@@ -116,3 +116,26 @@ fn moveit_srdfs_read_passive_joints_group_states_and_virtual_joints() {
         }
     }
 }
+
+#[test]
+fn decomposition_rule_on_the_corpus() {
+    // How many meshes the rule splits and what it costs: one load with the rule, one without.
+    let reference = reference();
+    for (key, srdf) in ROBOTS {
+        let urdf = corpus(reference[key]["urdf"].as_str().expect("urdf path"));
+        let srdf = srdf.map(corpus);
+        let mut row = format!("{key:16}");
+        let mut counts = Vec::new();
+        for decomposition in [None, Some(embodied_models::formats::mesh::Decomposition::default())] {
+            let options = UrdfOptions { use_environment: false, decomposition, ..UrdfOptions::default() };
+            let start = Instant::now();
+            let d = load_description(&urdf, srdf.as_deref(), &options).expect("loads");
+            let ms = start.elapsed().as_secs_f64() * 1e3;
+            let shapes: usize = d.robot.links().iter().map(|l| l.shapes.len()).sum();
+            counts.push(shapes);
+            row.push_str(&format!("  {} shapes {shapes:4} in {ms:7.1} ms", if decomposition.is_some() { "rule:" } else { "hulls:" }));
+        }
+        assert!(counts[1] >= counts[0], "{key}: decomposition never removes shapes");
+        eprintln!("{row}");
+    }
+}
