@@ -10,11 +10,7 @@ pub mod carry;
 pub mod deadline;
 pub mod error;
 pub mod motion;
-/// MoveIt planning scenes and motion plan requests; the reader lives in
-/// [`embodied_models::formats::moveit`] and is re-exported here.
-pub mod moveit {
-    pub use embodied_models::formats::moveit::*;
-}
+pub mod moveit;
 pub mod roadmap;
 pub mod search;
 pub mod task;

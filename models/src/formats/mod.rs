@@ -82,16 +82,30 @@ fn describe(text: &str, file: &Path, options: &UrdfOptions, srdf: Option<Srdf>) 
     Ok(Description { robot, srdf, warnings })
 }
 
+static WARNING_SINK: std::sync::RwLock<Option<fn(&Warning)>> = std::sync::RwLock::new(None);
+
+/// Where [`load_urdf`] and [`load_urdf_with`] send their warnings (a program prints them; by
+/// default they are dropped). [`load_description`] returns them instead.
+pub fn set_warning_sink(sink: fn(&Warning)) {
+    if let Ok(mut s) = WARNING_SINK.write() {
+        *s = Some(sink);
+    }
+}
+
 /// Load a URDF file (meshes loaded, default limits), applying an SRDF file if given
-/// (collision pairs, the `home` group state, end effectors). Warnings are dropped; use
-/// [`load_description`] to see them.
+/// (collision pairs, the `home` group state, end effectors). Warnings go to the sink set with
+/// [`set_warning_sink`]; use [`load_description`] to get them.
 pub fn load_urdf(path: &Path, srdf: Option<&Path>) -> Result<Robot, ModelError> {
     load_urdf_with(path, srdf, &UrdfOptions::default())
 }
 
 /// [`load_urdf`] with explicit options.
 pub fn load_urdf_with(path: &Path, srdf: Option<&Path>, options: &UrdfOptions) -> Result<Robot, ModelError> {
-    Ok(load_description(path, srdf, options)?.robot)
+    let d = load_description(path, srdf, options)?;
+    if let Some(sink) = WARNING_SINK.read().ok().and_then(|s| *s) {
+        d.warnings.iter().for_each(sink);
+    }
+    Ok(d.robot)
 }
 
 /// Parse URDF text and apply an already parsed SRDF (collision pairs, `home`, end effectors).

@@ -93,14 +93,34 @@ pub struct UrdfOptions {
     pub decomposition: Option<Decomposition>,
 }
 
+/// Process-wide defaults of [`UrdfOptions::default`], set once by a program (the CLI's
+/// `--package-path` and `--allow-missing-meshes`) so that every URDF it loads honours them.
+#[derive(Debug, Clone, Default)]
+pub struct UrdfDefaults {
+    /// Prepended to [`UrdfOptions::package_dirs`].
+    pub package_dirs: Vec<PathBuf>,
+    /// [`UrdfOptions::allow_missing_meshes`].
+    pub allow_missing_meshes: bool,
+}
+
+static DEFAULTS: std::sync::RwLock<Option<UrdfDefaults>> = std::sync::RwLock::new(None);
+
+/// Set the process-wide defaults of [`UrdfOptions::default`].
+pub fn set_urdf_defaults(defaults: UrdfDefaults) {
+    if let Ok(mut d) = DEFAULTS.write() {
+        *d = Some(defaults);
+    }
+}
+
 impl Default for UrdfOptions {
     fn default() -> Self {
+        let defaults = DEFAULTS.read().ok().and_then(|d| d.clone()).unwrap_or_default();
         Self {
-            package_dirs: Vec::new(),
+            package_dirs: defaults.package_dirs,
             default_max_velocity: DEFAULT_MAX_VELOCITY,
             default_max_acceleration: DEFAULT_MAX_ACCELERATION,
             load_meshes: true,
-            allow_missing_meshes: false,
+            allow_missing_meshes: defaults.allow_missing_meshes,
             use_environment: true,
             decomposition: Some(Decomposition::default()),
         }
