@@ -11,6 +11,7 @@ pub mod deadlines;
 pub mod error;
 pub mod mbm;
 pub mod model_report;
+pub mod moveit_cli;
 pub mod plan;
 pub mod run;
 pub mod runlog;
