@@ -39,19 +39,31 @@ pub const MESH_EXTENSIONS: [&str; 3] = ["stl", "dae", "obj"];
 /// The error is a sentence saying what is wrong with the file (the caller names the file).
 pub fn read_mesh(path: &Path, scale: Vector3<f64>) -> Result<TriMesh, String> {
     let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
-    let loader = mesh_loader::Loader::default();
-    let scene = match ext.as_str() {
-        "stl" => loader.load_stl(path),
-        "dae" => loader.load_collada(path),
-        "obj" => loader.load_obj(path),
-        _ => {
+    if !MESH_EXTENSIONS.contains(&ext.as_str()) {
+        return Err(format!(
+            "`.{ext}` meshes are not supported (expected one of: {})",
+            MESH_EXTENSIONS.iter().map(|e| format!(".{e}")).collect::<Vec<_>>().join(", ")
+        ));
+    }
+    let load = || {
+        let loader = mesh_loader::Loader::default();
+        match ext.as_str() {
+            "stl" => loader.load_stl(path),
+            "dae" => loader.load_collada(path),
+            _ => loader.load_obj(path),
+        }
+    };
+    // mesh-loader 0.1.13 panics on some malformed Collada files (a reference to a source the
+    // file does not define); such a file is refused like any other malformed one.
+    let scene = match std::panic::catch_unwind(std::panic::AssertUnwindSafe(load)) {
+        Ok(result) => result.map_err(|e| format!("not a valid {} file: {e}", ext.to_ascii_uppercase()))?,
+        Err(_) => {
             return Err(format!(
-                "`.{ext}` meshes are not supported (expected one of: {})",
-                MESH_EXTENSIONS.iter().map(|e| format!(".{e}")).collect::<Vec<_>>().join(", ")
+                "not a valid {} file: the reader failed on it (a reference to something the file does not define?)",
+                ext.to_ascii_uppercase()
             ));
         }
-    }
-    .map_err(|e| format!("not a valid {} file: {e}", ext.to_ascii_uppercase()))?;
+    };
     let mut out = TriMesh::default();
     for mesh in &scene.meshes {
         let base = u32::try_from(out.vertices.len()).map_err(|_| "the mesh has too many vertices".to_string())?;
