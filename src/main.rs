@@ -311,8 +311,11 @@ fn run(cli: Cli) -> Result<(), AppError> {
             match out {
                 Some(path) => {
                     std::fs::write(&path, &text).map_err(|e| AppError::io(&path, e))?;
-                    println!("{summary}
-plan written to {}", path.display());
+                    println!(
+                        "{summary}
+plan written to {}",
+                        path.display()
+                    );
                 }
                 None => print!("{text}"),
             }
@@ -369,7 +372,9 @@ plan written to {}", path.display());
                     &t,
                     json,
                 )?,
-                _ => embodied::verify::verify_cli(&scenario.unwrap_or_default(), plan.as_deref(), log.as_deref(), json)?,
+                _ => {
+                    embodied::verify::verify_cli(&scenario.unwrap_or_default(), plan.as_deref(), log.as_deref(), json)?
+                }
             };
             if !certified {
                 // Checked and not certified: a status of its own (2 is bad input).

@@ -71,7 +71,11 @@ pub struct MoveitPlanArgs {
 }
 
 /// Plan a MoveIt request and render it in `format`; returns the text and a one-line summary.
-pub fn plan_moveit(args: &MoveitPlanArgs, format: PlanFormat, out: Option<&Path>) -> Result<(String, String), AppError> {
+pub fn plan_moveit(
+    args: &MoveitPlanArgs,
+    format: PlanFormat,
+    out: Option<&Path>,
+) -> Result<(String, String), AppError> {
     let (robot, srdf) = load_moveit_robot(&args.urdf, Some(&args.srdf), args.limits.as_deref())?;
     let srdf = srdf.ok_or_else(|| AppError::Usage("--srdf is needed to resolve the request's group".into()))?;
     let scene = load_scene(&args.scene).map_err(from_moveit)?;
@@ -82,7 +86,8 @@ pub fn plan_moveit(args: &MoveitPlanArgs, format: PlanFormat, out: Option<&Path>
         Some(ms) => return Err(AppError::Usage(format!("--deadline-ms must be a non-negative number, got {ms}"))),
         None => request.allowed_planning_time.filter(|t| t.is_finite() && *t > 0.0).unwrap_or(5.0),
     };
-    let settings = MotionSettings { deadline: Deadline::after(Duration::from_secs_f64(seconds)), ..MotionSettings::default() };
+    let settings =
+        MotionSettings { deadline: Deadline::after(Duration::from_secs_f64(seconds)), ..MotionSettings::default() };
     let plan = plan_request(&problem, &settings)
         .map_err(|e| AppError::Failed(format!("{}: group `{}`: {e}", args.request.display(), request.group_name)))?;
     // The certified checker, not the planner, says whether the plan may leave.

@@ -315,7 +315,9 @@ fn mesh_files() {
 #[test]
 fn joint_limits_files() {
     let mut text = String::from("default_velocity_scaling_factor: 0.1\njoint_limits:\n");
-    for j in ["shoulder_pan_joint", "shoulder_lift_joint", "elbow_joint", "wrist_1_joint", "wrist_2_joint", "wrist_3_joint"] {
+    for j in
+        ["shoulder_pan_joint", "shoulder_lift_joint", "elbow_joint", "wrist_1_joint", "wrist_2_joint", "wrist_3_joint"]
+    {
         text.push_str(&format!(
             "  {j}:\n    has_velocity_limits: true\n    max_velocity: 3.15\n    has_acceleration_limits: true\n    max_acceleration: 5.0\n    has_position_limits: false\n    min_position: -1\n    max_position: 1\n"
         ));

@@ -63,8 +63,19 @@ fn planned_joint_trajectory_verifies_and_a_cut_corner_is_refused() {
     for ext in ["yaml", "json"] {
         let out = dir.join(format!("traj.{ext}"));
         let (code, stdout, stderr) = embodied(&[
-            "plan", "--urdf", &s(&urdf), "--srdf", &s(&srdf), "--scene", &s(&scene), "--request", &s(&request),
-            "--format", "joint-trajectory", "-o", &s(&out),
+            "plan",
+            "--urdf",
+            &s(&urdf),
+            "--srdf",
+            &s(&srdf),
+            "--scene",
+            &s(&scene),
+            "--request",
+            &s(&request),
+            "--format",
+            "joint-trajectory",
+            "-o",
+            &s(&out),
         ]);
         assert_eq!(code, 0, "plan failed: {stdout}{stderr}");
         let text = std::fs::read_to_string(&out).expect("written");
@@ -73,7 +84,17 @@ fn planned_joint_trajectory_verifies_and_a_cut_corner_is_refused() {
             serde_json::from_str::<serde_json::Value>(&text).expect("a .json file holds JSON");
         }
         let verify = |traj: &Path| {
-            embodied(&["verify", "--urdf", &s(&urdf), "--srdf", &s(&srdf), "--scene", &s(&scene), "--trajectory", &s(traj)])
+            embodied(&[
+                "verify",
+                "--urdf",
+                &s(&urdf),
+                "--srdf",
+                &s(&srdf),
+                "--scene",
+                &s(&scene),
+                "--trajectory",
+                &s(traj),
+            ])
         };
         let (code, stdout, stderr) = verify(&out);
         assert_eq!(code, 0, "not certified: {stdout}{stderr}");

@@ -37,8 +37,7 @@ fn load(key: &str, srdf: Option<&str>, reference: &serde_json::Value) -> (Descri
     let srdf = srdf.map(corpus);
     let options = UrdfOptions { use_environment: false, ..UrdfOptions::default() };
     let start = Instant::now();
-    let d = load_description(&urdf, srdf.as_deref(), &options)
-        .unwrap_or_else(|e| panic!("{key} does not load: {e}"));
+    let d = load_description(&urdf, srdf.as_deref(), &options).unwrap_or_else(|e| panic!("{key} does not load: {e}"));
     (d, start.elapsed().as_secs_f64() * 1e3)
 }
 
@@ -133,7 +132,10 @@ fn decomposition_rule_on_the_corpus() {
             let ms = start.elapsed().as_secs_f64() * 1e3;
             let shapes: usize = d.robot.links().iter().map(|l| l.shapes.len()).sum();
             counts.push(shapes);
-            row.push_str(&format!("  {} shapes {shapes:4} in {ms:7.1} ms", if decomposition.is_some() { "rule:" } else { "hulls:" }));
+            row.push_str(&format!(
+                "  {} shapes {shapes:4} in {ms:7.1} ms",
+                if decomposition.is_some() { "rule:" } else { "hulls:" }
+            ));
         }
         assert!(counts[1] >= counts[0], "{key}: decomposition never removes shapes");
         eprintln!("{row}");

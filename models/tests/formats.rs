@@ -136,11 +136,8 @@ fn package_uris_with_three_slashes_package_dirs_and_ament_prefixes() {
     let urdf = Path::new("/nowhere/r.urdf");
     let text = mesh_robot("package:///meshes/cube.obj", "x.stl");
     // `package:///meshes/...`: the package `meshes` is the fixtures' meshes folder.
-    let options = UrdfOptions {
-        package_dirs: vec![fixture("meshes")],
-        use_environment: false,
-        ..UrdfOptions::default()
-    };
+    let options =
+        UrdfOptions { package_dirs: vec![fixture("meshes")], use_environment: false, ..UrdfOptions::default() };
     let load = parse_urdf_with(&text, urdf, &options, None).expect("package:/// and --package-path");
     assert_eq!(load.robot.links()[0].shapes.len(), 1);
     // A folder containing the package works too.

@@ -432,7 +432,10 @@ fn error_missing_and_unsupported_meshes() {
     // PLY: not supported unless meshes are skipped; a missing Collada/OBJ file names every path tried.
     let err = parse(&mesh("meshes/arm.ply"), &UrdfOptions::default()).expect_err("ply");
     assert_mentions(&err.to_string(), &["inline.urdf:4", "`.ply` meshes are not supported", "expected STL, Collada"]);
-    assert_mentions(&parse(&mesh("x.obj"), &UrdfOptions::default()).expect_err("obj").to_string(), &["`x.obj`", "not found", "--allow-missing-meshes"]);
+    assert_mentions(
+        &parse(&mesh("x.obj"), &UrdfOptions::default()).expect_err("obj").to_string(),
+        &["`x.obj`", "not found", "--allow-missing-meshes"],
+    );
     for f in ["meshes/missing.stl", "meshes/arm.ply", "x.obj"] {
         let robot = parse(&mesh(f), &no_meshes()).expect("skipped");
         assert!(robot.links()[0].shapes.is_empty());

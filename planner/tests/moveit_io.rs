@@ -43,7 +43,8 @@ fn scene_text(robot: &Robot) -> String {
 }
 
 fn request_text() -> String {
-    let names = ["shoulder_pan_joint", "shoulder_lift_joint", "elbow_joint", "wrist_1_joint", "wrist_2_joint", "wrist_3_joint"];
+    let names =
+        ["shoulder_pan_joint", "shoulder_lift_joint", "elbow_joint", "wrist_1_joint", "wrist_2_joint", "wrist_3_joint"];
     let mut s = format!(
         "group_name: manipulator\nallowed_planning_time: 5\nstart_state:\n  joint_state:\n    name: [{}]\n    position: [{}]\ngoal_constraints:\n  - joint_constraints:\n",
         names.join(", "),
@@ -55,7 +56,11 @@ fn request_text() -> String {
     s
 }
 
-fn certify(robot: &Robot, scene_yaml: &str, jt: &JointTrajectory) -> embodied_planner::verify::certified::TrajectoryReport {
+fn certify(
+    robot: &Robot,
+    scene_yaml: &str,
+    jt: &JointTrajectory,
+) -> embodied_planner::verify::certified::TrajectoryReport {
     let scene = parse_scene(scene_yaml, Path::new("scene.yaml")).expect("scene");
     let problem =
         trajectory_problem(robot, scene.robot_state.as_ref(), scene.environment(), jt, Path::new("traj.yaml"))

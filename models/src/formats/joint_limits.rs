@@ -74,7 +74,9 @@ pub fn parse_joint_limits(text: &str, file: &Path) -> Result<JointLimitsFile, Ya
     }
     let limits = doc.require(root, "joint_limits", "a mapping from joint names to their limits")?;
     let YamlDataOwned::Mapping(map) = &limits.data else {
-        return Err(doc.err(limits, &format!("expected a mapping from joint names to limits, got {}", describe(limits))));
+        return Err(
+            doc.err(limits, &format!("expected a mapping from joint names to limits, got {}", describe(limits)))
+        );
     };
     let mut out = JointLimitsFile { file: file.to_path_buf(), joints: Vec::new() };
     for (key, value) in map {
@@ -149,11 +151,8 @@ impl JointLimitsFile {
                 changed += 1;
             }
         }
-        let provenance = format!(
-            "{}; limits from {} ({changed} joints changed)",
-            robot.provenance(),
-            self.file.display()
-        );
+        let provenance =
+            format!("{}; limits from {} ({changed} joints changed)", robot.provenance(), self.file.display());
         robot.set_provenance(provenance);
         Ok(changed)
     }

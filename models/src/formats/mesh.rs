@@ -68,11 +68,7 @@ pub fn read_mesh(path: &Path, scale: Vector3<f64>) -> Result<TriMesh, String> {
     for mesh in &scene.meshes {
         let base = u32::try_from(out.vertices.len()).map_err(|_| "the mesh has too many vertices".to_string())?;
         for v in &mesh.vertices {
-            let p = Point3::new(
-                f64::from(v[0]) * scale.x,
-                f64::from(v[1]) * scale.y,
-                f64::from(v[2]) * scale.z,
-            );
+            let p = Point3::new(f64::from(v[0]) * scale.x, f64::from(v[1]) * scale.y, f64::from(v[2]) * scale.z);
             if !p.coords.iter().all(|c| c.is_finite()) {
                 return Err("the mesh has non-finite vertex coordinates".into());
             }
@@ -157,11 +153,8 @@ pub fn convex_pieces(mesh: &TriMesh, decomposition: Option<&Decomposition>) -> O
                 ..VHACDParameters::default()
             };
             let parts = VHACD::decompose(&params, &mesh.vertices, &mesh.triangles, false).compute_convex_hulls(4);
-            let pieces: Vec<Arc<ConvexHull>> = parts
-                .iter()
-                .filter_map(|(points, _)| ConvexHull::from_points(points))
-                .map(Arc::new)
-                .collect();
+            let pieces: Vec<Arc<ConvexHull>> =
+                parts.iter().filter_map(|(points, _)| ConvexHull::from_points(points)).map(Arc::new).collect();
             if pieces.len() > 1 {
                 return Some(pieces);
             }

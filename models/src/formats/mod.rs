@@ -25,7 +25,7 @@ use std::path::Path;
 use crate::error::{ModelError, Warning};
 use crate::robot::Robot;
 use srdf::{Srdf, parse_srdf};
-use urdf::{Semantics, UrdfOptions, parse_urdf_with, read_urdf_text};
+use urdf::{HomeState, Semantics, UrdfOptions, parse_urdf_with, read_urdf_text};
 
 /// A robot with the SRDF it was loaded with and every warning raised on the way.
 #[derive(Debug, Clone)]
@@ -51,7 +51,7 @@ pub fn semantics(srdf: &Srdf) -> Semantics {
             .filter(|(j, v)| v.len() == 1 && !srdf.is_virtual_joint(j))
             .map(|(j, v)| (j.clone(), v[0]))
             .collect();
-        (values, s.line, s.column)
+        HomeState { values, line: s.line, column: s.column }
     });
     Semantics { file: srdf.file.clone(), end_effectors, home, disabled: Vec::new() }
 }
@@ -116,4 +116,3 @@ pub fn parse_urdf_with_srdf(text: &str, file: &Path, options: &UrdfOptions, srdf
 fn read_text(path: &Path) -> Result<String, ModelError> {
     std::fs::read_to_string(path).map_err(|source| ModelError::Io { file: path.to_path_buf(), source })
 }
-

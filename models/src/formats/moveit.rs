@@ -40,8 +40,8 @@ use crate::geometry::Shape;
 use crate::robot::Robot;
 use saphyr::{ScalarOwned, YamlDataOwned};
 
-use super::yaml::{Doc, Node, YamlError, describe, is_null};
 pub use super::yaml::Location;
+use super::yaml::{Doc, Node, YamlError, describe, is_null};
 
 /// What can go wrong reading a MoveIt scene or request.
 pub type MoveitError = YamlError;

@@ -160,11 +160,7 @@ impl Reader<'_, '_> {
             if a.namespace().is_none() && !known.contains(&a.name()) {
                 self.warn(
                     node,
-                    format!(
-                        "unknown attribute `{}` on <{tag}> ignored (expected: {})",
-                        a.name(),
-                        known.join(", ")
-                    ),
+                    format!("unknown attribute `{}` on <{tag}> ignored (expected: {})", a.name(), known.join(", ")),
                 );
             }
         }
@@ -234,7 +230,10 @@ pub fn parse_srdf(text: &str, file: &Path) -> Result<Srdf, ModelError> {
                 let mut values = Vec::new();
                 for j in node.children().filter(|n| n.is_element()) {
                     if j.tag_name().name() != "joint" {
-                        r.warn(j, format!("unknown <{}> in <group_state> ignored (expected <joint>)", j.tag_name().name()));
+                        r.warn(
+                            j,
+                            format!("unknown <{}> in <group_state> ignored (expected <joint>)", j.tag_name().name()),
+                        );
                         continue;
                     }
                     r.check_attributes_of_state_joint(j);
@@ -270,10 +269,9 @@ pub fn parse_srdf(text: &str, file: &Path) -> Result<Srdf, ModelError> {
             "virtual_joint" => {
                 let kind = x.attr(node, "type", "fixed, floating or planar")?;
                 if !matches!(kind, "fixed" | "floating" | "planar") {
-                    return Err(x.err(
-                        node,
-                        format!("virtual joint type `{kind}` (expected fixed, floating or planar)"),
-                    ));
+                    return Err(
+                        x.err(node, format!("virtual joint type `{kind}` (expected fixed, floating or planar)"))
+                    );
                 }
                 srdf.virtual_joints.push(VirtualJoint {
                     name: x.attr(node, "name", "the virtual joint's name")?.to_string(),
@@ -527,8 +525,13 @@ impl Srdf {
                 warn(g.position, format!("group `{}`: link `{l}` is not in the URDF, ignored", g.name));
             }
             g.links.retain(|l| robot.link_index(l).is_some());
-            for (b, t) in g.chains.iter().filter(|(b, t)| robot.link_index(b).is_none() || robot.link_index(t).is_none()) {
-                warn(g.position, format!("group `{}`: chain `{b}` -> `{t}` names a link not in the URDF, ignored", g.name));
+            for (b, t) in
+                g.chains.iter().filter(|(b, t)| robot.link_index(b).is_none() || robot.link_index(t).is_none())
+            {
+                warn(
+                    g.position,
+                    format!("group `{}`: chain `{b}` -> `{t}` names a link not in the URDF, ignored", g.name),
+                );
             }
             g.chains.retain(|(b, t)| robot.link_index(b).is_some() && robot.link_index(t).is_some());
         }

@@ -135,10 +135,21 @@ pub struct Semantics {
     pub file: PathBuf,
     /// `(end effector name, parent link, line, column)`, in file order.
     pub end_effectors: Vec<(String, String, u32, u32)>,
-    /// The `home` state: `(joint, value)` pairs and the state's line and column.
-    pub home: Option<(Vec<(String, f64)>, u32, u32)>,
+    /// The `home` state.
+    pub home: Option<HomeState>,
     /// Link pairs whose collisions are ignored (pairs naming unknown links are skipped).
     pub disabled: Vec<(String, String)>,
+}
+
+/// The `home` group state of a semantic description.
+#[derive(Debug, Clone, Default)]
+pub struct HomeState {
+    /// `(joint, value)` pairs.
+    pub values: Vec<(String, f64)>,
+    /// Line of the state in [`Semantics::file`].
+    pub line: u32,
+    /// Column of the state.
+    pub column: u32,
 }
 
 /// A robot loaded from a URDF, with what was noticed but did not stop the load.
@@ -184,11 +195,7 @@ pub fn read_urdf_text(path: &Path) -> Result<String, ModelError> {
             file: path.to_path_buf(),
             line: 1,
             column: 1,
-            message: format!(
-                "`xacro` failed ({}): {}",
-                out.status,
-                String::from_utf8_lossy(&out.stderr).trim()
-            ),
+            message: format!("`xacro` failed ({}): {}", out.status, String::from_utf8_lossy(&out.stderr).trim()),
         }),
         Err(e) => Err(ModelError::Parse {
             file: path.to_path_buf(),
@@ -655,7 +662,8 @@ fn build(text: &str, file: &Path, options: &UrdfOptions, srdf: Option<&Semantics
     // A first build gives the ordered tree, from which end effectors and home are chosen.
     let probe = builder.clone().build()?;
     let srdf_doc = || srdf.map(|s| s.file.clone()).unwrap_or_default();
-    let srdf_err = |(line, column): (u32, u32), message: String| ModelError::Parse { file: srdf_doc(), line, column, message };
+    let srdf_err =
+        |(line, column): (u32, u32), message: String| ModelError::Parse { file: srdf_doc(), line, column, message };
     let mut ee_links: Vec<usize> = Vec::new();
     let mut taken_groups: Vec<Option<usize>> = Vec::new();
     let last_actuated = |link: usize| {
@@ -711,7 +719,7 @@ fn build(text: &str, file: &Path, options: &UrdfOptions, srdf: Option<&Semantics
         builder.end_effector(name.clone(), name, Isometry3::identity());
     }
 
-    if let Some((values, line, column)) = srdf.and_then(|s| s.home.as_ref()) {
+    if let Some(HomeState { values, line, column }) = srdf.and_then(|s| s.home.as_ref()) {
         let at = (*line, *column);
         let mut home = probe.home().to_vec();
         for (joint, value) in values {

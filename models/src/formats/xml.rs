@@ -68,7 +68,14 @@ impl<'i> Xml<'i> {
     }
 
     /// Whitespace-separated finite numbers of an attribute value, exactly `n` of them.
-    pub(crate) fn numbers(&self, node: Node, name: &str, text: &str, n: usize, expected: &str) -> Result<Vec<f64>, ModelError> {
+    pub(crate) fn numbers(
+        &self,
+        node: Node,
+        name: &str,
+        text: &str,
+        n: usize,
+        expected: &str,
+    ) -> Result<Vec<f64>, ModelError> {
         let pos = self.attr_pos(node, name);
         let tag = node.tag_name().name();
         let mut out = Vec::with_capacity(n);
@@ -137,4 +144,3 @@ pub(crate) fn child<'a, 'i>(node: Node<'a, 'i>, tag: &str) -> Option<Node<'a, 'i
 pub(crate) fn children<'a, 'i>(node: Node<'a, 'i>, tag: &'static str) -> impl Iterator<Item = Node<'a, 'i>> {
     node.children().filter(move |n| n.is_element() && n.tag_name().name() == tag)
 }
-
