@@ -8,6 +8,7 @@
 #![forbid(unsafe_code)]
 
 pub mod model_report;
+pub mod moveit_cli;
 
 pub use embodied_system::SystemError as AppError;
 pub use embodied_system::{bench_qp, deadlines, log, mbm, plan, scenario, system, verify};

@@ -25,6 +25,13 @@ fn builtin_help() -> String {
 struct Cli {
     #[command(subcommand)]
     command: Command,
+    /// A folder to look for `package://NAME/...` files in: the package NAME itself or a folder
+    /// holding it (repeatable; before ROS_PACKAGE_PATH, AMENT_PREFIX_PATH and the URDF's folders).
+    #[arg(long, global = true, value_name = "DIR")]
+    package_path: Vec<PathBuf>,
+    /// Drop a collision mesh found nowhere (with a warning) instead of refusing the URDF.
+    #[arg(long, global = true)]
+    allow_missing_meshes: bool,
 }
 
 #[derive(Subcommand, Debug)]
@@ -81,10 +88,31 @@ enum Command {
         #[arg(long)]
         us_per_check: Option<f64>,
     },
-    /// Plan every agent of a scenario that has a goal and write the plan (JSON).
+    /// Plan every agent of a scenario that has a goal and write the plan (JSON), or plan a MoveIt
+    /// motion plan request in its planning scene (--urdf --srdf --scene --request).
     Plan {
         /// A built-in scenario name or a scenario TOML file.
-        scenario: String,
+        #[arg(required_unless_present = "request")]
+        scenario: Option<String>,
+        /// The robot of a MoveIt request (URDF or .xacro).
+        #[arg(long, requires_all = ["srdf", "scene", "request"])]
+        urdf: Option<PathBuf>,
+        /// Its SRDF (groups).
+        #[arg(long)]
+        srdf: Option<PathBuf>,
+        /// A MoveIt planning scene (YAML).
+        #[arg(long)]
+        scene: Option<PathBuf>,
+        /// A MoveIt motion plan request (YAML), planned instead of a scenario.
+        #[arg(long, requires = "urdf", conflicts_with = "scenario")]
+        request: Option<PathBuf>,
+        /// MoveIt's joint_limits.yaml (acceleration limits URDF has not).
+        #[arg(long, requires = "urdf")]
+        limits: Option<PathBuf>,
+        /// Output: embodied-plan/1 JSON, or a trajectory_msgs/JointTrajectory (YAML, or JSON for
+        /// a .json file). Default: embodied for scenarios, joint-trajectory for requests.
+        #[arg(long, value_enum)]
+        format: Option<embodied::moveit_cli::PlanFormat>,
         /// Write the plan file here (default: print it).
         #[arg(short = 'o', long = "out")]
         out: Option<PathBuf>,
@@ -100,10 +128,26 @@ enum Command {
     /// Exit status: 0 certified, 1 a violation or not certified, 2 bad input.
     Verify {
         /// A built-in scenario name or a scenario TOML file.
-        scenario: String,
+        #[arg(required_unless_present = "trajectory")]
+        scenario: Option<String>,
         /// The plan file (`embodied plan -o PLAN.json`); optional when --log is given.
-        #[arg(required_unless_present = "log")]
+        #[arg(required_unless_present_any = ["log", "trajectory"])]
         plan: Option<PathBuf>,
+        /// A trajectory_msgs/JointTrajectory (YAML or JSON) to certify, with --urdf.
+        #[arg(long, requires = "urdf", conflicts_with_all = ["scenario", "plan", "log"])]
+        trajectory: Option<PathBuf>,
+        /// The robot of --trajectory (URDF or .xacro).
+        #[arg(long, requires = "trajectory")]
+        urdf: Option<PathBuf>,
+        /// Its SRDF (disabled collision pairs).
+        #[arg(long, requires = "trajectory")]
+        srdf: Option<PathBuf>,
+        /// A MoveIt planning scene (YAML): obstacles and the state of joints the trajectory leaves out.
+        #[arg(long, requires = "trajectory")]
+        scene: Option<PathBuf>,
+        /// MoveIt's joint_limits.yaml.
+        #[arg(long, requires = "trajectory")]
+        limits: Option<PathBuf>,
         /// Check a run log (`embodied run --log FILE.jsonl`): limits and grasp..release closure.
         #[arg(long)]
         log: Option<PathBuf>,
@@ -266,10 +310,35 @@ fn run(cli: Cli) -> Result<(), AppError> {
                 None => Ok(()),
             }
         }
-        Command::Plan { scenario, out, deadline_ms, json } => {
-            let scenario = embodied::scenario::load_scenario(&scenario)?;
+        Command::Plan { request: Some(request), urdf, srdf, scene, limits, format, out, deadline_ms, .. } => {
+            let (Some(urdf), Some(srdf), Some(scene)) = (urdf, srdf, scene) else {
+                return Err(AppError::Usage("--request needs --urdf, --srdf and --scene".into()));
+            };
+            let args = embodied::moveit_cli::MoveitPlanArgs { urdf, srdf, scene, request, limits, deadline_ms };
+            let format = format.unwrap_or(embodied::moveit_cli::PlanFormat::JointTrajectory);
+            let (text, summary) = embodied::moveit_cli::plan_moveit(&args, format, out.as_deref())?;
+            match out {
+                Some(path) => {
+                    std::fs::write(&path, &text).map_err(|e| AppError::io(&path, e))?;
+                    println!(
+                        "{summary}
+plan written to {}",
+                        path.display()
+                    );
+                }
+                None => print!("{text}"),
+            }
+            Ok(())
+        }
+        Command::Plan { scenario, out, deadline_ms, json, format, .. } => {
+            let scenario = embodied::scenario::load_scenario(&scenario.unwrap_or_default())?;
             let plan = embodied::plan::plan_scenario(&scenario, deadline_ms)?;
-            let text = to_json(&plan)?;
+            let text = match format {
+                Some(embodied::moveit_cli::PlanFormat::JointTrajectory) => {
+                    embodied::moveit_cli::plan_file_as_joint_trajectory(&plan, out.as_deref())?
+                }
+                _ => to_json(&plan)?,
+            };
             match out {
                 Some(path) => {
                     std::fs::write(&path, &text).map_err(|e| AppError::io(&path, e))?;
@@ -302,8 +371,20 @@ fn run(cli: Cli) -> Result<(), AppError> {
             }
             Ok(())
         }
-        Command::Verify { scenario, plan, log, json } => {
-            let certified = embodied::verify::verify_cli(&scenario, plan.as_deref(), log.as_deref(), json)?;
+        Command::Verify { scenario, plan, log, json, trajectory, urdf, srdf, scene, limits } => {
+            let certified = match (trajectory, urdf) {
+                (Some(t), Some(u)) => embodied::moveit_cli::verify_joint_trajectory(
+                    &u,
+                    srdf.as_deref(),
+                    scene.as_deref(),
+                    limits.as_deref(),
+                    &t,
+                    json,
+                )?,
+                _ => {
+                    embodied::verify::verify_cli(&scenario.unwrap_or_default(), plan.as_deref(), log.as_deref(), json)?
+                }
+            };
             if !certified {
                 // Checked and not certified: a status of its own (2 is bad input).
                 use std::io::Write;
@@ -440,6 +521,11 @@ fn run(cli: Cli) -> Result<(), AppError> {
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
+    embodied_models::urdf::set_urdf_defaults(embodied_models::urdf::UrdfDefaults {
+        package_dirs: cli.package_path.clone(),
+        allow_missing_meshes: cli.allow_missing_meshes,
+    });
+    embodied_models::formats::set_warning_sink(|w| eprintln!("{w}"));
     match run(cli) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {

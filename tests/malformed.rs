@@ -1,5 +1,6 @@
-//! Malformed input never panics: every loader (scenario TOML, URDF, SRDF, MoveIt scene and
-//! request YAML, plan JSON, run log) is fed its own well-formed files with random edits
+//! Malformed input never panics: every loader (scenario TOML, URDF, SRDF, meshes (STL, OBJ,
+//! Collada), MoveIt scene and request YAML, joint_limits.yaml, JointTrajectory YAML/JSON, plan
+//! JSON, run log) is fed its own well-formed files with random edits
 //! (deleted, repeated or replaced spans, inserted tokens such as `nan`, `1e309`, `]`, `<`, a cut
 //! anywhere) and must answer `Ok` or an error that names the file. A panic fails the property,
 //! and proptest shrinks it to the smallest edit list that panics.
@@ -266,6 +267,99 @@ fn srdf_files() {
         let srdf = embodied_models::srdf::parse_srdf(text, file).map_err(|e| e.to_string())?;
         let urdf = dir.join(if file.ends_with("ur5.srdf") { "ur5_spherized.urdf" } else { "tiny_gripper.urdf" });
         parse_urdf_with_srdf(&read(&urdf), &urdf, &UrdfOptions::default(), &srdf).map(|_| ()).map_err(|e| e.to_string())
+    });
+}
+
+/// A MoveIt-generated SRDF (PR2: virtual and passive joints, group states, groups of groups)
+/// with its URDF, meshes skipped.
+#[test]
+fn moveit_generated_srdf_files() {
+    let pr2 = root().join("tests/fixtures/corpus/example-robot-data/robots/pr2_description");
+    let urdf = pr2.join("urdf/pr2.urdf");
+    let urdf_text = read(&urdf);
+    let seeds = [(pr2.join("srdf/pr2.srdf"), read(&pr2.join("srdf/pr2.srdf")))];
+    let options = UrdfOptions { load_meshes: false, ..UrdfOptions::default() };
+    fuzz("moveit-srdf", (64, 4), &seeds, &[], |file, text| {
+        let srdf = embodied_models::srdf::parse_srdf(text, file).map_err(|e| e.to_string())?;
+        let robot = parse_urdf_with_srdf(&urdf_text, &urdf, &options, &srdf).map_err(|e| e.to_string())?;
+        for g in &srdf.groups {
+            let _ = srdf.group_joints(&robot, &g.name);
+        }
+        Ok(())
+    });
+}
+
+/// Text meshes (OBJ, Collada, ASCII STL), edited, loaded as a URDF's collision mesh (hull and
+/// decomposition included).
+#[test]
+fn mesh_files() {
+    let dir = TempDir::new("malformed-meshes");
+    let fixtures = root().join("models/tests/fixtures/meshes");
+    let seeds: Vec<(PathBuf, String)> = ["cube.obj", "tetra.dae", "box_ascii.stl"]
+        .iter()
+        .map(|n| (fixtures.join(n), read(&fixtures.join(n))))
+        .collect();
+    fuzz("meshes", (96, 4), &seeds, &["edited.obj", "edited.dae", "edited.stl"], |file, text| {
+        let ext = file.extension().and_then(|e| e.to_str()).unwrap_or("obj");
+        let mesh = dir.join(format!("edited.{ext}"));
+        std::fs::write(&mesh, text).expect("written");
+        let urdf = format!(
+            "<robot name=\"m\"><link name=\"a\"><collision><geometry><mesh filename=\"{}\" scale=\"0.5 2 1\"/></geometry></collision></link></robot>",
+            mesh.display()
+        );
+        parse_urdf(&urdf, &dir.join("m.urdf"), &UrdfOptions::default()).map(|_| ()).map_err(|e| e.to_string())
+    });
+}
+
+/// MoveIt's joint_limits.yaml, edited, applied to the UR5.
+#[test]
+fn joint_limits_files() {
+    let mut text = String::from("default_velocity_scaling_factor: 0.1\njoint_limits:\n");
+    for j in
+        ["shoulder_pan_joint", "shoulder_lift_joint", "elbow_joint", "wrist_1_joint", "wrist_2_joint", "wrist_3_joint"]
+    {
+        text.push_str(&format!(
+            "  {j}:\n    has_velocity_limits: true\n    max_velocity: 3.15\n    has_acceleration_limits: true\n    max_acceleration: 5.0\n    has_position_limits: false\n    min_position: -1\n    max_position: 1\n"
+        ));
+    }
+    let seeds = [(PathBuf::from("joint_limits.yaml"), text)];
+    fuzz("joint-limits", (96, 4), &seeds, &[], |file, text| {
+        let limits =
+            embodied_models::formats::joint_limits::parse_joint_limits(text, file).map_err(|e| e.to_string())?;
+        let mut robot = ur5().0.clone();
+        limits.apply(&mut robot).map(|_| ()).map_err(|e| e.to_string())
+    });
+}
+
+/// JointTrajectory files (YAML as `ros2 topic echo` writes, and JSON), edited, read and certified
+/// against the UR5.
+#[test]
+fn joint_trajectory_files() {
+    use embodied_planner::moveit::{JointTrajectory, TrajectoryPoint, parse_joint_trajectory, trajectory_problem};
+    let (robot, _) = ur5();
+    let names = robot.joint_names();
+    let points = (0..4)
+        .map(|k| TrajectoryPoint {
+            positions: robot.home().iter().map(|h| h + 0.05 * k as f64).collect(),
+            velocities: vec![0.0; names.len()],
+            accelerations: vec![0.0; names.len()],
+            time_from_start: 0.5 * k as f64,
+        })
+        .collect();
+    let jt = JointTrajectory { joint_names: names, points };
+    let seeds = [(PathBuf::from("traj.yaml"), jt.to_yaml()), (PathBuf::from("traj.json"), jt.to_json())];
+    let settings = CheckSettings::default();
+    fuzz("joint-trajectories", (96, 4), &seeds, &[], |file, text| {
+        let jt = parse_joint_trajectory(text, file).map_err(|e| e.to_string())?;
+        let problem = trajectory_problem(robot, None, embodied_models::Environment::new(), &jt, file)
+            .map_err(|e| e.to_string())?;
+        let report = embodied_planner::verify::Verifier::default().with_settings(settings).check_trajectory(
+            &problem.model,
+            &problem.trajectory,
+            &[],
+        );
+        let _ = report.certified;
+        Ok(())
     });
 }
 

@@ -44,3 +44,23 @@ pub enum ModelError {
     #[error("robot `{robot}` has no {what} named `{name}`")]
     NoSuchName { robot: String, what: &'static str, name: String },
 }
+
+/// Something noticed while reading a file that did not stop the load (an unknown SRDF element, a
+/// dropped mesh, a missing robot name), with where it was written.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Warning {
+    /// The file read.
+    pub file: PathBuf,
+    /// 1-based line.
+    pub line: u32,
+    /// 1-based column.
+    pub column: u32,
+    /// What was noticed and what was done about it.
+    pub message: String,
+}
+
+impl std::fmt::Display for Warning {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{}:{}:{}: warning: {}", self.file.display(), self.line, self.column, self.message)
+    }
+}

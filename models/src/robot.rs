@@ -440,6 +440,20 @@ impl Robot {
         out
     }
 
+    /// Replace the limits of joint `ji` (by joint index), e.g. with MoveIt's
+    /// `joint_limits.yaml`; the home configuration is clamped into the new position limits.
+    pub fn set_joint_limits(&mut self, ji: usize, limits: JointLimits) {
+        self.joints[ji].limits = limits;
+        if let Some(d) = self.joints[ji].dof_index {
+            self.home[d] = limits.clamp(self.home[d]);
+        }
+    }
+
+    /// Replace the provenance text (what the model was made from and what was assumed).
+    pub fn set_provenance(&mut self, text: impl Into<String>) {
+        self.provenance = text.into();
+    }
+
     /// Disable self-collision checks between two links (by index).
     pub fn disable_pair(&mut self, a: usize, b: usize) {
         self.disabled_pairs.insert((a.min(b), a.max(b)));

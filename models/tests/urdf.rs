@@ -429,11 +429,14 @@ fn error_missing_and_unsupported_meshes() {
     assert_mentions(&msg, &["inline.urdf:4", "`meshes/missing.stl`", "fixtures/meshes/missing.stl", "not found"]);
     let ModelError::Mesh { resolved, line, .. } = &err else { panic!("{err:?}") };
     assert_eq!((resolved, *line), (&fixture("meshes/missing.stl"), 4));
-    // Collada/OBJ: not supported unless meshes are skipped.
-    let err = parse(&mesh("meshes/arm.dae"), &UrdfOptions::default()).expect_err("dae");
-    assert_mentions(&err.to_string(), &["inline.urdf:4", "`.dae` meshes are not supported", "expected an STL file"]);
-    assert_mentions(&parse(&mesh("x.obj"), &UrdfOptions::default()).expect_err("obj").to_string(), &["`.obj`"]);
-    for f in ["meshes/missing.stl", "meshes/arm.dae", "x.obj"] {
+    // PLY: not supported unless meshes are skipped; a missing Collada/OBJ file names every path tried.
+    let err = parse(&mesh("meshes/arm.ply"), &UrdfOptions::default()).expect_err("ply");
+    assert_mentions(&err.to_string(), &["inline.urdf:4", "`.ply` meshes are not supported", "expected STL, Collada"]);
+    assert_mentions(
+        &parse(&mesh("x.obj"), &UrdfOptions::default()).expect_err("obj").to_string(),
+        &["`x.obj`", "not found", "--allow-missing-meshes"],
+    );
+    for f in ["meshes/missing.stl", "meshes/arm.ply", "x.obj"] {
         let robot = parse(&mesh(f), &no_meshes()).expect("skipped");
         assert!(robot.links()[0].shapes.is_empty());
     }
@@ -445,14 +448,18 @@ fn error_missing_and_unsupported_meshes() {
 }
 
 #[test]
-fn error_unknown_srdf_group() {
+fn unknown_srdf_group_is_a_warning_and_drops_the_reference() {
+    // As in MoveIt's parser: the referring element is dropped, with a warning at its position.
     let text = "<robot name=\"r\">\n<group name=\"arm\"><chain base_link=\"a\" tip_link=\"b\"/></group>\n\
         <group_state name=\"home\" group=\"amr\">\n<joint name=\"j\" value=\"0\"/></group_state>\n</robot>";
-    let msg = parse_srdf(text, Path::new("dir/bad.srdf")).expect_err("unknown group").to_string();
+    let srdf = parse_srdf(text, Path::new("dir/bad.srdf")).expect("loads");
+    assert!(srdf.group_states.is_empty());
+    let msg = srdf.warnings[0].to_string();
     assert_mentions(&msg, &["dir/bad.srdf:3:", "unknown group `amr`", "expected one of the groups", "arm"]);
     let text = "<robot name=\"r\">\n<group name=\"all\">\n<group name=\"arm\"/></group>\n</robot>";
-    let msg = parse_srdf(text, Path::new("dir/bad.srdf")).expect_err("unknown subgroup").to_string();
-    assert_mentions(&msg, &["dir/bad.srdf:3:", "unknown group `arm`"]);
+    let srdf = parse_srdf(text, Path::new("dir/bad.srdf")).expect("loads");
+    assert!(srdf.groups[0].subgroups.is_empty());
+    assert_mentions(&srdf.warnings[0].to_string(), &["dir/bad.srdf:3:", "unknown group `arm`"]);
     let msg = parse_srdf(
         "<robot name=\"r\">\n<group_state name=\"x\" group=\"g\">\n<joint name=\"j\" value=\"1.0.0\"/>",
         Path::new("s.srdf"),
@@ -460,6 +467,14 @@ fn error_unknown_srdf_group() {
     .expect_err("malformed")
     .to_string();
     assert_mentions(&msg, &["s.srdf:", "malformed XML"]);
+    // A value that is not a number stays an error.
+    let msg = parse_srdf(
+        "<robot name=\"r\">\n<group name=\"g\"/>\n<group_state name=\"x\" group=\"g\">\n<joint name=\"j\" value=\"1.0.0\"/></group_state></robot>",
+        Path::new("s.srdf"),
+    )
+    .expect_err("bad number")
+    .to_string();
+    assert_mentions(&msg, &["s.srdf:4:", "`1.0.0` is not a finite number"]);
     // Asking a robot for a group the SRDF does not define.
     let robot = ur5_spherized();
     let srdf = load_srdf(&fixture("ur5.srdf")).expect("parses");
@@ -468,14 +483,24 @@ fn error_unknown_srdf_group() {
 }
 
 #[test]
-fn error_srdf_home_with_unknown_joint_names_the_srdf_line() {
-    let urdf = std::fs::read_to_string(fixture("tiny_gripper.urdf")).expect("readable");
-    let srdf_text = "<robot name=\"tiny_gripper\">\n<group name=\"arm\"><joint name=\"shoulder\"/></group>\n\
-        <group_state name=\"home\" group=\"arm\">\n<joint name=\"elbow\" value=\"0\"/></group_state>\n</robot>";
-    let srdf = parse_srdf(srdf_text, Path::new("dir/tiny.srdf")).expect("parses");
-    let err = embodied_models::urdf::parse_urdf_with_srdf(&urdf, &fixture("tiny_gripper.urdf"), &no_meshes(), &srdf)
-        .expect_err("unknown joint");
-    assert_mentions(&err.to_string(), &["dir/tiny.srdf:3:", "`elbow`", "expected a joint of robot `tiny_gripper`"]);
+fn srdf_home_with_unknown_joint_is_a_warning_naming_the_srdf_line() {
+    let urdf = fixture("tiny_gripper.urdf");
+    let dir = std::env::temp_dir().join(format!("embodied-srdf-home-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    let srdf = dir.join("tiny.srdf");
+    std::fs::write(
+        &srdf,
+        "<robot name=\"tiny_gripper\">\n<group name=\"arm\"><joint name=\"shoulder\"/></group>\n\
+        <group_state name=\"home\" group=\"arm\">\n<joint name=\"elbow\" value=\"0\"/></group_state>\n</robot>",
+    )
+    .expect("written");
+    let d = embodied_models::formats::load_description(&urdf, Some(&srdf), &no_meshes()).expect("loads");
+    let all: Vec<String> = d.warnings.iter().map(|w| w.to_string()).collect();
+    assert!(
+        all.iter().any(|w| w.contains("tiny.srdf:3:") && w.contains("`elbow`") && w.contains("ignored")),
+        "{all:?}"
+    );
+    std::fs::remove_dir_all(&dir).ok();
 }
 
 #[test]

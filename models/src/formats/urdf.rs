@@ -1,11 +1,13 @@
-//! URDF loading: a [`Robot`] from a URDF file, optionally with its SRDF.
+//! URDF loading: a [`Robot`] from a URDF file, optionally with the semantic facts an SRDF gives
+//! ([`Semantics`]; the SRDF itself is read by [`super::srdf`] and joined in [`super`]).
 //!
 //! What is read:
 //! - `<link>`: each `<collision>` element (any number per link) with its `<origin xyz rpy>`
 //!   and `<geometry>`: `<box size>` (full extents, stored as half extents), `<sphere radius>`,
 //!   `<cylinder radius length>` (along z), `<capsule radius length>` (along z) and
-//!   `<mesh filename [scale]>`, loaded as the convex hull of its scaled vertices (STL, binary
-//!   or ASCII). `<visual>` and `<inertial>` are ignored.
+//!   `<mesh filename [scale]>`, loaded as the convex hull of its scaled vertices, or several
+//!   hulls where the hull is far larger than the mesh (STL, Collada or OBJ; see [`super::mesh`]).
+//!   `<visual>` and `<inertial>` are ignored, so a missing visual mesh never stops a load.
 //! - `<joint>`: `revolute`, `continuous`, `prismatic` and `fixed`, with `<origin>` (default
 //!   identity), `<axis xyz>` (default `1 0 0`, normalised), `<limit lower upper velocity>`
 //!   (`effort` ignored) and `<mimic joint multiplier offset>`. The child frame is
@@ -24,11 +26,17 @@
 //!   clamped into their limits), else zeros clamped into the limits.
 //!
 //! Mesh file names: a plain path is relative to the URDF's folder; `file://` is an absolute
-//! path; `package://NAME/rest` is tried in each of [`UrdfOptions::package_dirs`] (a folder that
-//! is the package `NAME` itself, or that contains `NAME`), then in the URDF's folder and each
-//! of its ancestors (as `NAME/rest`, then `rest`). With [`UrdfOptions::load_meshes`] false,
-//! mesh collision elements are skipped (the link keeps its other shapes); otherwise a missing,
-//! unreadable or non-STL mesh is an error ([`ModelError::Mesh`]).
+//! path; `package://NAME/rest` (or `package:///NAME/rest`, as ROS tools accept) is tried in each
+//! of [`UrdfOptions::package_dirs`] (a folder that is the package `NAME` itself, or that
+//! contains `NAME`), then (with [`UrdfOptions::use_environment`]) in each folder of
+//! `ROS_PACKAGE_PATH` (the same way) and as `PREFIX/share/NAME` for each prefix of
+//! `AMENT_PREFIX_PATH`, then in the URDF's folder and each of its ancestors (as `NAME/rest`,
+//! then `rest`). With [`UrdfOptions::load_meshes`] false, mesh collision elements are skipped
+//! (the link keeps its other shapes); otherwise a missing collision mesh is an error
+//! ([`ModelError::Mesh`]) naming every path tried, unless [`UrdfOptions::allow_missing_meshes`],
+//! which drops that shape with a warning. An unreadable or unsupported mesh is always an error.
+//!
+//! A `<robot>` without `name` takes the file's stem, with a warning.
 //!
 //! Every error in the file names `file:line:column` and what was expected there.
 //!
@@ -47,19 +55,18 @@
 //! ```
 
 use std::collections::HashMap;
-use std::fs::File;
-use std::io::BufReader;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
-use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
-use roxmltree::{Document, Node};
+use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
+use roxmltree::Node;
 
-use crate::error::ModelError;
+use super::mesh::{Decomposition, MESH_EXTENSIONS, convex_pieces, read_mesh};
+use super::xml::{Xml, child, children};
+use crate::error::{ModelError, Warning};
 use crate::geometry::{ConvexHull, PlacedShape, Shape};
 use crate::joint::{JointKind, JointLimits};
 use crate::robot::{Robot, RobotBuilder};
-use crate::srdf::{Srdf, apply_srdf, parse_srdf};
 
 /// Default velocity limit for joints whose URDF `<limit velocity>` is missing or 0 (rad/s, m/s).
 pub const DEFAULT_MAX_VELOCITY: f64 = 1.0;
@@ -78,171 +85,131 @@ pub struct UrdfOptions {
     pub default_max_acceleration: f64,
     /// Load `<mesh>` collision geometry; if false, mesh collision elements are skipped.
     pub load_meshes: bool,
+    /// A collision mesh found nowhere is dropped with a warning instead of failing the load.
+    pub allow_missing_meshes: bool,
+    /// Also look for `package://` files in `ROS_PACKAGE_PATH` and `AMENT_PREFIX_PATH`.
+    pub use_environment: bool,
+    /// When to split a mesh into several convex pieces (`None`: always one hull per mesh).
+    pub decomposition: Option<Decomposition>,
+}
+
+/// Process-wide defaults of [`UrdfOptions::default`], set once by a program (the CLI's
+/// `--package-path` and `--allow-missing-meshes`) so that every URDF it loads honours them.
+#[derive(Debug, Clone, Default)]
+pub struct UrdfDefaults {
+    /// Prepended to [`UrdfOptions::package_dirs`].
+    pub package_dirs: Vec<PathBuf>,
+    /// [`UrdfOptions::allow_missing_meshes`].
+    pub allow_missing_meshes: bool,
+}
+
+static DEFAULTS: std::sync::RwLock<Option<UrdfDefaults>> = std::sync::RwLock::new(None);
+
+/// Set the process-wide defaults of [`UrdfOptions::default`].
+pub fn set_urdf_defaults(defaults: UrdfDefaults) {
+    if let Ok(mut d) = DEFAULTS.write() {
+        *d = Some(defaults);
+    }
 }
 
 impl Default for UrdfOptions {
     fn default() -> Self {
+        let defaults = DEFAULTS.read().ok().and_then(|d| d.clone()).unwrap_or_default();
         Self {
-            package_dirs: Vec::new(),
+            package_dirs: defaults.package_dirs,
             default_max_velocity: DEFAULT_MAX_VELOCITY,
             default_max_acceleration: DEFAULT_MAX_ACCELERATION,
             load_meshes: true,
+            allow_missing_meshes: defaults.allow_missing_meshes,
+            use_environment: true,
+            decomposition: Some(Decomposition::default()),
         }
     }
 }
 
-/// Load a URDF file (meshes loaded, default limits), applying an SRDF file if given
-/// (disabled collision pairs, the `home` group state, end effectors).
-pub fn load_urdf(path: &Path, srdf: Option<&Path>) -> Result<Robot, ModelError> {
-    load_urdf_with(path, srdf, &UrdfOptions::default())
+/// What a semantic description (an SRDF) tells the URDF loader: end effectors, the `home`
+/// state and self-collision pairs to ignore, with where each fact was written.
+#[derive(Debug, Clone, Default)]
+pub struct Semantics {
+    /// The file the facts come from (named in errors).
+    pub file: PathBuf,
+    /// `(end effector name, parent link, line, column)`, in file order.
+    pub end_effectors: Vec<(String, String, u32, u32)>,
+    /// The `home` state.
+    pub home: Option<HomeState>,
+    /// Link pairs whose collisions are ignored (pairs naming unknown links are skipped).
+    pub disabled: Vec<(String, String)>,
 }
 
-/// [`load_urdf`] with explicit options.
-pub fn load_urdf_with(path: &Path, srdf: Option<&Path>, options: &UrdfOptions) -> Result<Robot, ModelError> {
-    let text = read_text(path)?;
-    let srdf = match srdf {
-        Some(p) => Some(parse_srdf(&read_text(p)?, p)?),
-        None => None,
-    };
-    build(&text, path, options, srdf.as_ref())
+/// The `home` group state of a semantic description.
+#[derive(Debug, Clone, Default)]
+pub struct HomeState {
+    /// `(joint, value)` pairs.
+    pub values: Vec<(String, f64)>,
+    /// Line of the state in [`Semantics::file`].
+    pub line: u32,
+    /// Column of the state.
+    pub column: u32,
+}
+
+/// A robot loaded from a URDF, with what was noticed but did not stop the load.
+#[derive(Debug, Clone)]
+pub struct UrdfLoad {
+    /// The robot.
+    pub robot: Robot,
+    /// Warnings (missing name, dropped meshes, ...), in the order they arose.
+    pub warnings: Vec<Warning>,
 }
 
 /// Parse URDF text; `file` names the file in errors and anchors relative mesh paths.
 pub fn parse_urdf(text: &str, file: &Path, options: &UrdfOptions) -> Result<Robot, ModelError> {
-    build(text, file, options, None)
+    Ok(build(text, file, options, None)?.robot)
 }
 
-/// [`parse_urdf`] and apply an already parsed SRDF (disabled pairs, `home`, end effectors).
-pub fn parse_urdf_with_srdf(text: &str, file: &Path, options: &UrdfOptions, srdf: &Srdf) -> Result<Robot, ModelError> {
-    build(text, file, options, Some(srdf))
+/// [`parse_urdf`] with semantic facts, returning the warnings too.
+pub fn parse_urdf_with(
+    text: &str,
+    file: &Path,
+    options: &UrdfOptions,
+    semantics: Option<&Semantics>,
+) -> Result<UrdfLoad, ModelError> {
+    build(text, file, options, semantics)
+}
+
+/// Read a URDF file's text; a `.xacro` file is expanded by the `xacro` program if it is on
+/// `PATH`, else refused with an error that says so.
+pub fn read_urdf_text(path: &Path) -> Result<String, ModelError> {
+    let is_xacro = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("xacro"));
+    if !is_xacro {
+        return read_text(path);
+    }
+    let output = std::process::Command::new("xacro").arg(path).output();
+    match output {
+        Ok(out) if out.status.success() => String::from_utf8(out.stdout).map_err(|_| ModelError::Parse {
+            file: path.to_path_buf(),
+            line: 1,
+            column: 1,
+            message: "xacro printed text that is not UTF-8 (expected URDF XML)".into(),
+        }),
+        Ok(out) => Err(ModelError::Parse {
+            file: path.to_path_buf(),
+            line: 1,
+            column: 1,
+            message: format!("`xacro` failed ({}): {}", out.status, String::from_utf8_lossy(&out.stderr).trim()),
+        }),
+        Err(e) => Err(ModelError::Parse {
+            file: path.to_path_buf(),
+            line: 1,
+            column: 1,
+            message: format!(
+                "a .xacro file needs the `xacro` program to expand it, and it could not be run ({e}); install xacro (ROS) or pass the expanded URDF (`xacro FILE > robot.urdf`)"
+            ),
+        }),
+    }
 }
 
 fn read_text(path: &Path) -> Result<String, ModelError> {
     std::fs::read_to_string(path).map_err(|source| ModelError::Io { file: path.to_path_buf(), source })
-}
-
-/// A parsed XML document with its file name, for errors that name `file:line:column`.
-pub(crate) struct Xml<'i> {
-    pub(crate) doc: Document<'i>,
-    pub(crate) file: PathBuf,
-}
-
-impl<'i> Xml<'i> {
-    pub(crate) fn parse(text: &'i str, file: &Path) -> Result<Self, ModelError> {
-        match Document::parse(text) {
-            Ok(doc) => Ok(Self { doc, file: file.to_path_buf() }),
-            Err(e) => {
-                let pos = e.pos();
-                Err(ModelError::Parse {
-                    file: file.to_path_buf(),
-                    line: pos.row,
-                    column: pos.col,
-                    message: format!("malformed XML (expected well-formed XML): {e}"),
-                })
-            }
-        }
-    }
-
-    pub(crate) fn err_at(&self, byte: usize, message: String) -> ModelError {
-        let pos = self.doc.text_pos_at(byte);
-        ModelError::Parse { file: self.file.clone(), line: pos.row, column: pos.col, message }
-    }
-
-    pub(crate) fn err(&self, node: Node, message: String) -> ModelError {
-        self.err_at(node.range().start, message)
-    }
-
-    pub(crate) fn line(&self, node: Node) -> u32 {
-        self.doc.text_pos_at(node.range().start).row
-    }
-
-    /// Byte position of an attribute's value (or of the element if absent).
-    fn attr_pos(&self, node: Node, name: &str) -> usize {
-        node.attribute_node(name).map_or(node.range().start, |a| a.range_value().start)
-    }
-
-    /// A required attribute.
-    pub(crate) fn attr<'a>(&self, node: Node<'a, 'i>, name: &str, expected: &str) -> Result<&'a str, ModelError> {
-        node.attribute(name).ok_or_else(|| {
-            self.err(
-                node,
-                format!(
-                    "<{}> is missing the required attribute `{name}` (expected {expected})",
-                    node.tag_name().name()
-                ),
-            )
-        })
-    }
-
-    /// Whitespace-separated finite numbers of an attribute value, exactly `n` of them.
-    fn numbers(&self, node: Node, name: &str, text: &str, n: usize, expected: &str) -> Result<Vec<f64>, ModelError> {
-        let pos = self.attr_pos(node, name);
-        let tag = node.tag_name().name();
-        let mut out = Vec::with_capacity(n);
-        for word in text.split_whitespace() {
-            match word.parse::<f64>() {
-                Ok(v) if v.is_finite() => out.push(v),
-                _ => {
-                    return Err(self.err_at(
-                        pos,
-                        format!("attribute `{name}` of <{tag}>: `{word}` is not a finite number (expected {expected})"),
-                    ));
-                }
-            }
-        }
-        if out.len() != n {
-            return Err(self.err_at(
-                pos,
-                format!("attribute `{name}` of <{tag}> has {} numbers in `{text}` (expected {expected})", out.len()),
-            ));
-        }
-        Ok(out)
-    }
-
-    /// A required single number.
-    pub(crate) fn number(&self, node: Node, name: &str, expected: &str) -> Result<f64, ModelError> {
-        let text = self.attr(node, name, expected)?;
-        Ok(self.numbers(node, name, text, 1, expected)?[0])
-    }
-
-    /// An optional single number.
-    fn number_or(&self, node: Node, name: &str, default: f64, expected: &str) -> Result<f64, ModelError> {
-        match node.attribute(name) {
-            Some(text) => Ok(self.numbers(node, name, text, 1, expected)?[0]),
-            None => Ok(default),
-        }
-    }
-
-    /// A non-negative required number.
-    fn length(&self, node: Node, name: &str, expected: &str) -> Result<f64, ModelError> {
-        let v = self.number(node, name, expected)?;
-        if v < 0.0 {
-            return Err(self.err_at(
-                self.attr_pos(node, name),
-                format!("attribute `{name}` of <{}> is negative: {v} (expected {expected})", node.tag_name().name()),
-            ));
-        }
-        Ok(v)
-    }
-
-    /// An optional 3-vector.
-    fn vec3_or(&self, node: Node, name: &str, default: [f64; 3]) -> Result<Vector3<f64>, ModelError> {
-        match node.attribute(name) {
-            Some(text) => {
-                let v = self.numbers(node, name, text, 3, "three numbers \"x y z\"")?;
-                Ok(Vector3::new(v[0], v[1], v[2]))
-            }
-            None => Ok(Vector3::from(default)),
-        }
-    }
-}
-
-fn child<'a, 'i>(node: Node<'a, 'i>, tag: &str) -> Option<Node<'a, 'i>> {
-    node.children().find(|n| n.is_element() && n.tag_name().name() == tag)
-}
-
-fn children<'a, 'i>(node: Node<'a, 'i>, tag: &'static str) -> impl Iterator<Item = Node<'a, 'i>> {
-    node.children().filter(move |n| n.is_element() && n.tag_name().name() == tag)
 }
 
 /// `<origin xyz rpy>` of `parent` (identity if absent). URDF rpy: R = Rz(yaw) Ry(pitch) Rx(roll).
@@ -257,7 +224,8 @@ fn origin(x: &Xml, parent: Node) -> Result<Isometry3<f64>, ModelError> {
 struct Loader<'o> {
     options: &'o UrdfOptions,
     dir: PathBuf,
-    meshes: HashMap<(PathBuf, [u64; 3]), Arc<ConvexHull>>,
+    meshes: HashMap<(PathBuf, [u64; 3]), Vec<Arc<ConvexHull>>>,
+    warnings: Vec<Warning>,
 }
 
 impl Loader<'_> {
@@ -298,10 +266,11 @@ impl Loader<'_> {
                     let h = x.length(g, "length", "a non-negative length (along z)")? / 2.0;
                     Shape::capsule([0.0, 0.0, -h], [0.0, 0.0, h], r)
                 }
-                "mesh" => match self.mesh(x, g)? {
-                    Some(hull) => Shape::ConvexMesh(hull),
-                    None => continue,
-                },
+                "mesh" => {
+                    let pieces = self.mesh(x, g)?.unwrap_or_default();
+                    shapes.extend(pieces.into_iter().map(|h| PlacedShape::new(pose, Shape::ConvexMesh(h))));
+                    continue;
+                }
                 other => {
                     return Err(x.err(
                         g,
@@ -316,8 +285,9 @@ impl Loader<'_> {
         Ok(shapes)
     }
 
-    /// The convex hull of a `<mesh>`; `None` when meshes are not loaded.
-    fn mesh(&mut self, x: &Xml, mesh: Node) -> Result<Option<Arc<ConvexHull>>, ModelError> {
+    /// The convex pieces of a `<mesh>`; `None` when meshes are not loaded or a missing mesh is
+    /// dropped ([`UrdfOptions::allow_missing_meshes`]).
+    fn mesh(&mut self, x: &Xml, mesh: Node) -> Result<Option<Vec<Arc<ConvexHull>>>, ModelError> {
         let uri = x.attr(mesh, "filename", "a mesh file name or package:// URI")?;
         let scale = x.vec3_or(mesh, "scale", [1.0; 3])?;
         if !self.options.load_meshes {
@@ -333,57 +303,71 @@ impl Loader<'_> {
         };
         let candidates = self.candidates(uri).map_err(|reason| mesh_err(PathBuf::from(uri), reason))?;
         let ext = Path::new(uri).extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
-        if ext != "stl" {
+        if !MESH_EXTENSIONS.contains(&ext.as_str()) {
             return Err(mesh_err(
                 PathBuf::from(uri),
                 format!(
-                    "`.{ext}` meshes are not supported (expected an STL file, binary or ASCII); load with `load_meshes: false` to skip mesh collision geometry"
+                    "`.{ext}` meshes are not supported (expected STL, Collada .dae or Wavefront .obj); load with `load_meshes: false` to skip mesh collision geometry"
                 ),
             ));
         }
         let Some(path) = candidates.iter().find(|p| p.is_file()).cloned() else {
             let first = candidates.first().cloned().unwrap_or_else(|| PathBuf::from(uri));
             let tried: Vec<String> = candidates.iter().map(|p| p.display().to_string()).collect();
-            return Err(mesh_err(first, format!("mesh file not found (tried: {})", tried.join(", "))));
+            let reason = format!("collision mesh file not found (tried: {})", tried.join(", "));
+            if self.options.allow_missing_meshes {
+                let (line, column) = x.position(mesh);
+                self.warnings.push(Warning {
+                    file: x.file.clone(),
+                    line,
+                    column,
+                    message: format!("mesh `{uri}`: {reason}; shape dropped (missing meshes allowed)"),
+                });
+                return Ok(None);
+            }
+            return Err(mesh_err(first, format!("{reason}; pass --allow-missing-meshes to drop it")));
         };
         let key = (path.clone(), [scale.x.to_bits(), scale.y.to_bits(), scale.z.to_bits()]);
-        if let Some(hull) = self.meshes.get(&key) {
-            return Ok(Some(hull.clone()));
+        if let Some(pieces) = self.meshes.get(&key) {
+            return Ok(Some(pieces.clone()));
         }
-        let file = File::open(&path).map_err(|e| mesh_err(path.clone(), format!("cannot open: {e}")))?;
-        let stl = stl_io::read_stl(&mut BufReader::new(file))
-            .map_err(|e| mesh_err(path.clone(), format!("not a valid STL file (binary or ASCII): {e}")))?;
-        let points: Vec<Point3<f64>> = stl
-            .vertices
-            .iter()
-            .map(|v| Point3::new(f64::from(v.0[0]) * scale.x, f64::from(v.0[1]) * scale.y, f64::from(v.0[2]) * scale.z))
-            .collect();
-        if points.iter().any(|p| !p.coords.iter().all(|c| c.is_finite())) {
-            return Err(mesh_err(path, "the mesh has non-finite vertex coordinates".into()));
-        }
-        let hull = ConvexHull::from_points(&points).ok_or_else(|| {
+        let tri = read_mesh(&path, scale).map_err(|reason| mesh_err(path.clone(), reason))?;
+        let pieces = convex_pieces(&tri, self.options.decomposition.as_ref()).ok_or_else(|| {
             mesh_err(
                 path.clone(),
-                format!("the {} vertices are degenerate (flat or too few for a convex hull)", points.len()),
+                format!("the {} vertices are degenerate (flat or too few for a convex hull)", tri.vertices.len()),
             )
         })?;
-        let hull = Arc::new(hull);
-        self.meshes.insert(key, hull.clone());
-        Ok(Some(hull))
+        self.meshes.insert(key, pieces.clone());
+        Ok(Some(pieces))
     }
 
     /// Candidate file paths of a mesh URI, in the order they are tried.
     fn candidates(&self, uri: &str) -> Result<Vec<PathBuf>, String> {
         if let Some(rest) = uri.strip_prefix("package://") {
+            let rest = rest.strip_prefix('/').unwrap_or(rest);
             let Some((name, rest)) = rest.split_once('/').filter(|(n, r)| !n.is_empty() && !r.is_empty()) else {
                 return Err("malformed package URI (expected package://NAME/path)".into());
             };
             let mut out = Vec::new();
-            for d in &self.options.package_dirs {
+            let mut package_dirs = self.options.package_dirs.clone();
+            let mut prefixes = Vec::new();
+            if self.options.use_environment {
+                if let Some(p) = std::env::var_os("ROS_PACKAGE_PATH") {
+                    package_dirs.extend(std::env::split_paths(&p).filter(|d| !d.as_os_str().is_empty()));
+                }
+                if let Some(p) = std::env::var_os("AMENT_PREFIX_PATH") {
+                    prefixes.extend(std::env::split_paths(&p).filter(|d| !d.as_os_str().is_empty()));
+                }
+            }
+            for d in &package_dirs {
                 if d.file_name().is_some_and(|f| f == name) {
                     out.push(d.join(rest));
                 }
                 out.push(d.join(name).join(rest));
+            }
+            for prefix in &prefixes {
+                out.push(prefix.join("share").join(name).join(rest));
             }
             for a in self.dir.ancestors() {
                 out.push(a.join(name).join(rest));
@@ -513,19 +497,34 @@ fn read_joint<'a, 'i>(
     Ok(RawJoint { node, name, kind, parent, child: child_link, origin, axis, limits, mimic })
 }
 
-fn build(text: &str, file: &Path, options: &UrdfOptions, srdf: Option<&Srdf>) -> Result<Robot, ModelError> {
+fn build(text: &str, file: &Path, options: &UrdfOptions, srdf: Option<&Semantics>) -> Result<UrdfLoad, ModelError> {
     let x = Xml::parse(text, file)?;
     let root = x.doc.root_element();
     if root.tag_name().name() != "robot" {
         return Err(x.err(root, format!("expected a <robot> root element, found <{}>", root.tag_name().name())));
     }
-    let robot_name = x.attr(root, "name", "the robot's name")?.to_string();
+    let mut warnings = Vec::new();
+    let robot_name = match root.attribute("name").filter(|n| !n.trim().is_empty()) {
+        Some(n) => n.to_string(),
+        None => {
+            let stem = file.file_stem().and_then(|s| s.to_str()).unwrap_or("robot");
+            let stem = stem.strip_suffix(".urdf").unwrap_or(stem).to_string();
+            let (line, column) = x.position(root);
+            warnings.push(Warning {
+                file: file.to_path_buf(),
+                line,
+                column,
+                message: format!("<robot> has no `name`; using the file's stem `{stem}`"),
+            });
+            stem
+        }
+    };
     let dir = match file.parent() {
         Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
         _ => PathBuf::from("."),
     };
     let dir = dir.canonicalize().unwrap_or(dir);
-    let mut loader = Loader { options, dir, meshes: HashMap::new() };
+    let mut loader = Loader { options, dir, meshes: HashMap::new(), warnings: Vec::new() };
 
     // Links, in file order.
     let mut links: Vec<(String, Node)> = Vec::new();
@@ -663,7 +662,8 @@ fn build(text: &str, file: &Path, options: &UrdfOptions, srdf: Option<&Srdf>) ->
     // A first build gives the ordered tree, from which end effectors and home are chosen.
     let probe = builder.clone().build()?;
     let srdf_doc = || srdf.map(|s| s.file.clone()).unwrap_or_default();
-    let srdf_err = |line: u32, message: String| ModelError::Parse { file: srdf_doc(), line, column: 1, message };
+    let srdf_err =
+        |(line, column): (u32, u32), message: String| ModelError::Parse { file: srdf_doc(), line, column, message };
     let mut ee_links: Vec<usize> = Vec::new();
     let mut taken_groups: Vec<Option<usize>> = Vec::new();
     let last_actuated = |link: usize| {
@@ -671,15 +671,18 @@ fn build(text: &str, file: &Path, options: &UrdfOptions, srdf: Option<&Srdf>) ->
         probe.chain_to(link).into_iter().rev().find(|&j| moving(j))
     };
     if let Some(s) = srdf {
-        for ee in &s.end_effectors {
-            let Some(l) = probe.link_index(&ee.parent_link) else {
-                return Err(srdf_err(
-                    ee.line,
-                    format!(
-                        "end effector `{}` has parent link `{}`, which the URDF does not have (expected a link of robot `{robot_name}`)",
-                        ee.name, ee.parent_link
+        for (ee_name, parent_link, line, column) in &s.end_effectors {
+            let Some(l) = probe.link_index(parent_link) else {
+                // MoveIt ignores such an end effector too.
+                warnings.push(Warning {
+                    file: srdf_doc(),
+                    line: *line,
+                    column: *column,
+                    message: format!(
+                        "end effector `{ee_name}` has parent link `{parent_link}`, which robot `{robot_name}` does not have; ignored"
                     ),
-                ));
+                });
+                continue;
             };
             if !ee_links.contains(&l) {
                 ee_links.push(l);
@@ -716,22 +719,26 @@ fn build(text: &str, file: &Path, options: &UrdfOptions, srdf: Option<&Srdf>) ->
         builder.end_effector(name.clone(), name, Isometry3::identity());
     }
 
-    if let Some(state) = srdf.and_then(|s| s.group_state("home")) {
+    if let Some(HomeState { values, line, column }) = srdf.and_then(|s| s.home.as_ref()) {
+        let at = (*line, *column);
         let mut home = probe.home().to_vec();
-        for (joint, value) in &state.values {
+        for (joint, value) in values {
             let Some(ji) = probe.joint_index(joint) else {
-                return Err(srdf_err(
-                    state.line,
-                    format!(
-                        "group state `home` sets joint `{joint}`, which the URDF does not have (expected a joint of robot `{robot_name}`)"
+                warnings.push(Warning {
+                    file: srdf_doc(),
+                    line: at.0,
+                    column: at.1,
+                    message: format!(
+                        "group state `home` sets joint `{joint}`, which robot `{robot_name}` does not have; ignored"
                     ),
-                ));
+                });
+                continue;
             };
             let j = &probe.joints()[ji];
             if let Some(d) = j.dof_index {
                 if *value < j.limits.lower - 1e-9 || *value > j.limits.upper + 1e-9 {
                     return Err(srdf_err(
-                        state.line,
+                        at,
                         format!(
                             "group state `home` sets joint `{joint}` to {value}, outside its limits [{}, {}]",
                             j.limits.lower, j.limits.upper
@@ -746,7 +753,12 @@ fn build(text: &str, file: &Path, options: &UrdfOptions, srdf: Option<&Srdf>) ->
 
     let mut robot = builder.build()?;
     if let Some(s) = srdf {
-        apply_srdf(&mut robot, s);
+        for (a, b) in &s.disabled {
+            if let (Some(a), Some(b)) = (robot.link_index(a), robot.link_index(b)) {
+                robot.disable_pair(a, b);
+            }
+        }
     }
-    Ok(robot)
+    warnings.extend(loader.warnings);
+    Ok(UrdfLoad { robot, warnings })
 }
