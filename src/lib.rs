@@ -16,5 +16,6 @@ pub mod run;
 pub mod runlog;
 pub mod scenario;
 pub mod verify;
+pub mod view;
 
 pub use error::AppError;

@@ -68,6 +68,9 @@ enum Command {
         /// Write an SVG plot of every joint's trajectory here.
         #[arg(long)]
         plot: Option<PathBuf>,
+        /// Write a 3-D viewer page of the run here (one HTML file; opens offline).
+        #[arg(long)]
+        html: Option<PathBuf>,
         /// Print the summary as JSON.
         #[arg(long)]
         json: bool,
@@ -94,6 +97,22 @@ enum Command {
         /// Print a JSON summary (with -o) or the plan itself.
         #[arg(long)]
         json: bool,
+        /// Write a 3-D viewer page of the plan here (one HTML file; opens offline).
+        #[arg(long)]
+        html: Option<PathBuf>,
+    },
+    /// Write a 3-D viewer page (one self-contained HTML file) of a run log or a plan file:
+    /// the robots, obstacles and carried object moving along the logged or planned motion,
+    /// with a timeline of the events and the clearance.
+    View {
+        /// A run log (`embodied run --log RUN.jsonl`) or a plan file (`embodied plan -o PLAN.json`).
+        input: PathBuf,
+        /// The scenario (built-in name or TOML file; default: the built-in one the input names).
+        #[arg(long)]
+        scenario: Option<String>,
+        /// Where to write the page (default: the input's name with `.html`).
+        #[arg(short = 'o', long = "out")]
+        out: Option<PathBuf>,
     },
     /// Check a plan (and/or a run log) against a scenario, independently of the planner: limits,
     /// collisions certified over the whole continuous path, closed-chain spans, timing.
@@ -222,7 +241,7 @@ fn run(cli: Cli) -> Result<(), AppError> {
             }
             Ok(())
         }
-        Command::Run { scenario, duration, seed, log, plot, json, clock, us_per_check } => {
+        Command::Run { scenario, duration, seed, log, plot, html, json, clock, us_per_check } => {
             use embodied::scenario::ClockSpec;
             let scenario = scenario.unwrap_or_else(|| embodied::scenario::DEFAULT_SCENARIO.to_string());
             let clock = match (clock.as_deref(), us_per_check) {
@@ -245,21 +264,33 @@ fn run(cli: Cli) -> Result<(), AppError> {
                 }
                 (None, None) => None,
             };
-            let args = embodied::run::RunArgs { scenario, duration, seed, log, plot, clock, ..Default::default() };
+            let html_note = html.clone();
+            let args =
+                embodied::run::RunArgs { scenario, duration, seed, log, plot, html, clock, ..Default::default() };
             let summary = embodied::run::run_scenario(&args)?;
             if json {
                 println!("{}", serde_json::to_string(&summary).map_err(|e| AppError::Failed(e.to_string()))?);
             } else {
                 print!("{}", embodied::run::render_summary(&summary));
+                match &html_note {
+                    Some(path) => println!("viewer page written to {} (open it in a browser)", path.display()),
+                    None => println!("to see it in 3-D: embodied run --html run.html (or embodied view RUN.jsonl)"),
+                }
             }
             match summary.failure {
                 Some(f) => Err(AppError::Failed(format!("run failed: {f}"))),
                 None => Ok(()),
             }
         }
-        Command::Plan { scenario, out, deadline_ms, json } => {
+        Command::Plan { scenario, out, deadline_ms, json, html } => {
             let scenario = embodied::scenario::load_scenario(&scenario)?;
             let plan = embodied::plan::plan_scenario(&scenario, deadline_ms)?;
+            if let Some(path) = &html {
+                let track = embodied::view::track_from_plan(&scenario, &plan)?;
+                let title = format!("{}: plan", scenario.name);
+                let scene = embodied::view::build_scene(&scenario, &track, &title, "embodied plan")?;
+                embodied::view::write_html(path, &scene)?;
+            }
             let text = to_json(&plan)?;
             match out {
                 Some(path) => {
@@ -291,6 +322,22 @@ fn run(cli: Cli) -> Result<(), AppError> {
                 }
                 None => println!("{text}"),
             }
+            Ok(())
+        }
+        Command::View { input, scenario, out } => {
+            let out = out.unwrap_or_else(|| input.with_extension("html"));
+            if out == input {
+                return Err(AppError::Usage(format!("{}: the page would overwrite its input; pass -o", input.display())));
+            }
+            let scene = embodied::view::view_file(&input, scenario.as_deref())?;
+            embodied::view::write_html(&out, &scene)?;
+            println!(
+                "viewer page written to {} ({} frames, {} bodies, {} events)",
+                out.display(),
+                scene.times.len(),
+                scene.bodies.len(),
+                scene.events.len()
+            );
             Ok(())
         }
         Command::Verify { scenario, plan, log, json } => {

@@ -58,6 +58,8 @@ pub struct RunArgs {
     pub seed: Option<u64>,
     pub log: Option<PathBuf>,
     pub plot: Option<PathBuf>,
+    /// Write the viewer page (`embodied view`) of the run here.
+    pub html: Option<PathBuf>,
     /// How planning time is counted (default: the scenario's `[planner] clock`).
     pub clock: Option<ClockSpec>,
     /// Closed-chain controller settings for a carry (default: the controller's defaults).
@@ -625,11 +627,16 @@ pub fn run_scenario(args: &RunArgs) -> Result<RunSummary, AppError> {
     let mut pending = vec![false; scenario.agents.len()];
     let mut pace: Option<(Instant, u64)> = None;
     let mut log_error = None;
+    let mut track = crate::view::Track::default();
     let mut on_record = |r: &StepRecord| {
         if log_error.is_none()
             && let Err(e) = log.line(&step_line(r))
         {
             log_error = Some(e);
+        }
+        if args.html.is_some() && r.step.is_multiple_of(5) {
+            let q = r.agents.iter().take(scenario.agents.len()).map(|a| Some(a.q.clone())).collect();
+            track.frames.push(crate::view::TrackFrame { t: r.time, q });
         }
         let mut s = 0;
         for (k, a) in r.agents.iter().enumerate() {
@@ -703,6 +710,9 @@ pub fn run_scenario(args: &RunArgs) -> Result<RunSummary, AppError> {
     summary.log_lines = log.lines();
     if let Some(path) = &args.plot {
         plot_joints(path, &format!("{}: joint positions", scenario.name), &series, "q [rad | m]")?;
+    }
+    if let Some(path) = &args.html {
+        crate::view::write_run_view(path, &scenario, track, &summary.events)?;
     }
     Ok(summary)
 }
