@@ -327,7 +327,10 @@ fn run(cli: Cli) -> Result<(), AppError> {
         Command::View { input, scenario, out } => {
             let out = out.unwrap_or_else(|| input.with_extension("html"));
             if out == input {
-                return Err(AppError::Usage(format!("{}: the page would overwrite its input; pass -o", input.display())));
+                return Err(AppError::Usage(format!(
+                    "{}: the page would overwrite its input; pass -o",
+                    input.display()
+                )));
             }
             let scene = embodied::view::view_file(&input, scenario.as_deref())?;
             embodied::view::write_html(&out, &scene)?;

@@ -148,7 +148,8 @@ pub struct LogOrigin {
 ///
 /// This is the one place that knows the log's layout.
 pub fn read_run_log(text: &str, file: &Path, agents: &[String], keep_s: f64) -> Result<Track, AppError> {
-    let parse_error = |line: usize, message: String| AppError::Parse { file: file.to_path_buf(), line, column: 1, message };
+    let parse_error =
+        |line: usize, message: String| AppError::Parse { file: file.to_path_buf(), line, column: 1, message };
     let mut track = Track::default();
     let mut next_keep = f64::NEG_INFINITY;
     for (n, line) in text.lines().enumerate() {
@@ -318,7 +319,15 @@ pub fn event_kind(label: &str) -> &'static str {
     }
 }
 
-const AGENT_COLORS: [&str; 6] = ["#4a7bd0", "#d07a3a", "#3aa37a", "#a25ac8", "#c8b23a", "#3ab4c8"];
+/// Per agent, two shades that alternate along its links.
+const AGENT_COLORS: [[&str; 2]; 6] = [
+    ["#4a7bd0", "#6f98e0"],
+    ["#d07a3a", "#e09a62"],
+    ["#3aa37a", "#62c098"],
+    ["#a25ac8", "#bb80da"],
+    ["#c8b23a", "#dac862"],
+    ["#3ab4c8", "#62cada"],
+];
 
 fn pose_of(iso: &Isometry3<f64>) -> Pose {
     let t = iso.translation.vector;
@@ -331,7 +340,9 @@ fn pose_of(iso: &Isometry3<f64>) -> Pose {
 pub fn view_shape(shape: &Shape, pose: &Isometry3<f64>) -> ViewShape {
     match shape {
         Shape::Sphere { radius } => ViewShape::Sphere { radius: *radius, pose: pose_of(pose) },
-        Shape::Cuboid { half_extents: h } => ViewShape::Box { size: [2.0 * h.x, 2.0 * h.y, 2.0 * h.z], pose: pose_of(pose) },
+        Shape::Cuboid { half_extents: h } => {
+            ViewShape::Box { size: [2.0 * h.x, 2.0 * h.y, 2.0 * h.z], pose: pose_of(pose) }
+        }
         Shape::Cylinder { radius, half_height } => {
             ViewShape::Cylinder { radius: *radius, length: 2.0 * half_height, pose: pose_of(pose) }
         }
@@ -397,13 +408,14 @@ pub fn build_scene(scenario: &Scenario, track: &Track, title: &str, source: &str
     }
     let mut bodies = Vec::new();
     for (k, agent) in scenario.agents.iter().enumerate() {
-        let color = AGENT_COLORS[k % AGENT_COLORS.len()];
+        let colors = AGENT_COLORS[k % AGENT_COLORS.len()];
         let robot = &agent.robot;
         let fk: Vec<Vec<Isometry3<f64>>> = configurations[k].iter().map(|q| robot.forward_kinematics(q)).collect();
         for (l, link) in robot.links().iter().enumerate() {
             if link.shapes.is_empty() {
                 continue;
             }
+            let color = colors[bodies.len() % 2];
             bodies.push(ViewBody {
                 name: format!("{}/{}", agent.name, link.name),
                 kind: BodyKind::Link,
@@ -446,11 +458,8 @@ pub fn build_scene(scenario: &Scenario, track: &Track, title: &str, source: &str
         let release =
             track.events.iter().find(|e| e.agent == agent.name && event_kind(&e.label) == "release").map(|e| e.t);
         let in_tool = spec.grasps[0].inverse();
-        let object = CarriedObject {
-            name: spec.object.clone(),
-            size: spec.size,
-            in_tool: CarriedObject::encode_pose(&in_tool),
-        };
+        let object =
+            CarriedObject { name: spec.object.clone(), size: spec.size, in_tool: CarriedObject::encode_pose(&in_tool) };
         let holder = spec.end_effectors[0];
         let other_link = agent.robot.end_effectors().get(spec.end_effectors[1]).map(|e| e.link);
         let held_robot = object.attach(&agent.robot, holder, &other_link.into_iter().collect::<Vec<_>>());
@@ -480,7 +489,12 @@ pub fn build_scene(scenario: &Scenario, track: &Track, title: &str, source: &str
     let mut events: Vec<ViewEvent> = track
         .events
         .iter()
-        .map(|e| ViewEvent { t: e.t, agent: e.agent.clone(), kind: event_kind(&e.label).to_string(), label: e.label.clone() })
+        .map(|e| ViewEvent {
+            t: e.t,
+            agent: e.agent.clone(),
+            kind: event_kind(&e.label).to_string(),
+            label: e.label.clone(),
+        })
         .collect();
     events.sort_by(|a, b| a.t.total_cmp(&b.t));
     Ok(ViewScene {
@@ -658,8 +672,10 @@ pub fn write_run_view(
     mut track: Track,
     events: &[(f64, String, String)],
 ) -> Result<(), AppError> {
-    track.events =
-        events.iter().map(|(t, agent, label)| TrackEvent { t: *t, agent: agent.clone(), label: label.clone() }).collect();
+    track.events = events
+        .iter()
+        .map(|(t, agent, label)| TrackEvent { t: *t, agent: agent.clone(), label: label.clone() })
+        .collect();
     let scene = build_scene(scenario, &track, &format!("{}: run", scenario.name), "embodied run")?;
     write_html(path, &scene)
 }

@@ -94,12 +94,13 @@ if (box.isEmpty()) box.set(new THREE.Vector3(-1, -1, 0), new THREE.Vector3(1, 1,
 const centre = box.getCenter(new THREE.Vector3());
 const size = box.getSize(new THREE.Vector3());
 const span = Math.max(size.x, size.y, size.z, 0.5);
-const grid = new THREE.GridHelper(Math.ceil(span * 2), Math.ceil(span * 2) * 4, 0xb0b0b0, 0xd8d8d8);
+const gridSize = Math.ceil(span * 1.6);
+const grid = new THREE.GridHelper(gridSize, gridSize * 10, 0xb0b0b0, 0xdedede);
 grid.rotateX(Math.PI / 2);
 grid.position.set(centre.x, centre.y, Math.min(box.min.z, 0));
 world.add(grid);
 world.add(new THREE.AxesHelper(0.3));
-camera.position.set(centre.x + span * 1.3, centre.y - span * 1.5, centre.z + span * 0.9);
+camera.position.set(centre.x + span * 1.05, centre.y - span * 0.85, centre.z + span * 0.8);
 const controls = new OrbitControls(camera, renderer.domElement);
 controls.target.copy(centre);
 controls.update();
