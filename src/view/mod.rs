@@ -679,3 +679,99 @@ pub fn write_run_view(
     let scene = build_scene(scenario, &track, &format!("{}: run", scenario.name), "embodied run")?;
     write_html(path, &scene)
 }
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+
+    fn agents() -> Vec<String> {
+        vec!["a".to_string(), "b".to_string()]
+    }
+
+    #[test]
+    fn a_run_log_becomes_frames_and_events() {
+        let log = [
+            r#"{"header": {"scenario": "x", "scenario_hash": "h"}}"#,
+            r#"{"step": 0, "t": 0.0, "agents": {"a": {"q": [0.0, 1.0], "events": ["plan_landed planning_ms=1"]}, "b": {"q": [2.0], "events": []}}}"#,
+            r#"{"step": 1, "t": 0.001, "agents": {"a": {"q": [0.1, 1.0], "events": [{"kind": "grasp", "object": "bar"}]}, "b": {"q": [2.0], "events": []}}}"#,
+            r#"{"step": 2, "t": 0.002, "agents": {"a": {"q": [0.2, 1.0], "events": []}}}"#,
+            r#"{"summary": {}}"#,
+        ]
+        .join("\n");
+        let track = read_run_log(&log, Path::new("run.jsonl"), &agents(), 0.002).unwrap();
+        // Kept every 2 ms: steps 0 and 2; agent b is missing from step 2.
+        assert_eq!(track.frames.len(), 2);
+        assert_eq!(track.frames[0].q, vec![Some(vec![0.0, 1.0]), Some(vec![2.0])]);
+        assert_eq!(track.frames[1].q, vec![Some(vec![0.2, 1.0]), None]);
+        // The events of every step, strings or typed objects.
+        let labels: Vec<&str> = track.events.iter().map(|e| e.label.as_str()).collect();
+        assert_eq!(labels, ["plan_landed planning_ms=1", "grasp object=bar"]);
+        assert_eq!(event_kind(labels[1]), "grasp");
+        let origin = log_origin(&log, Path::new("run.jsonl")).unwrap();
+        assert_eq!(origin, LogOrigin { scenario: "x".into(), scenario_hash: Some("h".into()) });
+    }
+
+    #[test]
+    fn a_bad_log_line_is_named() {
+        let log = "{\"header\": {\"scenario\": \"x\"}}\n{\"t\": 0.0}\n";
+        let e = read_run_log(log, Path::new("run.jsonl"), &agents(), 0.0).unwrap_err().to_string();
+        assert!(e.starts_with("run.jsonl:2:1:") && e.contains("`agents`"), "{e}");
+        let e = read_run_log("{\"header\": {}}\n", Path::new("r.jsonl"), &agents(), 0.0).unwrap_err().to_string();
+        assert!(e.contains("no step lines"), "{e}");
+        let e = log_origin("[]", Path::new("r.jsonl")).unwrap_err().to_string();
+        assert!(e.contains("header line"), "{e}");
+    }
+
+    #[test]
+    fn events_are_sorted_into_kinds() {
+        for (label, kind) in [
+            ("plan_landed planning_ms=3", "plan"),
+            ("safe_halt_started reason=qp: x", "halt"),
+            ("resumed", "resume"),
+            ("release", "release"),
+            ("goal_reached: carry completed", "goal"),
+            ("plan_rejected by verifier", "failure"),
+            ("go received", "other"),
+        ] {
+            assert_eq!(event_kind(label), kind, "{label}");
+        }
+    }
+
+    #[test]
+    fn the_vendored_scripts_can_sit_inside_script_elements() {
+        // A `</script` or `<!--` would end or change the element the page keeps them in.
+        for (name, text) in [("core", THREE_CORE), ("module", THREE_MODULE), ("orbit", ORBIT_CONTROLS), ("viewer", VIEWER_JS)]
+        {
+            let lower = text.to_ascii_lowercase();
+            assert!(!lower.contains("</script") && !lower.contains("<!--"), "{name}");
+        }
+        // The specifiers the page rewrites to blob URLs are there.
+        assert_eq!(THREE_MODULE.matches("\"./three.core.min.js\"").count(), 2);
+        assert!(ORBIT_CONTROLS.contains("from 'three'"));
+        assert!(VIEWER_JS.contains("'\"./three.core.min.js\"'") && VIEWER_JS.contains("\"from 'three'\""));
+    }
+
+    #[test]
+    fn the_carry_plan_scene_moves_the_bar_and_keeps_clear() {
+        let sc = crate::scenario::load_scenario("two-irp6-carry").unwrap();
+        let plan = crate::plan::plan_scenario(&sc, None).unwrap();
+        let track = track_from_plan(&sc, &plan).unwrap();
+        let scene = build_scene(&sc, &track, "t <b>", "test").unwrap();
+        assert_eq!(scene.times.len(), scene.clearance.len());
+        let bar = scene.bodies.iter().find(|b| b.kind == BodyKind::Object).unwrap();
+        assert_eq!(bar.poses.len(), scene.times.len(), "the bar moves");
+        let (first, last) = (bar.poses[0].unwrap(), bar.poses.last().unwrap().unwrap());
+        // Carried from its start to its goal (0.23 m along x).
+        let goal = sc.carry.as_ref().unwrap().object_goal.translation.vector;
+        assert!((last[0] - goal.x).abs() < 1e-3 && (last[1] - goal.y).abs() < 1e-3, "{last:?} vs {goal:?}");
+        assert!((last[0] - first[0] - 0.23).abs() < 1e-3);
+        // Never in contact, and the grasp brings the arms near the stands.
+        let min = scene.clearance.iter().flatten().map(|c| c.m).fold(f64::INFINITY, f64::min);
+        assert!(min > 0.0 && min < 0.1, "clearance {min}");
+        // The page: the title escaped, no placeholder left, the scene's `<` escaped.
+        let page = render_html(&scene).unwrap();
+        assert!(page.contains("<title>t &lt;b&gt;</title>") && !page.contains("{{"));
+        assert!(page.contains("\"title\":\"t \\u003cb>\""));
+    }
+}
