@@ -12,6 +12,7 @@ pub mod error;
 pub mod mbm;
 pub mod model_report;
 pub mod plan;
+pub mod plot;
 pub mod run;
 pub mod runlog;
 pub mod scenario;

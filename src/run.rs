@@ -37,7 +37,7 @@ use serde_json::json;
 
 use crate::AppError;
 use crate::plan::{agent_problem, bodies_as_obstacles, goal_of, motion_settings};
-use crate::runlog::{RunLog, plot_joints};
+use crate::runlog::RunLog;
 use crate::scenario::{ClockSpec, Coordination, GoalSpec, Scenario, load_scenario};
 
 /// Message tags between agents and their coordinator.
@@ -616,12 +616,6 @@ pub fn run_scenario(args: &RunArgs) -> Result<RunSummary, AppError> {
     let mut events = Vec::new();
     let mut switches = Vec::new();
     let mut last_behaviour: Vec<String> = vec![String::new(); scenario.agents.len() + usize::from(coordinated)];
-    let mut series: Vec<(String, Vec<(f64, f64)>)> = Vec::new();
-    for agent in &scenario.agents {
-        for name in agent.robot.joint_names() {
-            series.push((format!("{}/{name}", agent.name), Vec::new()));
-        }
-    }
     let mut summaries: Vec<AgentSummary> =
         scenario.agents.iter().map(|a| AgentSummary { name: a.name.clone(), ..AgentSummary::default() }).collect();
     let mut pending = vec![false; scenario.agents.len()];
@@ -634,11 +628,10 @@ pub fn run_scenario(args: &RunArgs) -> Result<RunSummary, AppError> {
         {
             log_error = Some(e);
         }
-        if args.html.is_some() && r.step.is_multiple_of(5) {
+        if (args.html.is_some() || args.plot.is_some()) && r.step.is_multiple_of(5) {
             let q = r.agents.iter().take(scenario.agents.len()).map(|a| Some(a.q.clone())).collect();
             track.frames.push(crate::view::TrackFrame { t: r.time, q });
         }
-        let mut s = 0;
         for (k, a) in r.agents.iter().enumerate() {
             for e in &a.events {
                 events.push((r.time, a.agent.clone(), e.clone()));
@@ -652,12 +645,8 @@ pub fn run_scenario(args: &RunArgs) -> Result<RunSummary, AppError> {
             }
             if k < scenario.agents.len() {
                 let limits = scenario.agents[k].robot.limits();
-                for (j, (&q, &qd)) in a.q.iter().zip(&a.qd).enumerate() {
+                for (j, &qd) in a.qd.iter().enumerate() {
                     summaries[k].max_speed_ratio = summaries[k].max_speed_ratio.max(qd.abs() / limits[j].max_velocity);
-                    if r.step.is_multiple_of(10) {
-                        series[s].1.push((r.time, q));
-                    }
-                    s += 1;
                 }
             }
         }
@@ -708,11 +697,12 @@ pub fn run_scenario(args: &RunArgs) -> Result<RunSummary, AppError> {
     };
     log.line(&json!({"summary": &summary}))?;
     summary.log_lines = log.lines();
+    let track = crate::view::with_events(track, &summary.events);
     if let Some(path) = &args.plot {
-        plot_joints(path, &format!("{}: joint positions", scenario.name), &series, "q [rad | m]")?;
+        crate::plot::plot_run(path, &scenario, &track)?;
     }
     if let Some(path) = &args.html {
-        crate::view::write_run_view(path, &scenario, track, &summary.events)?;
+        crate::view::write_run_view(path, &scenario, &track)?;
     }
     Ok(summary)
 }

@@ -664,19 +664,18 @@ fn file_name(path: &Path) -> String {
     path.file_name().map_or_else(|| path.display().to_string(), |n| n.to_string_lossy().into_owned())
 }
 
-/// The page of a run that has just been made (`embodied run --html`): `track` holds its
-/// frames, `events` its (time, agent, event) list.
-pub fn write_run_view(
-    path: &Path,
-    scenario: &Scenario,
-    mut track: Track,
-    events: &[(f64, String, String)],
-) -> Result<(), AppError> {
+/// `track` with the events of a run's summary, (time, agent, event) each.
+pub fn with_events(mut track: Track, events: &[(f64, String, String)]) -> Track {
     track.events = events
         .iter()
         .map(|(t, agent, label)| TrackEvent { t: *t, agent: agent.clone(), label: label.clone() })
         .collect();
-    let scene = build_scene(scenario, &track, &format!("{}: run", scenario.name), "embodied run")?;
+    track
+}
+
+/// The page of a run that has just been made (`embodied run --html`).
+pub fn write_run_view(path: &Path, scenario: &Scenario, track: &Track) -> Result<(), AppError> {
+    let scene = build_scene(scenario, track, &format!("{}: run", scenario.name), "embodied run")?;
     write_html(path, &scene)
 }
 
@@ -741,7 +740,8 @@ mod tests {
     #[test]
     fn the_vendored_scripts_can_sit_inside_script_elements() {
         // A `</script` or `<!--` would end or change the element the page keeps them in.
-        for (name, text) in [("core", THREE_CORE), ("module", THREE_MODULE), ("orbit", ORBIT_CONTROLS), ("viewer", VIEWER_JS)]
+        for (name, text) in
+            [("core", THREE_CORE), ("module", THREE_MODULE), ("orbit", ORBIT_CONTROLS), ("viewer", VIEWER_JS)]
         {
             let lower = text.to_ascii_lowercase();
             assert!(!lower.contains("</script") && !lower.contains("<!--"), "{name}");
