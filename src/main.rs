@@ -8,6 +8,27 @@ use clap::{Parser, Subcommand};
 use embodied::AppError;
 use embodied::model_report::{load_robot, model_report, parse_q, render_text};
 
+/// `println!` that returns [`AppError::Output`] instead of panicking when standard output is
+/// closed (`embodied plan X | head`).
+macro_rules! outln {
+    ($($arg:tt)*) => {{
+        use std::io::Write as _;
+        writeln!(std::io::stdout(), $($arg)*).map_err(AppError::Output)?
+    }};
+}
+
+/// `print!` that returns [`AppError::Output`] instead of panicking when standard output is closed.
+macro_rules! out {
+    ($($arg:tt)*) => {{
+        use std::io::Write as _;
+        write!(std::io::stdout(), $($arg)*).map_err(AppError::Output)?
+    }};
+}
+
+const EXIT_STATUS_HELP: &str = "Exit status: 0 success; 1 the work was done but did not succeed (no plan, not \
+certified, a goal not reached, a run that failed); 2 bad input (arguments, files). File arguments \
+accept `-` for standard input.";
+
 fn builtin_help() -> String {
     let mut s = String::from("Built-in robots (and where their numbers come from):\n");
     for (name, source) in embodied_models::builtin_summaries() {
@@ -20,7 +41,8 @@ fn builtin_help() -> String {
 #[command(
     name = "embodied",
     version,
-    about = "Deliberative planning and verification of multi-robot systems (embodied agents)"
+    about = "Deliberative planning and verification of multi-robot systems (embodied agents)",
+    after_help = EXIT_STATUS_HELP
 )]
 struct Cli {
     #[command(subcommand)]
@@ -232,9 +254,9 @@ fn run(cli: Cli) -> Result<(), AppError> {
             }
             if json {
                 let text = serde_json::to_string(&report).map_err(|e| AppError::Failed(e.to_string()))?;
-                println!("{text}");
+                outln!("{text}");
             } else {
-                print!("{}", render_text(&report));
+                out!("{}", render_text(&report));
             }
             if report.ik.as_ref().is_some_and(|r| r.solutions.is_empty()) {
                 std::process::exit(1);
@@ -269,16 +291,27 @@ fn run(cli: Cli) -> Result<(), AppError> {
                 embodied::run::RunArgs { scenario, duration, seed, log, plot, html, clock, ..Default::default() };
             let summary = embodied::run::run_scenario(&args)?;
             if json {
-                println!("{}", serde_json::to_string(&summary).map_err(|e| AppError::Failed(e.to_string()))?);
+                outln!("{}", serde_json::to_string(&summary).map_err(|e| AppError::Failed(e.to_string()))?);
             } else {
-                print!("{}", embodied::run::render_summary(&summary));
+                out!("{}", embodied::run::render_summary(&summary));
                 match &html_note {
-                    Some(path) => println!("viewer page written to {} (open it in a browser)", path.display()),
-                    None => println!("to see it in 3-D: embodied run --html run.html (or embodied view RUN.jsonl)"),
+                    Some(path) => outln!("viewer page written to {} (open it in a browser)", path.display()),
+                    None => outln!("to see it in 3-D: embodied run --html run.html (or embodied view RUN.jsonl)"),
                 }
             }
+            // An agent with a goal (it asked for a plan, got one or has a goal distance) that did
+            // not reach it: the run did not succeed.
+            let unreached: Vec<&str> = summary
+                .agents
+                .iter()
+                .filter(|a| (a.plans_requested > 0 || a.planned || a.goal_error.is_some()) && !a.goal_reached)
+                .map(|a| a.name.as_str())
+                .collect();
             match summary.failure {
                 Some(f) => Err(AppError::Failed(format!("run failed: {f}"))),
+                None if !unreached.is_empty() => {
+                    Err(AppError::Failed(format!("goal not reached by: {}", unreached.join(", "))))
+                }
                 None => Ok(()),
             }
         }
@@ -294,17 +327,17 @@ fn run(cli: Cli) -> Result<(), AppError> {
             let text = to_json(&plan)?;
             match out {
                 Some(path) => {
-                    std::fs::write(&path, &text).map_err(|e| AppError::io(&path, e))?;
+                    std::fs::write(&path, &text).map_err(|e| AppError::write(&path, e))?;
                     let summary: Vec<serde_json::Value> = plan
                         .plans
                         .iter()
                         .map(|p| serde_json::json!({"agent": p.agent, "duration_s": p.trajectory.duration(), "waypoints": p.path.len(), "stats": p.stats}))
                         .collect();
                     if json {
-                        println!("{}", serde_json::json!({"plan_file": path, "plans": summary}));
+                        outln!("{}", serde_json::json!({"plan_file": path, "plans": summary}));
                     } else {
                         for p in &plan.plans {
-                            println!(
+                            outln!(
                                 "{}: {} waypoints, {:.3} s of motion, planned by {} in {} us",
                                 p.agent,
                                 p.path.len(),
@@ -317,10 +350,10 @@ fn run(cli: Cli) -> Result<(), AppError> {
                                 )
                             );
                         }
-                        println!("plan written to {}", path.display());
+                        outln!("plan written to {}", path.display());
                     }
                 }
-                None => println!("{text}"),
+                None => outln!("{text}"),
             }
             Ok(())
         }
@@ -334,7 +367,7 @@ fn run(cli: Cli) -> Result<(), AppError> {
             }
             let scene = embodied::view::view_file(&input, scenario.as_deref())?;
             embodied::view::write_html(&out, &scene)?;
-            println!(
+            outln!(
                 "viewer page written to {} ({} frames, {} bodies, {} events)",
                 out.display(),
                 scene.times.len(),
@@ -387,21 +420,21 @@ fn run(cli: Cli) -> Result<(), AppError> {
             })?;
             bar.finish_and_clear();
             if let Some(path) = &out {
-                std::fs::write(path, to_json(&report.paths_file())?).map_err(|e| AppError::io(path, e))?;
+                std::fs::write(path, to_json(&report.paths_file())?).map_err(|e| AppError::write(path, e))?;
             }
             if json {
-                println!("{}", to_json(&report)?);
+                outln!("{}", to_json(&report)?);
             } else {
-                print!("{}", embodied::mbm::render_table(&report));
+                out!("{}", embodied::mbm::render_table(&report));
             }
             Ok(())
         }
         Command::Bench(BenchCommand::Qp { scenario, json }) => {
             let report = embodied::carry_run::bench_qp(&scenario)?;
             if json {
-                println!("{}", to_json(&report)?);
+                outln!("{}", to_json(&report)?);
             } else {
-                print!("{}", embodied::carry_run::render_bench_qp(&report));
+                out!("{}", embodied::carry_run::render_bench_qp(&report));
             }
             Ok(())
         }
@@ -441,9 +474,9 @@ fn run(cli: Cli) -> Result<(), AppError> {
                 embodied::deadlines::plot_svg(&report, path)?;
             }
             if json {
-                println!("{}", to_json(&report)?);
+                outln!("{}", to_json(&report)?);
             } else {
-                print!("{}", embodied::deadlines::render_table(&report));
+                out!("{}", embodied::deadlines::render_table(&report));
             }
             Ok(())
         }
@@ -460,11 +493,11 @@ fn run(cli: Cli) -> Result<(), AppError> {
                 }));
             }
             if json {
-                println!("{}", serde_json::Value::Array(list));
+                outln!("{}", serde_json::Value::Array(list));
             } else {
                 for item in &list {
                     let default = if item["default"] == true { " (default)" } else { "" };
-                    println!(
+                    outln!(
                         "{:<22} {}{}",
                         item["name"].as_str().unwrap_or(""),
                         item["description"].as_str().unwrap_or(""),
@@ -482,8 +515,11 @@ fn main() -> ExitCode {
     match run(cli) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("error: {e}");
-            ExitCode::from(2)
+            // A closed standard output is not worth a word: the reader has what it wanted.
+            if !matches!(&e, AppError::Output(io) if io.kind() == std::io::ErrorKind::BrokenPipe) {
+                eprintln!("error: {e}");
+            }
+            ExitCode::from(e.exit_code())
         }
     }
 }

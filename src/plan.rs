@@ -213,7 +213,7 @@ pub fn plan_scenario(scenario: &Scenario, deadline_ms: Option<f64>) -> Result<Pl
 
 /// Read a plan file back, checking its format tag.
 pub fn read_plan(path: &std::path::Path) -> Result<PlanFile, AppError> {
-    let text = std::fs::read_to_string(path).map_err(|e| AppError::io(path, e))?;
+    let text = crate::error::read_input(path)?;
     parse_plan(&text, path)
 }
 

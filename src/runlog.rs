@@ -21,7 +21,7 @@ impl RunLog {
     /// A log written to `path`, or a log that discards lines when `path` is `None`.
     pub fn create(path: Option<&Path>) -> Result<Self, AppError> {
         let out = match path {
-            Some(p) => Some((p.to_path_buf(), BufWriter::new(File::create(p).map_err(|e| AppError::io(p, e))?))),
+            Some(p) => Some((p.to_path_buf(), BufWriter::new(File::create(p).map_err(|e| AppError::write(p, e))?))),
             None => None,
         };
         Ok(Self { out, lines: 0 })
@@ -32,7 +32,7 @@ impl RunLog {
         self.lines += 1;
         let Some((path, w)) = self.out.as_mut() else { return Ok(()) };
         serde_json::to_writer(&mut *w, record).map_err(|e| AppError::Failed(format!("log {}: {e}", path.display())))?;
-        w.write_all(b"\n").and_then(|_| w.flush()).map_err(|e| AppError::io(path.clone(), e))
+        w.write_all(b"\n").and_then(|_| w.flush()).map_err(|e| AppError::write(path.clone(), e))
     }
 
     /// Number of lines written so far.

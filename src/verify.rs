@@ -50,7 +50,9 @@ pub struct AgentVerification {
     pub certified: bool,
     /// Timing and endpoints: problems found (empty: fine).
     pub timing: Vec<String>,
-    #[serde(flatten)]
+    /// The certified check of the trajectory (its own `certified` says whether the trajectory
+    /// alone passed; the agent's `certified` above adds timing and endpoints).
+    #[serde(rename = "trajectory")]
     pub report: TrajectoryReport,
 }
 
@@ -373,8 +375,7 @@ fn parse_err(file: &Path, line: usize, column: usize, message: String) -> AppErr
 /// Check a run log against `scenario` (see the module documentation).
 pub fn verify_log(scenario: &Scenario, file: &Path, settings: &CheckSettings) -> Result<LogVerification, AppError> {
     let start = Instant::now();
-    let bytes = std::fs::read(file).map_err(|e| AppError::io(file, e))?;
-    let text = String::from_utf8_lossy(&bytes);
+    let text = crate::error::read_input(file)?;
     let lines: Vec<&str> = text.split('\n').collect();
     let last_nonempty = lines.iter().rposition(|l| !l.trim().is_empty());
     let header_line = lines.first().copied().unwrap_or("");
@@ -715,6 +716,7 @@ pub fn render_log(v: &LogVerification) -> String {
 /// `embodied verify SCENARIO [PLAN.json] [--log FILE.jsonl] [--json]`: prints the reports and
 /// returns whether everything is certified.
 pub fn verify_cli(scenario: &str, plan: Option<&Path>, log: Option<&Path>, json: bool) -> Result<bool, AppError> {
+    use std::io::Write;
     if plan.is_none() && log.is_none() {
         return Err(AppError::Usage("verify: give a plan file, --log FILE.jsonl, or both".into()));
     }
@@ -735,13 +737,13 @@ pub fn verify_cli(scenario: &str, plan: Option<&Path>, log: Option<&Path>, json:
             (None, Some(l)) => json_of(l)?,
             _ => json_of(&serde_json::json!({"certified": certified, "plan": plan_report, "log": log_report}))?,
         };
-        println!("{text}");
+        writeln!(std::io::stdout(), "{text}").map_err(AppError::Output)?;
     } else {
         if let Some(p) = &plan_report {
-            print!("{}", render_plan(p));
+            write!(std::io::stdout(), "{}", render_plan(p)).map_err(AppError::Output)?;
         }
         if let Some(l) = &log_report {
-            print!("{}", render_log(l));
+            write!(std::io::stdout(), "{}", render_log(l)).map_err(AppError::Output)?;
         }
     }
     Ok(certified)

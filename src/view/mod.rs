@@ -621,13 +621,13 @@ pub fn render_html(scene: &ViewScene) -> Result<String, AppError> {
 /// Write the page of `scene` to `path`.
 pub fn write_html(path: &Path, scene: &ViewScene) -> Result<(), AppError> {
     let page = render_html(scene)?;
-    std::fs::write(path, page).map_err(|e| AppError::io(path, e))
+    std::fs::write(path, page).map_err(|e| AppError::write(path, e))
 }
 
 /// `embodied view INPUT`: the scene of a run log or a plan file. The scenario is `scenario`, or
 /// the built-in one the input names.
 pub fn view_file(input: &Path, scenario: Option<&str>) -> Result<ViewScene, AppError> {
-    let text = std::fs::read_to_string(input).map_err(|e| AppError::io(input, e))?;
+    let text = crate::error::read_input(input)?;
     let first = text.lines().next().unwrap_or("");
     let is_log = serde_json::from_str::<serde_json::Value>(first).is_ok_and(|v| v.get("header").is_some());
     let load = |named: &str, hash: Option<&str>| -> Result<Scenario, AppError> {
