@@ -20,3 +20,12 @@ pub mod verify;
 pub mod view;
 
 pub use error::AppError;
+
+/// The program's version and the git commit it was built from (`unknown` when built outside
+/// a git checkout), as `--version`, log headers, plan files and reports give it.
+pub const VERSION: &str = concat!(env!("CARGO_PKG_VERSION"), " (commit ", env!("EMBODIED_GIT_COMMIT"), ")");
+
+/// `embodied VERSION`: what made a file.
+pub fn generator() -> String {
+    format!("embodied {VERSION}")
+}

@@ -40,7 +40,7 @@ fn builtin_help() -> String {
 #[derive(Parser, Debug)]
 #[command(
     name = "embodied",
-    version,
+    version = embodied::VERSION,
     about = "Deliberative planning and verification of multi-robot systems (embodied agents)",
     after_help = EXIT_STATUS_HELP
 )]
@@ -155,6 +155,13 @@ enum Command {
     /// Benchmarks: MotionBenchMaker problems, planning deadlines.
     #[command(subcommand)]
     Bench(BenchCommand),
+    /// Print a shell completion script (e.g. `embodied completions bash > /etc/bash_completion.d/embodied`).
+    Completions {
+        /// The shell.
+        shell: clap_complete::Shell,
+    },
+    /// Print the manual page (roff; e.g. `embodied man > embodied.1 && man ./embodied.1`).
+    Man,
     /// List the built-in scenarios (name and one-line description).
     Scenarios {
         /// Print a JSON array of {"name", "description", "agents", "obstacles"}.
@@ -236,6 +243,19 @@ enum BenchCommand {
     },
 }
 
+/// A spinner with elapsed time on standard error while a long verb works, only on a terminal.
+fn spinner(message: &str) -> indicatif::ProgressBar {
+    if !std::io::IsTerminal::is_terminal(&std::io::stderr()) {
+        return indicatif::ProgressBar::hidden();
+    }
+    let bar = indicatif::ProgressBar::new_spinner().with_message(message.to_string());
+    if let Ok(style) = indicatif::ProgressStyle::with_template("{spinner} {msg} ({elapsed})") {
+        bar.set_style(style);
+    }
+    bar.enable_steady_tick(std::time::Duration::from_millis(120));
+    bar
+}
+
 fn to_json<T: serde::Serialize>(value: &T) -> Result<String, AppError> {
     serde_json::to_string(value).map_err(|e| AppError::Failed(e.to_string()))
 }
@@ -289,7 +309,10 @@ fn run(cli: Cli) -> Result<(), AppError> {
             let html_note = html.clone();
             let args =
                 embodied::run::RunArgs { scenario, duration, seed, log, plot, html, clock, ..Default::default() };
-            let summary = embodied::run::run_scenario(&args)?;
+            let bar = spinner("running");
+            let summary = embodied::run::run_scenario(&args);
+            bar.finish_and_clear();
+            let summary = summary?;
             if json {
                 outln!("{}", serde_json::to_string(&summary).map_err(|e| AppError::Failed(e.to_string()))?);
             } else {
@@ -317,7 +340,10 @@ fn run(cli: Cli) -> Result<(), AppError> {
         }
         Command::Plan { scenario, out, deadline_ms, json, html } => {
             let scenario = embodied::scenario::load_scenario(&scenario)?;
-            let plan = embodied::plan::plan_scenario(&scenario, deadline_ms)?;
+            let bar = spinner("planning");
+            let plan = embodied::plan::plan_scenario(&scenario, deadline_ms);
+            bar.finish_and_clear();
+            let plan = plan?;
             if let Some(path) = &html {
                 let track = embodied::view::track_from_plan(&scenario, &plan)?;
                 let title = format!("{}: plan", scenario.name);
@@ -365,7 +391,10 @@ fn run(cli: Cli) -> Result<(), AppError> {
                     input.display()
                 )));
             }
-            let scene = embodied::view::view_file(&input, scenario.as_deref())?;
+            let bar = spinner("building the scene");
+            let scene = embodied::view::view_file(&input, scenario.as_deref());
+            bar.finish_and_clear();
+            let scene = scene?;
             embodied::view::write_html(&out, &scene)?;
             outln!(
                 "viewer page written to {} ({} frames, {} bodies, {} events)",
@@ -430,7 +459,10 @@ fn run(cli: Cli) -> Result<(), AppError> {
             Ok(())
         }
         Command::Bench(BenchCommand::Qp { scenario, json }) => {
-            let report = embodied::carry_run::bench_qp(&scenario)?;
+            let bar = spinner("solving every held step's QP twice");
+            let report = embodied::carry_run::bench_qp(&scenario);
+            bar.finish_and_clear();
+            let report = report?;
             if json {
                 outln!("{}", to_json(&report)?);
             } else {
@@ -469,7 +501,10 @@ fn run(cli: Cli) -> Result<(), AppError> {
                 mbm,
                 ..embodied::deadlines::DeadlineArgs::default()
             };
-            let report = embodied::deadlines::run_deadline_bench(&args)?;
+            let bar = spinner("planning under every deadline");
+            let report = embodied::deadlines::run_deadline_bench(&args);
+            bar.finish_and_clear();
+            let report = report?;
             if let Some(path) = &plot {
                 embodied::deadlines::plot_svg(&report, path)?;
             }
@@ -478,6 +513,22 @@ fn run(cli: Cli) -> Result<(), AppError> {
             } else {
                 out!("{}", embodied::deadlines::render_table(&report));
             }
+            Ok(())
+        }
+        Command::Completions { shell } => {
+            use clap::CommandFactory;
+            let mut script = Vec::new();
+            clap_complete::generate(shell, &mut Cli::command(), "embodied", &mut script);
+            out!("{}", String::from_utf8_lossy(&script));
+            Ok(())
+        }
+        Command::Man => {
+            use clap::CommandFactory;
+            let mut page = Vec::new();
+            clap_mangen::Man::new(Cli::command())
+                .render(&mut page)
+                .map_err(|e| AppError::Failed(format!("man page: {e}")))?;
+            out!("{}", String::from_utf8_lossy(&page));
             Ok(())
         }
         Command::Scenarios { json } => {

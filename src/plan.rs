@@ -46,6 +46,9 @@ pub struct AgentPlan {
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct PlanFile {
     pub format: String,
+    /// The program (version and commit) that made the file.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub generator: Option<String>,
     pub scenario: NamedHash,
     pub plans: Vec<AgentPlan>,
 }
@@ -206,6 +209,7 @@ pub fn plan_scenario(scenario: &Scenario, deadline_ms: Option<f64>) -> Result<Pl
     }
     Ok(PlanFile {
         format: PLAN_FORMAT.to_string(),
+        generator: Some(crate::generator()),
         scenario: NamedHash { name: scenario.name.clone(), hash: scenario.hash.clone() },
         plans,
     })

@@ -606,6 +606,7 @@ pub fn run_scenario(args: &RunArgs) -> Result<RunSummary, AppError> {
         header_agents.insert(agent.name.clone(), agent_limits_json(&agent.robot));
     }
     log.line(&json!({"header": {
+        "generator": crate::generator(),
         "scenario": scenario.name, "scenario_hash": scenario.hash, "seed": seed, "step_s": dt,
         "duration_s": duration, "planning_clock": clock_name(clock), "agents": header_agents,
         "closed_chain": carry.as_ref().map(|(_, h)| h),

@@ -59,6 +59,8 @@ pub struct AgentVerification {
 /// A plan file checked against a scenario.
 #[derive(Debug, Clone, Serialize)]
 pub struct PlanVerification {
+    /// The program (version and commit) that made the report.
+    pub generator: String,
     pub plan_file: PathBuf,
     pub scenario: String,
     pub certified: bool,
@@ -228,6 +230,7 @@ pub fn verify_plan(
         });
     }
     Ok(PlanVerification {
+        generator: crate::generator(),
         plan_file: file.to_path_buf(),
         scenario: scenario.name.clone(),
         certified: agents.iter().all(|a| a.certified),
@@ -344,6 +347,8 @@ pub struct LogAgent {
 /// A run log checked against a scenario.
 #[derive(Debug, Clone, Serialize)]
 pub struct LogVerification {
+    /// The program (version and commit) that made the report.
+    pub generator: String,
     pub log_file: PathBuf,
     pub scenario: String,
     pub certified: bool,
@@ -603,6 +608,7 @@ pub fn verify_log(scenario: &Scenario, file: &Path, settings: &CheckSettings) ->
         })
         .collect();
     Ok(LogVerification {
+        generator: crate::generator(),
         log_file: file.to_path_buf(),
         scenario: scenario.name.clone(),
         certified: agents.iter().all(|a| a.certified),

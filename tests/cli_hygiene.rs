@@ -108,3 +108,49 @@ fn a_dash_reads_standard_input() {
     assert_eq!(code, 2, "{err}");
     assert!(err.contains("<stdin>:1:"), "{err}");
 }
+
+#[test]
+fn version_names_the_commit_and_files_name_the_version() {
+    let (code, out, _) = embodied(&["--version"]);
+    assert_eq!(code, 0);
+    // `embodied 0.1.0 (commit 0123456789ab)`, or `(commit unknown)` when built outside git.
+    let expected = format!("embodied {} (commit ", env!("CARGO_PKG_VERSION"));
+    assert!(out.starts_with(&expected) && out.trim_end().ends_with(')'), "{out}");
+    let commit = out.trim_end().trim_start_matches(&expected).trim_end_matches(')');
+    assert!(commit == "unknown" || (commit.len() == 12 && commit.chars().all(|c| c.is_ascii_hexdigit())), "{out}");
+    let dir = TempDir::new("version");
+    let plan = dir.join("p.json");
+    let log = dir.join("r.jsonl");
+    assert_eq!(embodied(&["plan", "polycrank-transfer", "-o", plan.to_str().unwrap()]).0, 0);
+    assert_eq!(embodied(&["run", "polycrank-transfer", "--duration", "0.05", "--log", log.to_str().unwrap()]).0, 1);
+    let generator = format!("embodied {}", out.trim_end().trim_start_matches("embodied "));
+    let plan_json: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&plan).unwrap()).unwrap();
+    assert_eq!(plan_json["generator"], generator.as_str());
+    let header = std::fs::read_to_string(&log).unwrap();
+    let header: serde_json::Value = serde_json::from_str(header.lines().next().unwrap()).unwrap();
+    assert_eq!(header["header"]["generator"], generator.as_str());
+    let (code, out, _) = embodied(&["verify", "polycrank-transfer", plan.to_str().unwrap(), "--json"]);
+    assert_eq!(code, 0);
+    let report: serde_json::Value = serde_json::from_str(&out).unwrap();
+    assert_eq!(report["generator"], generator.as_str());
+}
+
+#[test]
+fn completions_and_a_man_page_come_from_the_command_definitions() {
+    for shell in ["bash", "zsh", "fish", "elvish", "powershell"] {
+        let (code, out, err) = embodied(&["completions", shell]);
+        assert_eq!(code, 0, "{shell}: {err}");
+        for verb in ["run", "plan", "verify", "view", "bench"] {
+            assert!(out.contains(verb), "{shell} completion lacks `{verb}`");
+        }
+    }
+    let (code, out, _) = embodied(&["completions", "bash"]);
+    assert_eq!(code, 0);
+    assert!(out.contains("--html") && out.contains("--deadline-ms"), "bash completion lacks options");
+    let (code, _, err) = embodied(&["completions", "tcsh"]);
+    assert_eq!(code, 2, "{err}");
+    let (code, out, _) = embodied(&["man"]);
+    assert_eq!(code, 0);
+    assert!(out.starts_with(".ie") || out.contains(".TH embodied"), "{}", &out[..out.len().min(200)]);
+    assert!(out.contains("Exit status") && out.contains("completions"), "the page lacks the exit statuses or verbs");
+}

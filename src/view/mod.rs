@@ -501,7 +501,7 @@ pub fn build_scene(scenario: &Scenario, track: &Track, title: &str, source: &str
         format: VIEW_FORMAT.to_string(),
         title: title.to_string(),
         source: source.to_string(),
-        generator: format!("embodied {}", env!("CARGO_PKG_VERSION")),
+        generator: crate::generator(),
         frame_s: FRAME_S,
         times,
         agents: scenario.agents.iter().map(|a| a.name.clone()).collect(),
