@@ -110,6 +110,7 @@ pub fn plan_moveit(
             let arm = problem.model.robot();
             let file = PlanFile {
                 format: PLAN_FORMAT.to_string(),
+                generator: Some(crate::generator()),
                 scenario: NamedHash { name: args.request.display().to_string(), hash: String::new() },
                 plans: vec![AgentPlan {
                     agent: request.group_name.clone(),
@@ -163,16 +164,16 @@ pub fn verify_joint_trajectory(
     let problem = trajectory_problem(&robot, state, env, &located.trajectory, trajectory).map_err(from_moveit)?;
     let report = Verifier::default().check_trajectory(&problem.model, &problem.trajectory, &[]);
     if json {
-        println!("{}", serde_json::to_string(&report).map_err(|e| AppError::Failed(e.to_string()))?);
+        crate::outln!("{}", serde_json::to_string(&report).map_err(|e| AppError::Failed(e.to_string()))?);
     } else {
-        println!(
+        crate::outln!(
             "{}: {} points, {:.3} s, joints {}",
             trajectory.display(),
             problem.trajectory.t.len(),
             problem.trajectory.duration(),
             problem.trajectory.joint_names.join(", ")
         );
-        println!(
+        crate::outln!(
             "  limits: {}  collision: {} ({} of {} segments certified, certified clearance {:.4} m)",
             if report.limits.ok { "ok" } else { "VIOLATED" },
             if report.collision.ok { "ok" } else { "VIOLATED" },
@@ -181,9 +182,9 @@ pub fn verify_joint_trajectory(
             report.collision.certified_clearance_m
         );
         for f in report.findings() {
-            println!("  first violation: {f}");
+            crate::outln!("  first violation: {f}");
         }
-        println!("certified: {}", if report.certified { "yes" } else { "no" });
+        crate::outln!("certified: {}", if report.certified { "yes" } else { "no" });
     }
     Ok(report.certified)
 }

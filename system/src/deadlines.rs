@@ -106,6 +106,8 @@ pub struct DeadlineRow {
 /// The whole benchmark.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct DeadlineReport {
+    /// The program (version and commit) that made the report.
+    pub generator: String,
     /// `scenario/agent` or `family/index` of every problem, per set.
     pub problems: Vec<(String, String)>,
     pub rows: Vec<DeadlineRow>,
@@ -347,7 +349,11 @@ pub fn run_deadline_bench(args: &DeadlineArgs) -> Result<DeadlineReport, SystemE
             });
         }
     }
-    Ok(DeadlineReport { problems: problems.into_iter().map(|p| (p.set.to_string(), p.name)).collect(), rows })
+    Ok(DeadlineReport {
+        generator: crate::generator(),
+        problems: problems.into_iter().map(|p| (p.set.to_string(), p.name)).collect(),
+        rows,
+    })
 }
 
 /// The report as a terminal table.

@@ -181,6 +181,8 @@ pub struct MbmSettings {
 /// The whole benchmark: per-family and overall summaries and every problem with its path.
 #[derive(Debug, Clone, Serialize)]
 pub struct MbmReport {
+    /// The program (version and commit) that made the report.
+    pub generator: String,
     pub settings: MbmSettings,
     pub families: Vec<Summary>,
     pub overall: Summary,
@@ -540,6 +542,7 @@ pub fn run_mbm(args: &MbmArgs, on_progress: &mut dyn FnMut(usize, usize)) -> Res
     let all: Vec<&ProblemResult> = results.iter().collect();
     let overall = summarize("overall", &all);
     Ok(MbmReport {
+        generator: crate::generator(),
         settings: MbmSettings {
             urdf: args.urdf.clone(),
             srdf: args.srdf.clone(),

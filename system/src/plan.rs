@@ -45,6 +45,9 @@ pub struct AgentPlan {
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct PlanFile {
     pub format: String,
+    /// The program (version and commit) that made the file.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub generator: Option<String>,
     pub scenario: NamedHash,
     pub plans: Vec<AgentPlan>,
 }
@@ -207,6 +210,7 @@ pub fn plan_scenario(scenario: &Scenario, deadline_ms: Option<f64>) -> Result<Pl
     }
     Ok(PlanFile {
         format: PLAN_FORMAT.to_string(),
+        generator: Some(crate::generator()),
         scenario: NamedHash { name: scenario.name.clone(), hash: scenario.hash.clone() },
         plans,
     })
@@ -214,7 +218,7 @@ pub fn plan_scenario(scenario: &Scenario, deadline_ms: Option<f64>) -> Result<Pl
 
 /// Read a plan file back, checking its format tag.
 pub fn read_plan(path: &std::path::Path) -> Result<PlanFile, SystemError> {
-    let text = std::fs::read_to_string(path).map_err(|e| SystemError::io(path, e))?;
+    let text = crate::error::read_input(path)?;
     parse_plan(&text, path)
 }
 

@@ -38,7 +38,7 @@ use embodied_planner::deadline::Deadline;
 use serde::Serialize;
 
 use crate::SystemError;
-use crate::log::{LOG_FORMAT, LogHeader, LogStep, LoggedAgent, RunLog, plot_joints};
+use crate::log::{LOG_FORMAT, LogHeader, LogStep, LoggedAgent, RunLog};
 use crate::plan::{agent_problem, bodies_as_obstacles, goal_of, motion_settings};
 use crate::scenario::{ClockSpec, Coordination, GoalSpec, Scenario, load_scenario};
 
@@ -412,7 +412,7 @@ impl RunSummary {
     }
 }
 
-/// Per-step bookkeeping of a run: summaries, events, behaviour switches, plot series.
+/// Per-step bookkeeping of a run: summaries, events, behaviour switches.
 struct Observer {
     summaries: Vec<AgentSummary>,
     pending: Vec<bool>,
@@ -420,17 +420,10 @@ struct Observer {
     switches: Vec<(f64, String, String)>,
     last_behaviour: Vec<String>,
     limits: Vec<Vec<embodied_models::JointLimits>>,
-    series: Vec<(String, Vec<(f64, f64)>)>,
 }
 
 impl Observer {
     fn new(scenario: &Scenario, agents: usize) -> Self {
-        let mut series = Vec::new();
-        for agent in &scenario.agents {
-            for name in agent.robot.joint_names() {
-                series.push((format!("{}/{name}", agent.name), Vec::new()));
-            }
-        }
         Self {
             summaries: scenario
                 .agents
@@ -442,12 +435,10 @@ impl Observer {
             switches: Vec::new(),
             last_behaviour: vec![String::new(); agents],
             limits: scenario.agents.iter().map(|a| a.robot.limits()).collect(),
-            series,
         }
     }
 
     fn observe(&mut self, r: &StepRecord) {
-        let mut s = 0;
         for (k, a) in r.agents.iter().enumerate() {
             for e in &a.events {
                 self.events.push((r.time, a.agent.clone(), e.clone()));
@@ -460,13 +451,9 @@ impl Observer {
                 self.last_behaviour[k].clone_from(&a.behaviour);
             }
             if let Some(limits) = self.limits.get(k) {
-                for (j, (&q, &qd)) in a.q.iter().zip(&a.qd).enumerate() {
+                for (j, &qd) in a.qd.iter().enumerate() {
                     let ratio = qd.abs() / limits[j].max_velocity;
                     self.summaries[k].max_speed_ratio = self.summaries[k].max_speed_ratio.max(ratio);
-                    if r.step.is_multiple_of(10) {
-                        self.series[s].1.push((r.time, q));
-                    }
-                    s += 1;
                 }
             }
         }
@@ -707,6 +694,7 @@ impl System {
         let agents = self.scenario.agents.iter().map(|a| (a.name.clone(), LoggedAgent::of(&a.robot))).collect();
         LogHeader {
             format: LOG_FORMAT.to_string(),
+            generator: crate::generator(),
             scenario: self.scenario.name.clone(),
             scenario_hash: self.scenario.hash.clone(),
             seed: self.seed,
@@ -823,11 +811,6 @@ impl System {
             closed_chain: self.carry.as_ref().and_then(|(r, _)| finish(r)),
         }
     }
-
-    /// The joint series (every 10th step) for a plot: `agent/joint` and (t, q) points.
-    pub fn joint_series(&self) -> &[(String, Vec<(f64, f64)>)] {
-        &self.observer.series
-    }
 }
 
 /// The carrying agent of `scenario` (planned here, before the first step) and its log header.
@@ -888,12 +871,15 @@ pub struct RunArgs {
     pub options: RunOptions,
     /// Write the JSON Lines log here.
     pub log: Option<PathBuf>,
-    /// Write an SVG plot of the joints here.
+    /// Write an SVG plot of the run here (joints per agent and unit, limits, events, carry
+    /// closure error and clearance).
     pub plot: Option<PathBuf>,
+    /// Write the viewer page (`embodied view`) of the run here.
+    pub html: Option<PathBuf>,
 }
 
 /// Load and run a scenario, writing its log (complete up to the last step even on failure)
-/// and plot. The summary's `failure` says whether the run stopped early.
+/// plot and viewer page. The summary's `failure` says whether the run stopped early.
 pub fn run_scenario(args: &RunArgs) -> Result<(RunSummary, System), SystemError> {
     let scenario = load_scenario(&args.scenario)?;
     let mut system = System::new(&scenario, &args.options)?;
@@ -901,11 +887,19 @@ pub fn run_scenario(args: &RunArgs) -> Result<(RunSummary, System), SystemError>
     log.line(&serde_json::json!({ "header": system.header() }))?;
     let mut log_error = None;
     let until = system.duration();
+    // Frames for the plot and the page: every 5 ms, kept only when one is asked for.
+    let mut track = crate::view::Track::default();
+    let keep_frames = args.html.is_some() || args.plot.is_some();
+    let n = scenario.agents.len();
     let result = system.run_until(until, |r| {
         if log_error.is_none()
             && let Err(e) = log.line(&LogStep::of(r))
         {
             log_error = Some(e);
+        }
+        if keep_frames && r.step.is_multiple_of(5) {
+            let q = r.agents.iter().take(n).map(|a| Some(a.q.clone())).collect();
+            track.frames.push(crate::view::TrackFrame { t: r.time, q });
         }
     });
     if let Some(e) = log_error {
@@ -915,8 +909,12 @@ pub fn run_scenario(args: &RunArgs) -> Result<(RunSummary, System), SystemError>
     let mut summary = system.summary();
     log.line(&serde_json::json!({ "summary": summary.replayable() }))?;
     summary.log_lines = log.lines();
+    let track = crate::view::with_events(track, &summary.events);
     if let Some(path) = &args.plot {
-        plot_joints(path, &format!("{}: joint positions", scenario.name), system.joint_series(), "q [rad | m]")?;
+        crate::plot::plot_run(path, &scenario, &track)?;
+    }
+    if let Some(path) = &args.html {
+        crate::view::write_run_view(path, &scenario, &track)?;
     }
     Ok((summary, system))
 }

@@ -52,13 +52,17 @@ pub struct AgentVerification {
     pub certified: bool,
     /// Timing and endpoints: problems found (empty: fine).
     pub timing: Vec<String>,
-    #[serde(flatten)]
+    /// The certified check of the trajectory (its own `certified` says whether the trajectory
+    /// alone passed; the agent's `certified` above adds timing and endpoints).
+    #[serde(rename = "trajectory")]
     pub report: TrajectoryReport,
 }
 
 /// A plan file checked against a scenario.
 #[derive(Debug, Clone, Serialize)]
 pub struct PlanVerification {
+    /// The program (version and commit) that made the report.
+    pub generator: String,
     pub plan_file: PathBuf,
     pub scenario: String,
     pub certified: bool,
@@ -229,6 +233,7 @@ pub fn verify_plan(
         });
     }
     Ok(PlanVerification {
+        generator: crate::generator(),
         plan_file: file.to_path_buf(),
         scenario: scenario.name.clone(),
         certified: agents.iter().all(|a| a.certified),
@@ -345,6 +350,8 @@ pub struct LogAgent {
 /// A run log checked against a scenario.
 #[derive(Debug, Clone, Serialize)]
 pub struct LogVerification {
+    /// The program (version and commit) that made the report.
+    pub generator: String,
     pub log_file: PathBuf,
     pub scenario: String,
     pub certified: bool,
@@ -376,8 +383,7 @@ fn parse_err(file: &Path, line: usize, column: usize, message: String) -> System
 /// Check a run log against `scenario` (see the module documentation).
 pub fn verify_log(scenario: &Scenario, file: &Path, settings: &CheckSettings) -> Result<LogVerification, SystemError> {
     let start = Instant::now();
-    let bytes = std::fs::read(file).map_err(|e| SystemError::io(file, e))?;
-    let text = String::from_utf8_lossy(&bytes);
+    let text = crate::error::read_input(file)?;
     let lines: Vec<&str> = text.split('\n').collect();
     let last_nonempty = lines.iter().rposition(|l| !l.trim().is_empty());
     let header_line = lines.first().copied().unwrap_or("");
@@ -616,6 +622,7 @@ pub fn verify_log(scenario: &Scenario, file: &Path, settings: &CheckSettings) ->
         })
         .collect();
     Ok(LogVerification {
+        generator: crate::generator(),
         log_file: file.to_path_buf(),
         scenario: scenario.name.clone(),
         certified: agents.iter().all(|a| a.certified),
@@ -677,39 +684,58 @@ pub fn render_log(v: &LogVerification) -> String {
     s
 }
 
-/// `embodied verify SCENARIO [PLAN.json] [--log FILE.jsonl] [--json]`: prints the reports and
-/// returns whether everything is certified.
-pub fn verify_cli(scenario: &str, plan: Option<&Path>, log: Option<&Path>, json: bool) -> Result<bool, SystemError> {
+/// What `embodied verify SCENARIO [PLAN.json] [--log FILE.jsonl]` found.
+#[derive(Debug, Clone, Serialize)]
+pub struct Verification {
+    /// Everything checked is certified.
+    pub certified: bool,
+    /// The plan file's report, when a plan was given.
+    pub plan: Option<PlanVerification>,
+    /// The run log's report, when a log was given.
+    pub log: Option<LogVerification>,
+}
+
+impl Verification {
+    /// The report as one JSON object: the plan's or the log's report alone when only one was
+    /// checked, else both under `plan` and `log` with `certified` for all.
+    pub fn to_json(&self) -> Result<String, SystemError> {
+        match (&self.plan, &self.log) {
+            (Some(p), None) => json_of(p),
+            (None, Some(l)) => json_of(l),
+            _ => json_of(self),
+        }
+    }
+
+    /// The report as text for the terminal.
+    pub fn render(&self) -> String {
+        let mut out = String::new();
+        if let Some(p) = &self.plan {
+            out.push_str(&render_plan(p));
+        }
+        if let Some(l) = &self.log {
+            out.push_str(&render_log(l));
+        }
+        out
+    }
+}
+
+/// Check a plan file and/or a run log against a scenario (a built-in name or a file).
+pub fn verify_files(scenario: &str, plan: Option<&Path>, log: Option<&Path>) -> Result<Verification, SystemError> {
     if plan.is_none() && log.is_none() {
         return Err(SystemError::Usage("verify: give a plan file, --log FILE.jsonl, or both".into()));
     }
     let scenario = load_scenario(scenario)?;
     let settings = CheckSettings::default();
-    let plan_report = match plan {
+    let plan = match plan {
         Some(p) => Some(verify_plan(&scenario, &read_plan(p)?, p, &settings)?),
         None => None,
     };
-    let log_report = match log {
+    let log = match log {
         Some(l) => Some(verify_log(&scenario, l, &settings)?),
         None => None,
     };
-    let certified = plan_report.as_ref().is_none_or(|r| r.certified) && log_report.as_ref().is_none_or(|r| r.certified);
-    if json {
-        let text = match (&plan_report, &log_report) {
-            (Some(p), None) => json_of(p)?,
-            (None, Some(l)) => json_of(l)?,
-            _ => json_of(&serde_json::json!({"certified": certified, "plan": plan_report, "log": log_report}))?,
-        };
-        println!("{text}");
-    } else {
-        if let Some(p) = &plan_report {
-            print!("{}", render_plan(p));
-        }
-        if let Some(l) = &log_report {
-            print!("{}", render_log(l));
-        }
-    }
-    Ok(certified)
+    let certified = plan.as_ref().is_none_or(|r| r.certified) && log.as_ref().is_none_or(|r| r.certified);
+    Ok(Verification { certified, plan, log })
 }
 
 fn json_of<T: Serialize>(value: &T) -> Result<String, SystemError> {
