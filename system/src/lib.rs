@@ -33,7 +33,6 @@
 //! # Ok::<(), embodied_system::SystemError>(())
 //! ```
 #![forbid(unsafe_code)]
-#![warn(missing_docs)]
 
 pub mod bench_qp;
 pub mod deadlines;
