@@ -45,11 +45,8 @@ fn every_example_runs_and_does_what_it_says() {
         let bin = example(&name);
         if !bin.exists() {
             // `cargo test --test examples` alone does not build the examples; `cargo test` does.
-            let status = Command::new(env!("CARGO"))
-                .args(["build", "--example", &name])
-                .current_dir(root())
-                .status()
-                .unwrap();
+            let status =
+                Command::new(env!("CARGO")).args(["build", "--example", &name]).current_dir(root()).status().unwrap();
             assert!(status.success() && bin.exists(), "{} could not be built", bin.display());
         }
         let out = Command::new(&bin).args(&args).output().unwrap();
