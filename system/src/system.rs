@@ -380,6 +380,9 @@ pub struct RunSummary {
     /// Simulated / wall time (not in the log).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub real_time_factor: Option<f64>,
+    /// Wall-clock time the carry's planning took before the run, ms (not in the log).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub carry_wall_planning_ms: Option<f64>,
     /// Per agent.
     pub agents: Vec<AgentSummary>,
     /// (time, agent, event) in order.
@@ -402,6 +405,7 @@ impl RunSummary {
         let mut s = self.clone();
         s.wall_s = None;
         s.real_time_factor = None;
+        s.carry_wall_planning_ms = None;
         if let Some(c) = &mut s.closed_chain {
             c.qp_p50_us = 0.0;
             c.qp_p99_us = 0.0;
@@ -500,7 +504,8 @@ pub struct System {
     clock: ClockSpec,
     duration: f64,
     coordinator: Option<AgentId>,
-    carry: Option<(Arc<Mutex<CarryRecord>>, serde_json::Value)>,
+    /// The carry's record, its log header and its wall-clock planning time, ms.
+    carry: Option<(Arc<Mutex<CarryRecord>>, serde_json::Value, f64)>,
     observer: Observer,
     started: Option<Instant>,
     wall: Duration,
@@ -555,9 +560,9 @@ impl System {
         for (k, agent) in scenario.agents.iter().enumerate() {
             let robot = Arc::new(agent.robot.clone());
             if let Some(spec) = scenario.carry.as_ref().filter(|c| c.agent == k) {
-                let (a, record, header) = carry_parts(scenario, spec, dt, clock, options)?;
+                let (a, record, header, wall_ms) = carry_parts(scenario, spec, dt, clock, options)?;
                 runtime.add_agent(a);
-                carry = Some((record, header));
+                carry = Some((record, header, wall_ms));
                 continue;
             }
             let Some(goal) = &agent.goal else {
@@ -702,7 +707,7 @@ impl System {
             duration_s: self.duration,
             planning_clock: clock_name(self.clock),
             agents,
-            closed_chain: self.carry.as_ref().map(|(_, h)| h.clone()),
+            closed_chain: self.carry.as_ref().map(|(_, h, _)| h.clone()),
         }
     }
 
@@ -775,7 +780,7 @@ impl System {
 
     /// The carry's per-step measurements (QP timings, closure), when the scenario has a carry.
     pub fn carry_record(&self) -> Option<Arc<Mutex<CarryRecord>>> {
-        self.carry.as_ref().map(|(r, _)| r.clone())
+        self.carry.as_ref().map(|(r, _, _)| r.clone())
     }
 
     /// What the run did so far (wall-clock figures included; see [`RunSummary::replayable`]).
@@ -808,7 +813,8 @@ impl System {
             behaviour_switches: self.observer.switches.clone(),
             failure: self.runtime.failure().map(|e| e.to_string()),
             log_lines: 0,
-            closed_chain: self.carry.as_ref().and_then(|(r, _)| finish(r)),
+            closed_chain: self.carry.as_ref().and_then(|(r, _, _)| finish(r)),
+            carry_wall_planning_ms: self.carry.as_ref().map(|(_, _, ms)| *ms),
         }
     }
 }
@@ -821,7 +827,7 @@ fn carry_parts(
     clock: ClockSpec,
     options: &RunOptions,
 ) -> Result<
-    (Agent<embodied_executor::closed_chain::carry::CarryAgent>, Arc<Mutex<CarryRecord>>, serde_json::Value),
+    (Agent<embodied_executor::closed_chain::carry::CarryAgent>, Arc<Mutex<CarryRecord>>, serde_json::Value, f64),
     SystemError,
 > {
     let agent = &scenario.agents[spec.agent];
@@ -835,6 +841,7 @@ fn carry_parts(
     })?;
     // Planning time as the run counts it: simulated from the collision checks (the log stays
     // byte-identical for a seed) or the wall clock.
+    let wall_ms = plan.stats.planning_ms;
     let planning_ms = match clock {
         ClockSpec::Wall => plan.stats.planning_ms,
         ClockSpec::Simulated { us_per_check } => plan.stats.collision_checks as f64 * us_per_check * 1e-3,
@@ -859,7 +866,7 @@ fn carry_parts(
     let (a, record) = carry_agent(setup).map_err(|e| {
         SystemError::Failed(format!("scenario `{}`: agent `{}`: carry: {e}", scenario.name, agent.name))
     })?;
-    Ok((a, record, header))
+    Ok((a, record, header, wall_ms))
 }
 
 /// What `embodied run` was asked to do.
@@ -956,9 +963,10 @@ pub fn render_summary(s: &RunSummary) -> String {
     if let Some(c) = &s.closed_chain {
         let _ = writeln!(
             out,
-            "  closed chain ({}): plan {:.1} ms, {:.2} s of motion; held {} steps; QP p50 {:.1} us, p99 {:.1} us, max {:.1} us ({} late, {} fallbacks, {} slacked); largest closure error {:.2e} m / {:.2e} rad (residual {:.1e}); object tracking {:.2e} m; nearest obstacle {:.3} m ({} damped steps); halts {}{}; object put down {} from its goal",
+            "  closed chain ({}): plan {:.1} ms{}, {:.2} s of motion; held {} steps; QP p50 {:.1} us, p99 {:.1} us, max {:.1} us ({} late, {} fallbacks, {} slacked); largest closure error {:.2e} m / {:.2e} rad (residual {:.1e}); object tracking {:.2e} m; nearest obstacle {:.3} m ({} damped steps); halts {}{}; object put down {} from its goal",
             c.agent,
             c.planning_ms,
+            s.carry_wall_planning_ms.map_or(String::new(), |ms| format!(" ({ms:.1} ms wall)")),
             c.plan_duration_s,
             c.qp_steps,
             c.qp_p50_us,
