@@ -279,7 +279,18 @@ pub fn plan_motion_with<V: StateValidity>(
     if settings.racers > 1 {
         return race(model, start, goal, settings);
     }
-    plan_alone(model, start, goal, settings)
+    plan_alone(model, start, goal, settings, Stages::All)
+}
+
+/// Which stages of [`plan_alone`] run.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Stages {
+    /// The straight segment, then the search.
+    All,
+    /// Only the straight segment: [`PlanError::NoPath`] when it is blocked.
+    Direct,
+    /// Only the search (the straight segment is known to be blocked).
+    Search,
 }
 
 /// [`MotionSettings::racers`] planners on the rayon pool, racer `k` with seed `seed + k`; the
@@ -295,6 +306,11 @@ fn race<V: StateValidity>(
     use std::sync::Arc;
     use std::sync::atomic::{AtomicBool, Ordering};
 
+    // The straight segment first, on this thread: most problems end there and need no race.
+    match plan_alone(model, start, goal, settings, Stages::Direct) {
+        Err(PlanError::NoPath { .. }) => {}
+        done => return done,
+    }
     let flag = Arc::new(AtomicBool::new(false));
     let results: Vec<Result<MotionPlan, PlanError>> = (0..settings.racers)
         .into_par_iter()
@@ -305,7 +321,7 @@ fn race<V: StateValidity>(
                 racers: 1,
                 ..settings.clone()
             };
-            let result = plan_alone(model, start, goal, &racer);
+            let result = plan_alone(model, start, goal, &racer, Stages::Search);
             if result.is_ok() {
                 flag.store(true, Ordering::Relaxed);
             }
@@ -338,6 +354,7 @@ fn plan_alone<V: StateValidity>(
     start: &[f64],
     goal: &Goal,
     settings: &MotionSettings,
+    stages: Stages,
 ) -> Result<MotionPlan, PlanError> {
     let robot = model.robot();
     if !(settings.resolution.is_finite() && settings.resolution > 0.0) {
@@ -381,6 +398,9 @@ fn plan_alone<V: StateValidity>(
     let mut order: Vec<usize> = (0..goals.len()).collect();
     order.sort_by(|&a, &b| space.distance(start, &goals[a]).total_cmp(&space.distance(start, &goals[b])));
     let mut raw: Option<(Vec<Vec<f64>>, &'static str)> = None;
+    if stages == Stages::Search {
+        order.clear();
+    }
     for &i in &order {
         if validity.segment_free(start, &goals[i]) {
             raw = Some((vec![start.to_vec(), goals[i].clone()], "direct"));
@@ -393,6 +413,9 @@ fn plan_alone<V: StateValidity>(
 
     // 2. The search.
     let mut greedy_done = false;
+    if raw.is_none() && stages == Stages::Direct {
+        return Err(PlanError::NoPath { samples: 0 });
+    }
     if raw.is_none() {
         let found = match settings.planner {
             PlannerKind::RrtConnect => {
