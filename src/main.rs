@@ -164,12 +164,13 @@ enum BenchCommand {
         /// RRT-Connect's largest step (rad).
         #[arg(long)]
         rrt_range: Option<f64>,
-        /// RRT-Connect with dynamic domain (Yershova et al. 2005).
+        /// RRT-Connect without dynamic domain (Yershova et al. 2005; on by default).
         #[arg(long)]
-        dynamic_domain: bool,
-        /// RRT-Connect grows the smaller tree while the other has twice its nodes.
+        no_dynamic_domain: bool,
+        /// RRT-Connect swaps its trees every iteration instead of growing the smaller one while
+        /// the other has twice its nodes (the default).
         #[arg(long)]
-        balance: bool,
+        no_balance: bool,
         /// How RRT-Connect draws samples: uniform or halton.
         #[arg(long, default_value = "uniform")]
         sampler: embodied_planner::motion::Sampler,
@@ -342,8 +343,8 @@ fn run(cli: Cli) -> Result<(), AppError> {
             shortcut_attempts,
             threads,
             rrt_range,
-            dynamic_domain,
-            balance,
+            no_dynamic_domain,
+            no_balance,
             sampler,
         }) => {
             if threads == 0 {
@@ -352,8 +353,8 @@ fn run(cli: Cli) -> Result<(), AppError> {
             let mut args = embodied::mbm::MbmArgs::new(urdf, srdf, problems);
             args.algorithm = algorithm;
             args.threads = threads;
-            args.dynamic_domain = dynamic_domain;
-            args.balance = balance;
+            args.dynamic_domain = !no_dynamic_domain;
+            args.balance = !no_balance;
             args.sampler = sampler;
             if let Some(r) = rrt_range {
                 if !(r.is_finite() && r > 0.0) {

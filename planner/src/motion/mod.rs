@@ -209,10 +209,16 @@ pub struct MotionSettings {
     /// RRT-Connect: dynamic domain (Yershova et al., ICRA 2005): once an extension from a node
     /// fails, samples farther than a radius from it (4 rad, adapted by 0.01% per success or
     /// failure, at least 1 rad) are not extended from it, so the tree stops pushing into
-    /// obstacles from its boundary nodes.
+    /// obstacles from its boundary nodes. On by default: with [`MotionSettings::rrt_balance`],
+    /// on the 96 valid bookshelf_small MotionBenchMaker UR5 problems the planner's instructions
+    /// fell from 756 M to 270 M (callgrind, k-d tree nearest neighbours in both), the largest
+    /// collision-check count of a problem from 15,963 to 2,269 and the median path length of
+    /// all 296 problems from 6.53 to 6.27 (Halton samples on top: 311 M; range 2 rad on top of
+    /// that: path length 6.73).
     pub rrt_dynamic_domain: bool,
     /// RRT-Connect: keep growing the smaller tree while the other has twice its nodes (instead
-    /// of swapping the trees every iteration).
+    /// of swapping the trees every iteration). On by default (see
+    /// [`MotionSettings::rrt_dynamic_domain`]).
     pub rrt_balance: bool,
     /// How RRT-Connect draws its samples.
     pub sampler: Sampler,
@@ -243,8 +249,8 @@ impl Default for MotionSettings {
             parallel: false,
             rrt_range: 1.0,
             lazy_probe: DEFAULT_LAZY_PROBE,
-            rrt_dynamic_domain: false,
-            rrt_balance: false,
+            rrt_dynamic_domain: true,
+            rrt_balance: true,
             sampler: Sampler::Uniform,
             racers: 1,
             max_samples: 50_000,
