@@ -234,6 +234,23 @@ enum BenchCommand {
         /// Random shortcut attempts per path after the greedy pass (more: shorter paths, slower).
         #[arg(long)]
         shortcut_attempts: Option<usize>,
+        /// Planners racing per problem on the rayon pool (1: one planner; 2: two differently
+        /// seeded planners, the first path wins and stops the other).
+        #[arg(long, default_value_t = 1)]
+        threads: usize,
+        /// RRT-Connect's largest step (rad).
+        #[arg(long)]
+        rrt_range: Option<f64>,
+        /// RRT-Connect without dynamic domain (Yershova et al. 2005; on by default).
+        #[arg(long)]
+        no_dynamic_domain: bool,
+        /// RRT-Connect swaps its trees every iteration instead of growing the smaller one while
+        /// the other has twice its nodes (the default).
+        #[arg(long)]
+        no_balance: bool,
+        /// How RRT-Connect draws samples: uniform or halton.
+        #[arg(long, default_value = "uniform")]
+        sampler: embodied_planner::motion::Sampler,
     },
     /// The closed-chain QP of a two-handed carry, every held step solved by the fast dense
     /// solver (which drives) and by clarabel: time percentiles, late steps, agreement.
@@ -507,9 +524,27 @@ fn run(cli: Cli) -> Result<(), AppError> {
             algorithm,
             resolution,
             shortcut_attempts,
+            threads,
+            rrt_range,
+            no_dynamic_domain,
+            no_balance,
+            sampler,
         }) => {
+            if threads == 0 {
+                return Err(AppError::Usage("--threads must be at least 1".into()));
+            }
             let mut args = embodied::mbm::MbmArgs::new(urdf, srdf, problems);
             args.algorithm = algorithm;
+            args.threads = threads;
+            args.dynamic_domain = !no_dynamic_domain;
+            args.balance = !no_balance;
+            args.sampler = sampler;
+            if let Some(r) = rrt_range {
+                if !(r.is_finite() && r > 0.0) {
+                    return Err(AppError::Usage(format!("--rrt-range must be a positive number, got {r}")));
+                }
+                args.rrt_range = r;
+            }
             if let Some(r) = resolution {
                 args.resolution = r;
                 args.edge_check = embodied_planner::motion::EdgeCheck::Sampled;

@@ -21,7 +21,7 @@ use embodied_models::urdf::load_urdf;
 use embodied_models::{CollisionModel, ConfigSpace, Robot};
 use embodied_planner::PlanError;
 use embodied_planner::deadline::Deadline;
-use embodied_planner::motion::{CERTIFY_TOLERANCE, EdgeCheck, Goal, MotionSettings, PlannerKind, plan_motion};
+use embodied_planner::motion::{CERTIFY_TOLERANCE, EdgeCheck, Goal, MotionSettings, PlannerKind, Sampler, plan_motion};
 use embodied_planner::moveit::{MoveitError, load_request, load_scene};
 use embodied_planner::verify::Verifier;
 use serde::Serialize;
@@ -58,6 +58,17 @@ pub struct MbmArgs {
     pub shortcut_attempts: usize,
     /// The planner after the straight segment (default: RRT-Connect).
     pub algorithm: PlannerKind,
+    /// RRT-Connect's largest step (rad).
+    pub rrt_range: f64,
+    /// RRT-Connect with dynamic domain.
+    pub dynamic_domain: bool,
+    /// RRT-Connect grows the smaller tree while the other has twice its nodes.
+    pub balance: bool,
+    /// How RRT-Connect draws samples.
+    pub sampler: Sampler,
+    /// Planners racing per problem (1: one planner on one thread; 2: two differently seeded
+    /// planners on the rayon pool, first path wins).
+    pub threads: usize,
     /// Only these families (all when `None`).
     pub families: Option<Vec<String>>,
     /// At most this many problems per family (the lowest indices).
@@ -83,6 +94,11 @@ impl MbmArgs {
             resolution: VERIFY_RESOLUTION,
             shortcut_attempts: MotionSettings::default().shortcut_attempts,
             algorithm: PlannerKind::RrtConnect,
+            rrt_range: MotionSettings::default().rrt_range,
+            dynamic_domain: MotionSettings::default().rrt_dynamic_domain,
+            balance: MotionSettings::default().rrt_balance,
+            sampler: MotionSettings::default().sampler,
+            threads: 1,
             families: None,
             limit: None,
             progress: false,
@@ -150,6 +166,10 @@ pub struct Summary {
     pub p95_us: Option<f64>,
     pub max_us: Option<f64>,
     pub mean_us: Option<f64>,
+    /// Share of the valid problems solved within 1 ms (0..=1).
+    pub within_1ms: Option<f64>,
+    /// Median joint-space path length of the solved problems (rad).
+    pub median_path_length: Option<f64>,
     /// Mean joint-space path length of the solved problems (rad).
     pub mean_path_length: Option<f64>,
     /// Returned paths that failed the independent check (must be 0).
@@ -170,6 +190,13 @@ pub struct MbmSettings {
     pub shortcut_attempts: usize,
     /// The planner after the straight segment.
     pub algorithm: PlannerKind,
+    /// RRT-Connect's largest step (rad), dynamic domain, balanced trees and sampler.
+    pub rrt_range: f64,
+    pub dynamic_domain: bool,
+    pub balance: bool,
+    pub sampler: Sampler,
+    /// Planners racing per problem.
+    pub threads: usize,
     pub verify_resolution: f64,
     /// Self-collision pairs disabled because they touch in every sampled configuration.
     pub always_colliding_disabled: Vec<(String, String)>,
@@ -476,6 +503,11 @@ fn run_problem(args: &MbmArgs, loaded: &Loaded, p: &ProblemFiles) -> Result<Prob
         deadline: Deadline::after(budget),
         shortcut_attempts: args.shortcut_attempts,
         planner: args.algorithm,
+        rrt_range: args.rrt_range,
+        rrt_dynamic_domain: args.dynamic_domain,
+        rrt_balance: args.balance,
+        sampler: args.sampler,
+        racers: args.threads.max(1),
         ..MotionSettings::default()
     };
     let goal = Goal::Configuration(resolved.goal.clone());
@@ -553,6 +585,11 @@ pub fn run_mbm(args: &MbmArgs, on_progress: &mut dyn FnMut(usize, usize)) -> Res
             resolution: args.resolution,
             shortcut_attempts: args.shortcut_attempts,
             algorithm: args.algorithm,
+            rrt_range: args.rrt_range,
+            dynamic_domain: args.dynamic_domain,
+            balance: args.balance,
+            sampler: args.sampler,
+            threads: args.threads.max(1),
             verify_resolution: VERIFY_RESOLUTION,
             always_colliding_disabled: loaded.always_colliding.clone(),
             never_colliding_disabled: loaded.never_colliding.clone(),
@@ -576,14 +613,16 @@ fn summarize(name: &str, results: &[&ProblemResult]) -> Summary {
     let solved: Vec<&&ProblemResult> = results.iter().filter(|r| r.solved).collect();
     let mut times: Vec<f64> = solved.iter().filter_map(|r| r.planning_us).collect();
     times.sort_by(f64::total_cmp);
-    let lengths: Vec<f64> = solved.iter().filter_map(|r| r.path_length).collect();
+    let mut lengths: Vec<f64> = solved.iter().filter_map(|r| r.path_length).collect();
+    lengths.sort_by(f64::total_cmp);
     let mean = |v: &[f64]| if v.is_empty() { None } else { Some(v.iter().sum::<f64>() / v.len() as f64) };
     let invalid = results.iter().filter(|r| r.status.is_invalid()).count();
     let verification_failures = results.iter().filter(|r| r.verified == Some(false)).count();
+    let valid = results.len() - invalid;
     Summary {
         name: name.to_string(),
         total: results.len(),
-        valid: results.len() - invalid,
+        valid,
         invalid,
         solved: solved.len(),
         out_of_time: results.iter().filter(|r| r.status == ProblemStatus::OutOfTime).count(),
@@ -592,6 +631,8 @@ fn summarize(name: &str, results: &[&ProblemResult]) -> Summary {
         p95_us: percentile(&times, 0.95),
         max_us: times.last().copied(),
         mean_us: mean(&times),
+        within_1ms: (valid > 0).then(|| times.iter().filter(|&&t| t <= 1000.0).count() as f64 / valid as f64),
+        median_path_length: percentile(&lengths, 0.5),
         mean_path_length: mean(&lengths),
         verification_failures,
         all_paths_valid: verification_failures == 0,
@@ -622,8 +663,19 @@ fn fmt_us(v: Option<f64>) -> String {
 
 /// A plain-text table for the terminal: one row per family and one for all.
 pub fn render_table(report: &MbmReport) -> String {
-    let header =
-        ["family", "solved", "invalid", "timeout", "failed", "p50 us", "p95 us", "max us", "path len", "bad paths"];
+    let header = [
+        "family",
+        "solved",
+        "invalid",
+        "timeout",
+        "failed",
+        "p50 us",
+        "p95 us",
+        "max us",
+        "<=1 ms",
+        "path len",
+        "bad paths",
+    ];
     let row = |s: &Summary| -> Vec<String> {
         vec![
             s.name.clone(),
@@ -634,7 +686,8 @@ pub fn render_table(report: &MbmReport) -> String {
             fmt_us(s.p50_us),
             fmt_us(s.p95_us),
             fmt_us(s.max_us),
-            s.mean_path_length.map_or("-".to_string(), |l| format!("{l:.2}")),
+            s.within_1ms.map_or("-".to_string(), |w| format!("{:.1}%", 100.0 * w)),
+            s.median_path_length.map_or("-".to_string(), |l| format!("{l:.2}")),
             s.verification_failures.to_string(),
         ]
     };
@@ -662,8 +715,13 @@ pub fn render_table(report: &MbmReport) -> String {
         EdgeCheck::Sampled => format!("edges sampled at {} rad", report.settings.resolution),
     };
     let mut out = format!(
-        "MotionBenchMaker: deadline {} ms, seed {}, {edges}, paths re-checked at {} rad\n",
-        report.settings.deadline_ms, report.settings.seed, report.settings.verify_resolution
+        "MotionBenchMaker: deadline {} ms, seed {}, {edges}, paths re-checked at {} rad, {} ({} thread{})\n",
+        report.settings.deadline_ms,
+        report.settings.seed,
+        report.settings.verify_resolution,
+        report.settings.algorithm,
+        report.settings.threads,
+        if report.settings.threads == 1 { "" } else { "s" },
     );
     out.push_str(&line(&header.iter().map(|h| h.to_string()).collect::<Vec<_>>()));
     for (i, r) in rows.iter().enumerate() {
@@ -673,7 +731,10 @@ pub fn render_table(report: &MbmReport) -> String {
         }
         out.push_str(&line(r));
     }
-    out.push_str("solved = solved/valid problems; times are wall-clock plan_motion calls of solved problems\n");
+    out.push_str(
+        "solved = solved/valid problems; times are wall-clock plan_motion calls of solved problems; \
+         <=1 ms = share of valid problems solved within 1 ms; path len = median\n",
+    );
     let unsolved: Vec<String> = report
         .problems
         .iter()
