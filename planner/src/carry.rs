@@ -8,7 +8,7 @@ use serde::{Deserialize, Serialize};
 /// A rigid box carried by two end effectors.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct CarriedObject {
-    /// The object's name (in messages and as the held object's link name).
+    /// The object's name.
     pub name: String,
     /// Full box sizes along the object's x, y, z, m.
     pub size: [f64; 3],
