@@ -138,7 +138,7 @@ impl<C> Agent<C> {
     pub fn internal(&self) -> &C {
         &self.control.internal
     }
-    /// The control subsystem: `c_c` and the behaviours that compute `c^{i+1}`.
+    /// The control subsystem `c_j`: `c_c` and the input and output images.
     pub fn control(&self) -> &ControlSubsystem<C> {
         &self.control
     }
