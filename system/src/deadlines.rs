@@ -97,17 +97,17 @@ pub struct DeadlineRow {
     pub halts_from_speed: usize,
     /// Largest joint travel during a halt from speed (rad or m): mean and max.
     pub halt_distance_mean: f64,
-    /// See `halt_distance_mean`.
+    /// Largest joint travel of any halt from speed (rad or m).
     pub halt_distance_max: f64,
     /// Duration of a halt from speed, ms: mean and max.
     pub halt_time_mean_ms: f64,
-    /// See `halt_time_mean_ms`.
+    /// Longest halt from speed, ms.
     pub halt_time_max_ms: f64,
     /// Searches stopped by the deadline.
     pub stopped: usize,
     /// How long past the deadline a stopped search returned, µs: median and max.
     pub overshoot_p50_us: f64,
-    /// See `overshoot_p50_us`.
+    /// Largest overshoot of a stopped search past the deadline, µs.
     pub overshoot_max_us: f64,
     /// Every halt from speed.
     pub halts: Vec<HaltRecord>,

@@ -161,11 +161,11 @@ pub struct Summary {
     pub failed: usize,
     /// Percentiles of the planning time of the solved problems, microseconds.
     pub p50_us: Option<f64>,
-    /// See `p50_us`.
+    /// 95th percentile planning time of the solved problems, µs.
     pub p95_us: Option<f64>,
-    /// See `p50_us`.
+    /// Longest planning time of the solved problems, µs.
     pub max_us: Option<f64>,
-    /// See `p50_us`.
+    /// Mean planning time of the solved problems, µs.
     pub mean_us: Option<f64>,
     /// Mean joint-space path length of the solved problems (rad).
     pub mean_path_length: Option<f64>,
