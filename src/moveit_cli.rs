@@ -61,10 +61,15 @@ pub fn load_moveit_robot(
 /// What `embodied plan` was asked for a MoveIt request.
 #[derive(Debug, Clone)]
 pub struct MoveitPlanArgs {
+    /// The robot's URDF file.
     pub urdf: PathBuf,
+    /// The robot's SRDF file.
     pub srdf: PathBuf,
+    /// The MoveIt planning scene file (YAML).
     pub scene: PathBuf,
+    /// The MoveIt motion plan request file (YAML).
     pub request: PathBuf,
+    /// An optional `joint_limits.yaml` applied to the robot.
     pub limits: Option<PathBuf>,
     /// Deadline in milliseconds; default: the request's `allowed_planning_time`, else 5 s.
     pub deadline_ms: Option<f64>,

@@ -110,6 +110,7 @@ impl MbmArgs {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "snake_case")]
 pub enum ProblemStatus {
+    /// A path that verifies came back within the deadline.
     Solved,
     /// The request's start configuration is in collision or outside the joint limits.
     InvalidStart,
@@ -122,6 +123,7 @@ pub enum ProblemStatus {
 }
 
 impl ProblemStatus {
+    /// Whether the problem itself is invalid (start or goal in collision or outside the limits).
     pub fn is_invalid(self) -> bool {
         matches!(self, ProblemStatus::InvalidStart | ProblemStatus::InvalidGoal)
     }
@@ -130,13 +132,19 @@ impl ProblemStatus {
 /// One problem's outcome; `path` runs from the request's start to its goal over `joint_names`.
 #[derive(Debug, Clone, Serialize)]
 pub struct ProblemResult {
+    /// The problem's family (its folder name).
     pub family: String,
+    /// The problem's index within its family.
     pub index: u32,
+    /// Whether the status is [`ProblemStatus::Solved`].
     pub solved: bool,
+    /// How the problem ended.
     pub status: ProblemStatus,
     /// Wall-clock time of the `plan_motion` call, microseconds (absent for invalid problems).
     pub planning_us: Option<f64>,
+    /// Names of the joints of `path`, in order.
     pub joint_names: Vec<String>,
+    /// The path's waypoints, rad (empty when none came back).
     pub path: Vec<Vec<f64>>,
     /// Joint-space length of `path` (the configuration space's metric).
     pub path_length: Option<f64>,
@@ -153,18 +161,27 @@ pub struct ProblemResult {
 /// Counts and planning-time percentiles of a set of problems (a family or all).
 #[derive(Debug, Clone, Serialize, PartialEq)]
 pub struct Summary {
+    /// The family's name, or `overall`.
     pub name: String,
+    /// Problems in the set.
     pub total: usize,
     /// Problems with a valid start and goal.
     pub valid: usize,
+    /// Problems with a start or goal in collision or outside the joint limits.
     pub invalid: usize,
+    /// Problems solved.
     pub solved: usize,
+    /// Problems the planner gave up at the deadline.
     pub out_of_time: usize,
+    /// Problems failed before the deadline or with a path that does not verify.
     pub failed: usize,
     /// Percentiles of the planning time of the solved problems, microseconds.
     pub p50_us: Option<f64>,
+    /// 95th percentile planning time of the solved problems, µs.
     pub p95_us: Option<f64>,
+    /// Longest planning time of the solved problems, µs.
     pub max_us: Option<f64>,
+    /// Mean planning time of the solved problems, µs.
     pub mean_us: Option<f64>,
     /// Share of the valid problems solved within 1 ms (0..=1).
     pub within_1ms: Option<f64>,
@@ -174,29 +191,42 @@ pub struct Summary {
     pub mean_path_length: Option<f64>,
     /// Returned paths that failed the independent check (must be 0).
     pub verification_failures: usize,
+    /// Whether every returned path passed the independent check.
     pub all_paths_valid: bool,
 }
 
 /// The benchmark's settings, echoed in the report.
 #[derive(Debug, Clone, Serialize)]
 pub struct MbmSettings {
+    /// The robot's URDF file.
     pub urdf: PathBuf,
+    /// The robot's SRDF file.
     pub srdf: PathBuf,
+    /// Folder of the problem families.
     pub problems: PathBuf,
+    /// Planning deadline per problem, ms.
     pub deadline_ms: f64,
+    /// Base seed.
     pub seed: u64,
+    /// How the planner checked its edges.
     pub edge_check: EdgeCheck,
+    /// Collision-checking resolution of sampled edges (rad, largest joint step).
     pub resolution: f64,
+    /// Random shortcut attempts after the greedy shortcut pass.
     pub shortcut_attempts: usize,
     /// The planner after the straight segment.
     pub algorithm: PlannerKind,
-    /// RRT-Connect's largest step (rad), dynamic domain, balanced trees and sampler.
+    /// RRT-Connect's largest step, rad.
     pub rrt_range: f64,
+    /// Whether RRT-Connect's sampling was restricted to a dynamic domain around each tree.
     pub dynamic_domain: bool,
+    /// Whether the smaller tree was grown while the other had twice its nodes.
     pub balance: bool,
+    /// How RRT-Connect drew its samples.
     pub sampler: Sampler,
     /// Planners racing per problem.
     pub threads: usize,
+    /// Resolution at which every returned path was re-checked (rad, largest joint step).
     pub verify_resolution: f64,
     /// Self-collision pairs disabled because they touch in every sampled configuration.
     pub always_colliding_disabled: Vec<(String, String)>,
@@ -210,9 +240,13 @@ pub struct MbmSettings {
 pub struct MbmReport {
     /// The program (version and commit) that made the report.
     pub generator: String,
+    /// The settings the benchmark ran with.
     pub settings: MbmSettings,
+    /// One summary per family.
     pub families: Vec<Summary>,
+    /// The summary over every problem.
     pub overall: Summary,
+    /// Every problem's outcome.
     pub problems: Vec<ProblemResult>,
 }
 
@@ -425,8 +459,11 @@ fn load_robot(args: &MbmArgs) -> Result<Loaded, AppError> {
 pub struct MbmProblem {
     /// `family/index`.
     pub name: String,
+    /// The planning arm among the scene's obstacles.
     pub model: CollisionModel,
+    /// Start configuration, rad.
     pub start: Vec<f64>,
+    /// Goal configuration, rad.
     pub goal: Vec<f64>,
 }
 
@@ -642,6 +679,7 @@ fn summarize(name: &str, results: &[&ProblemResult]) -> Summary {
 /// The `--out` file: every problem with its joint names and path, for an independent checker.
 #[derive(Debug, Clone, Serialize)]
 pub struct PathsFile<'a> {
+    /// Every problem's outcome.
     pub problems: &'a [ProblemResult],
 }
 

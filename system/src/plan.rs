@@ -22,19 +22,28 @@ use crate::scenario::{GoalSpec, Scenario};
 pub const PLAN_FORMAT: &str = "embodied-plan/1";
 
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+/// A name and the SHA-256 of what it names (a robot's kinematic description, a scenario).
 pub struct NamedHash {
+    /// The name.
     pub name: String,
+    /// The SHA-256, hex.
     pub hash: String,
 }
 
 /// One agent's plan.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct AgentPlan {
+    /// The agent's name.
     pub agent: String,
+    /// The agent's robot and the hash of its kinematic description.
     pub robot: NamedHash,
+    /// Names of the degrees of freedom, in the order of the values in `path`.
     pub joint_names: Vec<String>,
+    /// The planned waypoints (rad or m).
     pub path: Vec<Vec<f64>>,
+    /// The timed trajectory along `path`.
     pub trajectory: Trajectory,
+    /// What planning cost (the planner's statistics, as JSON).
     pub stats: serde_json::Value,
     /// Spans where two end effectors hold one object (two-arm plans); empty otherwise.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
@@ -44,11 +53,14 @@ pub struct AgentPlan {
 /// A plan file.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct PlanFile {
+    /// Format tag ([`PLAN_FORMAT`]).
     pub format: String,
     /// The program (version and commit) that made the file.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub generator: Option<String>,
+    /// The scenario planned for, with its hash.
     pub scenario: NamedHash,
+    /// One plan per planned agent.
     pub plans: Vec<AgentPlan>,
 }
 

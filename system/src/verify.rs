@@ -45,10 +45,13 @@ pub const EXIT_NOT_CERTIFIED: u8 = 1;
 /// One agent's plan, checked.
 #[derive(Debug, Clone, Serialize)]
 pub struct AgentVerification {
+    /// The agent's name.
     pub agent: String,
+    /// The agent's robot.
     pub robot: String,
     /// Where the other agents stood while this one moved.
     pub others: Vec<String>,
+    /// Whether the trajectory is certified and timing and endpoints are fine.
     pub certified: bool,
     /// Timing and endpoints: problems found (empty: fine).
     pub timing: Vec<String>,
@@ -63,12 +66,19 @@ pub struct AgentVerification {
 pub struct PlanVerification {
     /// The program (version and commit) that made the report.
     pub generator: String,
+    /// The plan file checked.
     pub plan_file: PathBuf,
+    /// The scenario checked against.
     pub scenario: String,
+    /// Whether every agent's plan is certified.
     pub certified: bool,
+    /// Problems with the input that did not stop the check.
     pub warnings: Vec<String>,
+    /// One result per agent.
     pub agents: Vec<AgentVerification>,
+    /// The settings of the certified check.
     pub settings: CheckSettings,
+    /// Wall-clock time of the check, s.
     pub time_s: f64,
 }
 
@@ -316,34 +326,51 @@ pub fn render_plan(v: &PlanVerification) -> String {
 /// The closed-chain declaration of a log header.
 #[derive(Debug, Clone, Serialize, serde::Deserialize)]
 pub struct LogClosedChain {
+    /// The holding agent's name.
     pub agent: String,
+    /// The two end effectors that hold the object.
     pub end_effectors: [String; 2],
+    /// Largest allowed drift of the relative tool position, m.
     pub tolerance_m: f64,
+    /// Largest allowed drift of the relative tool rotation angle, rad.
     pub tolerance_rad: f64,
 }
 
 /// Closure between grasp and release events of one agent.
 #[derive(Debug, Clone, Serialize)]
 pub struct LogClosure {
+    /// Whether the relative tool pose stayed within the tolerances while held.
     pub ok: bool,
+    /// The first drift beyond the tolerances, if any.
     pub violation: Option<Finding>,
+    /// Grasp events seen.
     pub grasps: usize,
     /// Steps checked while holding.
     pub samples: usize,
+    /// Largest drift of the relative tool position while held, m.
     pub max_position_error_m: f64,
+    /// Largest drift of the relative tool rotation angle while held, rad.
     pub max_angle_error_rad: f64,
 }
 
 /// One agent of a run log, checked.
 #[derive(Debug, Clone, Serialize)]
 pub struct LogAgent {
+    /// The agent's name.
     pub agent: String,
+    /// Whether its logged motion stayed within the limits (and the closure, if any, held).
     pub certified: bool,
+    /// Logged steps of this agent.
     pub steps: usize,
+    /// The first limit violation, if any.
     pub violation: Option<Finding>,
+    /// Limit violations found.
     pub violations: usize,
+    /// Largest |velocity| / limit over the log.
     pub max_velocity_ratio: f64,
+    /// Largest |acceleration| / limit over the log.
     pub max_acceleration_ratio: f64,
+    /// The closed-chain check, for an agent that holds an object with two end effectors.
     pub closure: Option<LogClosure>,
 }
 
@@ -352,16 +379,25 @@ pub struct LogAgent {
 pub struct LogVerification {
     /// The program (version and commit) that made the report.
     pub generator: String,
+    /// The run log checked.
     pub log_file: PathBuf,
+    /// The scenario checked against.
     pub scenario: String,
+    /// Whether every agent is certified.
     pub certified: bool,
     /// Whether the log ends with its summary line; `note` says where a truncated log stops.
     pub complete: bool,
+    /// Where a truncated log stops (see `complete`).
     pub note: Option<String>,
+    /// Steps in the log.
     pub steps: usize,
+    /// Control period from the log header, s.
     pub step_s: f64,
+    /// Problems with the input that did not stop the check.
     pub warnings: Vec<String>,
+    /// One result per agent.
     pub agents: Vec<LogAgent>,
+    /// Wall-clock time of the check, s.
     pub time_s: f64,
 }
 

@@ -10,6 +10,7 @@ use crate::world::ReceptorReadings;
 /// the surface distance.
 #[derive(Debug, Clone, Default)]
 pub struct UnmappedObstacle {
+    /// World obstacle ids the agent already plans around (not reported).
     pub mapped: Vec<usize>,
 }
 

@@ -34,7 +34,12 @@ pub enum Goal {
     /// Any one of these configurations (the search finds the cheapest reachable).
     AnyOf(Vec<Vec<f64>>),
     /// The tool frame of end effector `end_effector` at `pose` (world frame).
-    ToolPose { end_effector: usize, pose: Isometry3<f64> },
+    ToolPose {
+        /// Index into [`embodied_models::Robot::end_effectors`].
+        end_effector: usize,
+        /// Required pose of its tool frame, in the world frame.
+        pose: Isometry3<f64>,
+    },
 }
 
 /// Default [`MotionSettings::lazy_probe`] (rad or m).

@@ -39,15 +39,46 @@ pub type Pose = [f64; 7];
 #[serde(tag = "kind", rename_all = "snake_case")]
 pub enum ViewShape {
     /// A box of these full sizes.
-    Box { size: [f64; 3], pose: Pose },
+    Box {
+        /// Full sizes along x, y, z, m.
+        size: [f64; 3],
+        /// Pose in the body's frame.
+        pose: Pose,
+    },
     /// A ball.
-    Sphere { radius: f64, pose: Pose },
+    Sphere {
+        /// Radius, m.
+        radius: f64,
+        /// Pose in the body's frame.
+        pose: Pose,
+    },
     /// A cylinder of this full length along z.
-    Cylinder { radius: f64, length: f64, pose: Pose },
+    Cylinder {
+        /// Radius, m.
+        radius: f64,
+        /// Full length along z, m.
+        length: f64,
+        /// Pose in the body's frame.
+        pose: Pose,
+    },
     /// A capsule whose axis segment has this length along z.
-    Capsule { radius: f64, length: f64, pose: Pose },
+    Capsule {
+        /// Radius, m.
+        radius: f64,
+        /// Length of the axis segment along z, m.
+        length: f64,
+        /// Pose in the body's frame.
+        pose: Pose,
+    },
     /// A triangle mesh: vertex coordinates (x, y, z, ...) and vertex index triples.
-    Mesh { vertices: Vec<f64>, triangles: Vec<u32>, pose: Pose },
+    Mesh {
+        /// Vertex coordinates x, y, z, ..., m.
+        vertices: Vec<f64>,
+        /// Vertex indices, three per triangle.
+        triangles: Vec<u32>,
+        /// Pose in the body's frame.
+        pose: Pose,
+    },
 }
 
 /// What a body of the scene is.
@@ -65,13 +96,16 @@ pub enum BodyKind {
 /// A rigid body: its shapes and its pose at each frame.
 #[derive(Debug, Clone, Serialize)]
 pub struct ViewBody {
+    /// The body's name.
     pub name: String,
+    /// Link, obstacle or carried object.
     pub kind: BodyKind,
     /// The agent it belongs to (links and carried objects).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub agent: Option<String>,
     /// CSS colour.
     pub color: String,
+    /// Its shapes, in the body's frame.
     pub shapes: Vec<ViewShape>,
     /// One pose per frame (`null`: absent at that frame), or a single pose for a body that never
     /// moves.
@@ -81,35 +115,47 @@ pub struct ViewBody {
 /// A marked moment of the timeline.
 #[derive(Debug, Clone, Serialize, PartialEq)]
 pub struct ViewEvent {
+    /// When, s.
     pub t: f64,
+    /// Which agent.
     pub agent: String,
     /// `plan`, `halt`, `resume`, `grasp`, `release`, `goal`, `failure` or `other`.
     pub kind: String,
+    /// What the page shows.
     pub label: String,
 }
 
 /// The clearance at one frame: the distance and the two bodies that are nearest.
 #[derive(Debug, Clone, Serialize, PartialEq)]
 pub struct ViewClearance {
+    /// The distance, m.
     pub m: f64,
+    /// One body of the nearest pair.
     pub a: String,
+    /// The other body of the nearest pair.
     pub b: String,
 }
 
 /// Everything a viewer page draws.
 #[derive(Debug, Clone, Serialize)]
 pub struct ViewScene {
+    /// Format tag ([`VIEW_FORMAT`]).
     pub format: String,
+    /// The page's title.
     pub title: String,
     /// What the scene was made from (a run log, a plan file, a run).
     pub source: String,
     /// Version and commit of the program that made it.
     pub generator: String,
+    /// Time between frames, s.
     pub frame_s: f64,
     /// Frame times, s.
     pub times: Vec<f64>,
+    /// The agents' names.
     pub agents: Vec<String>,
+    /// Every body drawn.
     pub bodies: Vec<ViewBody>,
+    /// The timeline's marked moments.
     pub events: Vec<ViewEvent>,
     /// Per frame; `null` where nothing is there to be near.
     pub clearance: Vec<Option<ViewClearance>>,
@@ -118,7 +164,9 @@ pub struct ViewScene {
 /// One timed configuration of every scenario agent (`None`: not known at that time).
 #[derive(Debug, Clone, PartialEq)]
 pub struct TrackFrame {
+    /// Time, s.
     pub t: f64,
+    /// Per scenario agent, its joint values (`None`: not known at that time).
     pub q: Vec<Option<Vec<f64>>>,
 }
 
@@ -145,14 +193,18 @@ impl TrackEvent {
 /// The motion to show: frames in time order and events, for the scenario's agents in order.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct Track {
+    /// Timed configurations, in time order.
     pub frames: Vec<TrackFrame>,
+    /// The events to mark.
     pub events: Vec<TrackEvent>,
 }
 
 /// What a run log's header says about where it came from.
 #[derive(Debug, Clone, PartialEq)]
 pub struct LogOrigin {
+    /// The scenario named in the header.
     pub scenario: String,
+    /// The scenario's hash from the header, if given.
     pub scenario_hash: Option<String>,
 }
 
