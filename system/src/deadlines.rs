@@ -194,21 +194,15 @@ fn tally_event(t: &mut Tally, problem: &str, e: &Event, deadline_us: f64) {
     let elapsed_us = |wall: &Option<WallTiming>| wall.map_or(f64::INFINITY, |w| w.elapsed_us as f64);
     match e {
         Event::PlanRequested { .. } => t.requested += 1,
-        Event::PlanLanded { in_time, wall, .. } => {
-            if *in_time && elapsed_us(wall) <= deadline_us {
-                t.in_time += 1;
-            }
-        }
+        Event::PlanLanded { in_time: true, wall, .. } if elapsed_us(wall) <= deadline_us => t.in_time += 1,
         Event::GoalReached { .. } => t.goal = true,
         Event::HaltStarted { .. } => t.halts += 1,
-        Event::HaltFinished { distance, time_s, steps } => {
-            if *steps > 0 {
-                t.halts_from_speed.push(HaltRecord {
-                    problem: problem.to_string(),
-                    distance: *distance,
-                    time_ms: time_s * 1e3,
-                });
-            }
+        Event::HaltFinished { distance, time_s, steps } if *steps > 0 => {
+            t.halts_from_speed.push(HaltRecord {
+                problem: problem.to_string(),
+                distance: *distance,
+                time_ms: time_s * 1e3,
+            });
         }
         _ => {}
     }

@@ -161,8 +161,7 @@ fn draw_panel(
     // Limits near the curves widen the plot to show them; limits far away (continuous-like
     // wrists of ±10 rad) would squash the curves and are only named in the legend.
     let reach = ((y1 - y0) * 0.6).max(0.3);
-    let (shown, far): (Vec<(f64, usize)>, Vec<(f64, usize)>) =
-        panel.limits.iter().partition(|(v, _)| *v >= y0 - reach && *v <= y1 + reach);
+    let (shown, far): (Vec<_>, Vec<_>) = panel.limits.iter().partition(|(v, _)| *v >= y0 - reach && *v <= y1 + reach);
     for &(v, _) in &shown {
         y0 = y0.min(v);
         y1 = y1.max(v);

@@ -819,6 +819,10 @@ impl System {
     }
 }
 
+/// The carrying agent, its record, its log header and the wall-clock time its plan took, ms.
+type CarryParts =
+    (Agent<embodied_executor::closed_chain::carry::CarryAgent>, Arc<Mutex<CarryRecord>>, serde_json::Value, f64);
+
 /// The carrying agent of `scenario` (planned here, before the first step) and its log header.
 fn carry_parts(
     scenario: &Scenario,
@@ -826,10 +830,7 @@ fn carry_parts(
     dt: f64,
     clock: ClockSpec,
     options: &RunOptions,
-) -> Result<
-    (Agent<embodied_executor::closed_chain::carry::CarryAgent>, Arc<Mutex<CarryRecord>>, serde_json::Value, f64),
-    SystemError,
-> {
+) -> Result<CarryParts, SystemError> {
     let agent = &scenario.agents[spec.agent];
     let task = scenario
         .carry_task()
