@@ -184,7 +184,6 @@ impl Deliberator {
         let started = Instant::now();
         std::thread::spawn(move || {
             let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| planner.plan(&request, &deadline)));
-            let elapsed = started.elapsed();
             let (outcome, work) = match result {
                 Err(payload) => (PlanOutcome::Panicked(panic_message(payload.as_ref())), 0),
                 Ok(Err(failure)) => {
@@ -193,6 +192,8 @@ impl Deliberator {
                 }
                 Ok(Ok(planned)) => (verify(&verifier, &request, planned.trajectory), planned.work),
             };
+            // The plan is usable only once the gate has passed it: its time counts too.
+            let elapsed = started.elapsed();
             // The receiver may be gone (request superseded): nothing to do then.
             let _ = tx.send(WorkerResult { outcome, work, elapsed });
         });
