@@ -43,11 +43,12 @@ pub mod mbm;
 pub mod plan;
 pub mod scenario;
 pub mod system;
+pub mod task;
 pub mod verify;
 
 pub use error::SystemError;
 pub use scenario::{
     AgentSpec, CarrySpec, ClockSpec, Coordination, GoalSpec, ObstacleSpec, PlannerSpec, RunSpec, Scenario,
-    ScenarioBuilder,
+    ScenarioBuilder, StandSpec, TaskSpec,
 };
 pub use system::{AgentSummary, RunOptions, RunSummary, System};

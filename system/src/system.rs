@@ -565,8 +565,19 @@ impl System {
             settings.obstacle_sensing = Some(f64::INFINITY);
         }
         let mut carry = None;
+        let task_domain = match &scenario.task {
+            Some(_) => Some(Arc::new(crate::task::TaskDomain::new(scenario)?)),
+            None => None,
+        };
         for (k, agent) in scenario.agents.iter().enumerate() {
             let robot = Arc::new(agent.robot.clone());
+            if scenario.task.as_ref().is_some_and(|t| t.arms.contains(&k)) {
+                let state = crate::task::TaskArm::new(coordinator_id);
+                let a = Agent::embodied(agent.name.clone(), robot, Some(&agent.start), state, crate::task::arm_program())
+                    .map_err(|e| failed(&agent.name, &e))?;
+                runtime.add_agent(a);
+                continue;
+            }
             if let Some(spec) = scenario.carry.as_ref().filter(|c| c.agent == k) {
                 let (a, record, header) = carry_parts(scenario, spec, dt, clock, options)?;
                 runtime.add_agent(a);
@@ -625,7 +636,16 @@ impl System {
             runtime.add_agent(a);
         }
         let mut coordinator = None;
-        if coordinated {
+        if let (Some(domain), Some(task)) = (task_domain, &scenario.task) {
+            let arm_ids: Vec<AgentId> = task.arms.iter().map(|&k| AgentId(k)).collect();
+            let c = crate::task::TaskCoordinator::new(domain, Arc::new(scenario.clone()), clock, dt, arm_ids.clone());
+            let id = runtime.add_agent(Coordinator::new("coordinator", c, crate::task::coordinator_program()));
+            let link = options.link.unwrap_or(Link::IDEAL);
+            for k in arm_ids {
+                runtime.connect_both(id, k, link).map_err(|e| SystemError::Failed(e.to_string()))?;
+            }
+            coordinator = Some(id);
+        } else if coordinated {
             let order: Vec<(AgentId, usize)> = planners.iter().map(|&k| (AgentId(k), k)).collect();
             let n = scenario.agents.len();
             let mut index_of = vec![None; n + 1];

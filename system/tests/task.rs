@@ -1,0 +1,135 @@
+//! Task-level deliberation end to end: the production-rule A* in the coordinator's `c_c`, its
+//! operators refined into certified motion, the plan run by both arms as `Wait` / `Move`.
+
+mod common;
+
+use embodied_executor::Event;
+use embodied_planner::task::GroundAction;
+use embodied_system::scenario::{ClockSpec, load_scenario};
+use embodied_system::system::{RunArgs, RunOptions, run_scenario};
+use embodied_system::task::{TaskBudget, TaskDomain, deliberate};
+
+fn stand(domain: &TaskDomain, name: &str) -> usize {
+    domain.stand_index(name).unwrap()
+}
+
+/// The planning is necessary: neither arm reaches both the start and the goal stand (so a
+/// handover on the shared stand is needed), and the greedy order (each part straight to its
+/// goal level, top part first) is not applicable.
+#[test]
+fn two_irp6_stack_needs_handover_and_order() {
+    let scenario = load_scenario("two-irp6-stack").unwrap();
+    let domain = TaskDomain::new(&scenario).unwrap();
+    let (ot, p) = (0, 1);
+    let (a, x, b, c) = (stand(&domain, "a"), stand(&domain, "x"), stand(&domain, "b"), stand(&domain, "c"));
+    // Reach comes from inverse kinematics and a collision check, not from the file.
+    assert!(domain.reaches(ot, a) && domain.reaches(ot, x), "the on-track arm reaches a and x");
+    assert!(!domain.reaches(ot, b) && !domain.reaches(ot, c), "the on-track arm reaches neither b nor c");
+    assert!(domain.reaches(p, x) && domain.reaches(p, b) && domain.reaches(p, c), "the postument arm reaches x, b, c");
+    assert!(!domain.reaches(p, a), "the postument arm does not reach a");
+    // Greedy: the top part (p4) straight to its goal level on b: no arm can pick it and place it there.
+    for arm in ["irp6ot", "irp6p"] {
+        let pick = GroundAction::new("pick", &[("arm", arm), ("part", "p4"), ("stand", "a"), ("level", "3")]);
+        let place = GroundAction::new("place", &[("arm", arm), ("part", "p4"), ("stand", "b"), ("level", "3")]);
+        assert!(
+            domain.rule_of(&pick).is_none() || domain.rule_of(&place).is_none(),
+            "{arm} can carry p4 from a to b directly"
+        );
+    }
+    // Even through the shared stand, p1 cannot go first onto b's bottom: it is buried under p2..p4.
+    let state = embodied_planner::search::SearchProblem::initial(&domain.problem);
+    let pick_p1 = GroundAction::new("pick", &[("arm", "irp6ot"), ("part", "p1"), ("stand", "a"), ("level", "0")]);
+    let rule = domain.rule_of(&pick_p1).expect("the on-track arm has a rule to pick p1 from a");
+    assert!(domain.problem.apply(&state, rule).unwrap().is_none(), "p1 could be picked from under the stack");
+}
+
+/// The deliberation finds a plan that uses both arms and the shared stand, and every operator
+/// comes with a certified trajectory from where its arm was.
+#[test]
+fn two_irp6_stack_deliberation_plans_handovers_and_buffering() {
+    let scenario = load_scenario("two-irp6-stack").unwrap();
+    let domain = TaskDomain::new(&scenario).unwrap();
+    let clock = ClockSpec::Simulated { us_per_check: 2.0 };
+    let report = deliberate(&domain, &scenario, &TaskBudget { clock, give_up_ms: 10_000.0 });
+    let ops = report.operators.as_ref().unwrap_or_else(|| panic!("no plan: {:?}", report.failure));
+    // Every part is picked and placed at least twice (once by each arm).
+    assert!(ops.len() >= 16, "{} operators", ops.len());
+    let on = |stand: &str| ops.iter().filter(|o| o.name.contains(&format!("stand={stand},"))).count();
+    assert!(on("x") >= 8, "every part passes the shared stand: {}", on("x"));
+    assert!(on("c") >= 2, "the postument arm buffers parts on c to restore their order: {}", on("c"));
+    assert!(ops.iter().any(|o| o.arm == 0) && ops.iter().any(|o| o.arm == 1));
+    // Some operator may run alongside one of the other arm (not every pair is ordered).
+    let independent = ops.iter().enumerate().any(|(j, o)| {
+        (0..j).any(|i| ops[i].arm != o.arm && !o.after.contains(&i))
+    });
+    assert!(independent, "the plan leaves no room for the arms to act at once");
+    let (planning_ms, motion_ms) = report.planning_ms(clock, 20.0);
+    assert!(report.expansions > 0 && report.refinements as usize >= ops.len() && motion_ms > 0.0);
+    eprintln!(
+        "two-irp6-stack: {} operators, cost {:.2}, {} expansions, {} searches, refinements {} tried / {} failed, {} checks, planning {planning_ms:.1} ms (motion {motion_ms:.1} ms) simulated; wall: search {:?}, motion {:?}; straight segment collides in {} operators",
+        ops.len(),
+        report.cost,
+        report.expansions,
+        report.searches,
+        report.refinements,
+        report.refinements_failed,
+        report.collision_checks,
+        report.search_wall,
+        report.motion_wall,
+        ops.iter().filter(|o| o.straight_collides).count()
+    );
+}
+
+/// The run: the plan lands, every operator starts and finishes in its arm, both arms move at
+/// once at some time, and the coordinator hears that all is done. Two runs write the same log.
+#[test]
+fn two_irp6_stack_runs_concurrently_and_replays_bit_for_bit() {
+    let dir = common::TempDir::new("stack");
+    let logs: Vec<String> = (0..2)
+        .map(|k| {
+            let log = dir.join(format!("run{k}.jsonl"));
+            let args = RunArgs {
+                scenario: "two-irp6-stack".into(),
+                log: Some(log.clone()),
+                options: RunOptions::default(),
+                ..RunArgs::default()
+            };
+            let (summary, _) = run_scenario(&args).unwrap();
+            assert!(summary.failure.is_none(), "{:?}", summary.failure);
+            if k == 0 {
+                check_run(&summary.events);
+            }
+            std::fs::read_to_string(&log).unwrap()
+        })
+        .collect();
+    assert!(logs[0] == logs[1], "two runs with the same seed differ");
+}
+
+fn check_run(events: &[(f64, String, Event)]) {
+    let found = events.iter().find_map(|(t, _, e)| match e {
+        Event::TaskPlanFound { operators, .. } => Some((*t, *operators)),
+        _ => None,
+    });
+    let (t_plan, n) = found.expect("a task plan landed");
+    let mut spans: Vec<(String, f64, f64)> = Vec::new();
+    for index in 0..n {
+        let start = events.iter().find_map(|(t, a, e)| match e {
+            Event::OperatorStarted { index: i, .. } if *i == index => Some((*t, a.clone())),
+            _ => None,
+        });
+        let end = events.iter().find_map(|(t, _, e)| match e {
+            Event::OperatorFinished { index: i, error, .. } if *i == index => Some((*t, *error)),
+            _ => None,
+        });
+        let (t0, agent) = start.unwrap_or_else(|| panic!("operator {index} never started"));
+        let (t1, error) = end.unwrap_or_else(|| panic!("operator {index} never finished"));
+        assert!(t0 >= t_plan && t1 > t0, "operator {index}: {t0} .. {t1}");
+        assert!(error < 0.01, "operator {index} ended {error} from its last configuration");
+        spans.push((agent, t0, t1));
+    }
+    let overlap = spans.iter().any(|(a, s0, e0)| spans.iter().any(|(b, s1, e1)| a != b && s0 < e1 && s1 < e0));
+    assert!(overlap, "the two arms never moved at the same time");
+    assert!(events.iter().any(|(_, a, e)| a == "coordinator" && matches!(e, Event::AllDone)), "no all_done");
+    let end = spans.iter().map(|s| s.2).fold(0.0, f64::max);
+    eprintln!("two-irp6-stack run: plan landed at {t_plan:.3} s, {n} operators executed by {end:.3} s");
+}
