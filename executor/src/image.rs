@@ -57,6 +57,11 @@ pub enum Message {
         /// The motion (shared: sending does not copy it).
         trajectory: std::sync::Arc<embodied_planner::trajectory::Trajectory>,
     },
+    /// The sender started operator `index` of the task plan.
+    OperatorStarted {
+        /// Index in the task plan.
+        index: usize,
+    },
     /// The sender finished operator `index` of the task plan.
     OperatorDone {
         /// Index in the task plan.

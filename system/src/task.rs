@@ -5,7 +5,8 @@
 //! * **Search-space states**: which stand and level each part is at, what each hand holds, how
 //!   high each stack is (facts of a [`TaskProblem`], a bitset).
 //! * **Operators**: ground production rules `pick(arm, part, stand, level)` and
-//!   `place(arm, part, stand, level)`, generated for every stand level an arm reaches (decided
+//!   `place(arm, part, stand, level)` (which also say which stand the arm is at) and
+//!   `retreat(arm)` (back to its start pose, out of the other arm's way), generated for every stand level an arm reaches (decided
 //!   by inverse kinematics and a collision check, not declared), with preconditions, add and
 //!   delete lists and a cost: the handling time plus the estimated travel time to the stand.
 //! * **Goal test**: every part of a goal stack at its level.
@@ -60,6 +61,17 @@ const CONCURRENCY_RESOLUTION: f64 = 0.02;
 /// Time past an operator's motion after which its `Move` ends even if the arm has not settled, s.
 const SETTLE_TIMEOUT_S: f64 = 0.5;
 
+/// Index standing for "no part / no stand / no level" in a retreat operator.
+const NONE: usize = usize::MAX;
+
+/// Cost of `retreat(arm)`, s: the estimate of an arm's move back to its start pose, out of
+/// the other arm's way.
+const RETREAT_COST: f64 = 0.3;
+
+/// Margin on the time into another arm's operator after which an operator may start, s: the
+/// arm lags its reference a little, and its start is heard a step or more after it happened.
+const LAG_MARGIN_S: f64 = 0.2;
+
 /// Distance from the operator's last configuration within which the arm counts as arrived.
 const ARRIVED: f64 = 5e-3;
 
@@ -79,7 +91,8 @@ pub struct TaskDomain {
     pub parts: Vec<String>,
     /// The ground problem.
     pub problem: TaskProblem,
-    /// Per rule: (arm position in `arms`, part, stand, level, is a pick).
+    /// Per rule: (arm position in `arms`, part, stand, level, is a pick); a retreat has
+    /// [`NONE`] for part, stand and level.
     ops: Vec<(usize, usize, usize, usize, bool)>,
     /// `reach[arm][stand][level]`.
     reach: Vec<Vec<Vec<Option<Reach>>>>,
@@ -133,6 +146,14 @@ impl TaskDomain {
         let height = |s: usize, l: usize| format!("height({},{l})", stand(s));
         let holding = |a: usize, p: usize| format!("holding({},{})", arm_names[a], parts[p]);
         let empty = |a: usize| format!("hand_empty({})", arm_names[a]);
+        // Where each arm is, coarsely: at a stand, or at home (its start pose).
+        let arm_at = |a: usize, s: usize| format!("arm_at({},{})", arm_names[a], stand(s));
+        let home = |a: usize| format!("arm_home({})", arm_names[a]);
+        let away = |a: usize| format!("arm_away({})", arm_names[a]);
+        let moves_to = |a: usize, s: usize| -> (Vec<String>, Vec<String>) {
+            let others = (0..spec.stands.len()).filter(|&o| o != s).map(|o| arm_at(a, o));
+            (vec![arm_at(a, s), away(a)], others.chain([home(a)]).collect())
+        };
         let mut rules = Vec::new();
         let mut ops = Vec::new();
         for a in 0..robots.len() {
@@ -147,19 +168,20 @@ impl TaskDomain {
                             ("stand", stand(s)),
                             ("level", &l.to_string()),
                         ];
+                        let (there, elsewhere) = moves_to(a, s);
                         rules.push(Rule {
                             action: GroundAction::new("pick", &params),
                             preconditions: vec![empty(a), at(p, s, l), height(s, l + 1)],
-                            add: vec![holding(a, p), height(s, l)],
-                            delete: vec![empty(a), at(p, s, l), height(s, l + 1)],
+                            add: [vec![holding(a, p), height(s, l)], there.clone()].concat(),
+                            delete: [vec![empty(a), at(p, s, l), height(s, l + 1)], elsewhere.clone()].concat(),
                             cost,
                         });
                         ops.push((a, p, s, l, true));
                         rules.push(Rule {
                             action: GroundAction::new("place", &params),
                             preconditions: vec![holding(a, p), height(s, l)],
-                            add: vec![at(p, s, l), height(s, l + 1), empty(a)],
-                            delete: vec![holding(a, p), height(s, l)],
+                            add: [vec![at(p, s, l), height(s, l + 1), empty(a)], there].concat(),
+                            delete: [vec![holding(a, p), height(s, l)], elsewhere].concat(),
                             cost,
                         });
                         ops.push((a, p, s, l, false));
@@ -167,7 +189,19 @@ impl TaskDomain {
                 }
             }
         }
-        let mut initial: Vec<String> = (0..robots.len()).map(empty).collect();
+        for a in 0..robots.len() {
+            let mut delete: Vec<String> = (0..spec.stands.len()).map(|s| arm_at(a, s)).collect();
+            delete.push(away(a));
+            rules.push(Rule {
+                action: GroundAction::new("retreat", &[("arm", arm_names[a].as_str())]),
+                preconditions: vec![away(a)],
+                add: vec![home(a)],
+                delete,
+                cost: RETREAT_COST,
+            });
+            ops.push((a, NONE, NONE, NONE, false));
+        }
+        let mut initial: Vec<String> = (0..robots.len()).flat_map(|a| [empty(a), home(a)]).collect();
         let mut goal = Vec::new();
         let mut goal_of = vec![None; parts.len()];
         let index = |name: &str| parts.iter().position(|p| p == name);
@@ -205,6 +239,9 @@ impl TaskDomain {
         let mut min_pick = vec![f64::INFINITY; parts.len()];
         let mut min_place_goal = vec![f64::INFINITY; parts.len()];
         for (rule, &(_, p, s, l, pick)) in problem.rules().iter().zip(&ops) {
+            if p == NONE {
+                continue;
+            }
             if pick {
                 min_pick[p] = min_pick[p].min(rule.cost);
             } else if goal_of[p] == Some((s, l)) {
@@ -351,8 +388,10 @@ pub struct RefinedOperator {
     pub path: Vec<Vec<f64>>,
     /// Collision checks its refinement took.
     pub work: u64,
-    /// Operators it must wait for (earlier in the plan).
-    pub after: Vec<usize>,
+    /// Operators of the other arms it must wait for (earlier in the plan), each with the time
+    /// into that operator's motion after which the rest of it is clear of this one's swept
+    /// volume (`f64::INFINITY`: wait until it has finished).
+    pub after: Vec<(usize, f64)>,
     /// Whether its straight joint-space segment from start to end collides (the motion planner
     /// had to go around).
     pub straight_collides: bool,
@@ -549,7 +588,11 @@ fn refine(
 ) -> Result<RefinedOperator, String> {
     let (a, _, s, l, _) = domain.ops[rule.0];
     let name: Arc<str> = domain.problem.rules()[rule.0].action.to_string().into();
-    let goal = domain.reach[a][s][l].as_ref().ok_or("the arm does not reach that stand level")?.q.clone();
+    let goal = if s == NONE {
+        domain.starts[a].clone()
+    } else {
+        domain.reach[a][s][l].as_ref().ok_or("the arm does not reach that stand level")?.q.clone()
+    };
     let mut env = domain.static_env.clone();
     for o in parts_in(domain, state) {
         env.add(o);
@@ -588,8 +631,11 @@ fn refine(
     })
 }
 
-/// Fill in each operator's `after`: the earlier operators it must wait for (the arm's own
-/// previous one is implied). Returns the collision checks spent.
+/// Fill in each operator's `after`: the earlier operators of other arms it must wait for, and
+/// for how long (the arm's own previous one is implied). Operators that touch the same facts
+/// (a stand, a part) wait for each other to finish; otherwise operator `j` may start once
+/// operator `i` has passed the last point of its motion that meets `j`'s swept volume.
+/// Returns the collision checks spent.
 fn order_constraints(domain: &TaskDomain, rules: &[RuleId], ops: &mut [RefinedOperator]) -> u64 {
     let touched: Vec<HashSet<&str>> = rules
         .iter()
@@ -605,11 +651,15 @@ fn order_constraints(domain: &TaskDomain, rules: &[RuleId], ops: &mut [RefinedOp
             if ops[i].arm == ops[j].arm {
                 continue;
             }
-            let shares = !touched[i].is_disjoint(&touched[j]);
-            let (meets, n) = if shares { (true, 0) } else { sweeps_meet(domain, rules, ops, i, j) };
-            checks += n;
-            if meets {
-                after.push(i);
+            let wait = if touched[i].is_disjoint(&touched[j]) {
+                let (wait, n) = clear_after(domain, rules, ops, i, j);
+                checks += n;
+                wait
+            } else {
+                Some(f64::INFINITY)
+            };
+            if let Some(t) = wait {
+                after.push((i, t));
             }
         }
         ops[j].after = after;
@@ -617,28 +667,57 @@ fn order_constraints(domain: &TaskDomain, rules: &[RuleId], ops: &mut [RefinedOp
     checks
 }
 
-/// Whether operator `j`'s path meets the volume operator `i` sweeps (its arm's links along its
-/// path, and its part where it picks or places it), and the collision checks spent.
-fn sweeps_meet(domain: &TaskDomain, rules: &[RuleId], ops: &[RefinedOperator], i: usize, j: usize) -> (bool, u64) {
-    let (ai, pi, si, li, _) = domain.ops[rules[i].0];
+/// How far into operator `i`'s motion its arm is clear of operator `j`'s swept volume (its
+/// arm's links along its path, and its part where it picks or places it) for good: the time of
+/// the first sample after the last one that meets it, `f64::INFINITY` when `i`'s last
+/// configuration meets it, `None` when no sample does. Also the collision checks spent.
+fn clear_after(domain: &TaskDomain, rules: &[RuleId], ops: &[RefinedOperator], i: usize, j: usize) -> (Option<f64>, u64) {
+    let (_, pj, sj, lj, _) = domain.ops[rules[j].0];
     let mut env = Environment::new();
-    for o in bodies_as_obstacles(&domain.robots[ai], &ops[i].path, SWEEP_STEP, "sweep") {
+    for o in bodies_as_obstacles(&domain.robots[ops[j].arm], &ops[j].path, SWEEP_STEP, "sweep") {
         env.add(o);
     }
-    env.add(part_obstacle(domain, pi, si, li));
-    let model = CollisionModel::new(&domain.robots[ops[j].arm], env);
-    let mut checks = 0;
-    let space = domain.robots[ops[j].arm].config_space();
-    for w in ops[j].path.windows(2) {
-        let n = (space.max_joint_step(&w[0], &w[1]) / CONCURRENCY_RESOLUTION).ceil().max(1.0) as usize;
-        for k in 0..=n {
-            checks += 1;
-            if model.collides(&space.interpolate(&w[0], &w[1], k as f64 / n as f64)) {
-                return (true, checks);
+    if pj != NONE {
+        env.add(part_obstacle(domain, pj, sj, lj));
+    }
+    let (_, pi, si, li, _) = domain.ops[rules[i].0];
+    if pi != NONE {
+        // Operator i's part where it picks or places it, against j's arm.
+        let part = CollisionModel::new(&domain.robots[ops[j].arm], {
+            let mut e = Environment::new();
+            e.add(part_obstacle(domain, pi, si, li));
+            e
+        });
+        let space = domain.robots[ops[j].arm].config_space();
+        for w in ops[j].path.windows(2) {
+            if !part.motion_is_free(&w[0], &w[1], CONCURRENCY_RESOLUTION) {
+                return (Some(f64::INFINITY), 1);
             }
         }
+        let _ = space;
     }
-    (false, checks)
+    let model = CollisionModel::new(&domain.robots[ops[i].arm], env);
+    let traj = &ops[i].trajectory;
+    let robot = &domain.robots[ops[i].arm];
+    let vmax = robot.limits().iter().map(|l| l.max_velocity).fold(0.0, f64::max).max(1e-9);
+    // Samples no more than CONCURRENCY_RESOLUTION apart in any joint.
+    let step = (CONCURRENCY_RESOLUTION / vmax).max(1e-4);
+    let duration = traj.duration();
+    let mut checks = 0;
+    let mut t = duration;
+    let mut later = None;
+    loop {
+        let (q, _, _) = traj.sample(t);
+        checks += 1;
+        if model.collides(&q) {
+            return (Some(later.unwrap_or(f64::INFINITY)), checks);
+        }
+        if t <= 0.0 {
+            return (None, checks);
+        }
+        later = Some(t);
+        t = (t - step).max(0.0);
+    }
 }
 
 /// What the coordinator's deliberation job sends back.
@@ -659,6 +738,8 @@ pub struct TaskCoordinator {
     held: Option<(TaskPlanReport, u64)>,
     plan: Option<Vec<RefinedOperator>>,
     started: Vec<bool>,
+    /// Step at which the coordinator heard that each operator started.
+    started_at: Vec<Option<u64>>,
     finished: Vec<bool>,
     done: bool,
 }
@@ -680,6 +761,7 @@ impl TaskCoordinator {
             held: None,
             plan: None,
             started: Vec::new(),
+            started_at: Vec::new(),
             finished: Vec::new(),
             done: false,
         }
@@ -744,7 +826,7 @@ impl TaskCoordinator {
                         agent: domain.arm_names[op.arm].clone(),
                         duration_s: op.trajectory.duration(),
                         work: op.work,
-                        after: op.after.clone(),
+                        after: op.after.iter().map(|(i, _)| *i).collect(),
                     });
                 }
                 o.event(Event::TaskPlanFound {
@@ -760,6 +842,7 @@ impl TaskCoordinator {
                     in_time: planning_ms <= self.deadline_ms,
                 });
                 self.started = vec![false; ops.len()];
+                self.started_at = vec![None; ops.len()];
                 self.finished = vec![false; ops.len()];
                 self.plan = Some(ops);
             }
@@ -776,14 +859,19 @@ impl TaskCoordinator {
     }
 
     /// Hand out every operator whose predecessors have finished.
-    fn dispatch(&mut self, o: &mut OutputImages) {
+    fn dispatch(&mut self, now: u64, o: &mut OutputImages) {
         let Some(ops) = &self.plan else { return };
         for j in 0..ops.len() {
             if self.started[j] {
                 continue;
             }
             let own_previous = (0..j).rev().find(|&i| ops[i].arm == ops[j].arm);
-            let ready = own_previous.is_none_or(|i| self.finished[i]) && ops[j].after.iter().all(|&i| self.finished[i]);
+            let passed = |&(i, t): &(usize, f64)| {
+                self.finished[i]
+                    || (t.is_finite()
+                        && self.started_at[i].is_some_and(|s0| (now.saturating_sub(s0)) as f64 * self.dt >= t + LAG_MARGIN_S))
+            };
+            let ready = own_previous.is_none_or(|i| self.finished[i]) && ops[j].after.iter().all(passed);
             if ready {
                 self.started[j] = true;
                 let message =
@@ -809,13 +897,15 @@ pub fn coordinator_program() -> Primitive<TaskCoordinator> {
             c.land(report, o);
         }
         for env in i.messages() {
-            if let Message::OperatorDone { index } = env.message
-                && let Some(f) = c.finished.get_mut(index)
-            {
-                *f = true;
+            match env.message {
+                Message::OperatorDone { index } if index < c.finished.len() => c.finished[index] = true,
+                Message::OperatorStarted { index } if index < c.started_at.len() => {
+                    c.started_at[index].get_or_insert(i.step());
+                }
+                _ => {}
             }
         }
-        c.dispatch(o);
+        c.dispatch(i.step(), o);
         if !c.done && !c.finished.is_empty() && c.finished.iter().all(|f| *f) {
             c.done = true;
             o.event(Event::AllDone);
@@ -889,6 +979,7 @@ pub fn arm_program() -> Reactive<TaskArm> {
             c.read(i);
             if let Some((index, name, traj)) = c.inbox.pop_front() {
                 o.event(Event::OperatorStarted { index, operator: name.to_string() });
+                o.send(c.coordinator, Message::OperatorStarted { index });
                 c.current = Some((index, name, traj, i.step()));
             }
             c.track(i, o);
