@@ -156,3 +156,28 @@ fn check_run(events: &[(f64, String, Event)]) {
     let end = spans.iter().map(|s| s.2).fold(0.0, f64::max);
     eprintln!("two-irp6-stack run: plan landed at {t_plan:.3} s, {n} operators executed by {end:.3} s");
 }
+
+/// `irp6-pick` is true to its description: the straight joint-space line from the front
+/// position to the pick pose runs into the pillar, and the plan lifts the wrist over it.
+#[test]
+fn irp6_pick_plan_lifts_the_wrist_over_the_pillar() {
+    let scenario = load_scenario("irp6-pick").unwrap();
+    let agent = &scenario.agents[0];
+    let model = embodied_system::plan::agent_problem(&scenario, 0, &[]);
+    let Some(embodied_system::GoalSpec::Configuration(goal)) = &agent.goal else { panic!("a configuration goal") };
+    assert!(!model.motion_is_free(&agent.start, goal, 0.01), "the straight line misses the pillar");
+    let plan = embodied_system::plan::plan_scenario(&scenario, None).unwrap();
+    let path = &plan.plans[0].path;
+    assert!(path.len() > 2, "the plan is a straight line: {path:?}");
+    let pillar = scenario.obstacles.iter().find(|o| o.obstacle.name == "pillar").unwrap();
+    let top = pillar.obstacle.pose.translation.vector.z * 2.0; // the pillar stands on the floor
+    let highest = plan.plans[0]
+        .trajectory
+        .q
+        .iter()
+        .map(|q| agent.robot.end_effector_poses(q, 0).1.translation.vector.z)
+        .fold(f64::NEG_INFINITY, f64::max);
+    let tool = |q: &[f64]| agent.robot.end_effector_poses(q, 0).1.translation.vector.z;
+    eprintln!("irp6-pick: {} waypoints, tool z start {:.3} goal {:.3} highest {highest:.3}, pillar top {top:.3}", path.len(), tool(&agent.start), tool(goal));
+    assert!(highest > top, "the tool never rises over the pillar's top ({highest:.3} <= {top:.3})");
+}
