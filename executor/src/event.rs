@@ -519,7 +519,10 @@ impl fmt::Display for Event {
                 Ok(())
             }
             Event::OperatorRefined { index, operator, agent, duration_s, work, after } => {
-                write!(f, "{kind} #{index} {operator} by {agent}: duration_s={duration_s:.3} work={work} after={after:?}")
+                write!(
+                    f,
+                    "{kind} #{index} {operator} by {agent}: duration_s={duration_s:.3} work={work} after={after:?}"
+                )
             }
             Event::RefinementFailed { operator, agent, reason } => {
                 write!(f, "{kind} {operator} by {agent}: {reason}")

@@ -1057,15 +1057,17 @@ fn parse_task(
     if let Some(a) = agents.iter().find(|a| a.goal.is_some()) {
         return Err(ctx.err(
             spanned.span(),
-            format!("task: agent `{}` has a goal; in a scenario with a [task] the task coordinator drives the agents", a.name),
+            format!(
+                "task: agent `{}` has a goal; in a scenario with a [task] the task coordinator drives the agents",
+                a.name
+            ),
         ));
     }
-    let number = |v: &Option<Spanned<f64>>, default: f64, what: &str, ok: &dyn Fn(f64) -> bool, expected: &str| {
-        match v {
-            None => Ok(default),
-            Some(x) if ok(*x.get_ref()) => Ok(*x.get_ref()),
-            Some(x) => Err(ctx.err(x.span(), format!("task: {what}: expected {expected}, got {}", x.get_ref()))),
-        }
+    let number = |v: &Option<Spanned<f64>>, default: f64, what: &str, ok: &dyn Fn(f64) -> bool, expected: &str| match v
+    {
+        None => Ok(default),
+        Some(x) if ok(*x.get_ref()) => Ok(*x.get_ref()),
+        Some(x) => Err(ctx.err(x.span(), format!("task: {what}: expected {expected}, got {}", x.get_ref()))),
     };
     let positive = |x: f64| x.is_finite() && x > 0.0;
     let non_negative = |x: f64| x.is_finite() && x >= 0.0;
@@ -1073,8 +1075,13 @@ fn parse_task(
     let clearance = number(&t.clearance, 0.02, "clearance", &non_negative, "a length >= 0 m")?;
     let handling_s = number(&t.handling_s, 0.5, "handling_s", &non_negative, "a time >= 0 s")?;
     let deadline_ms = number(&t.deadline_ms, 500.0, "deadline_ms", &non_negative, "a time >= 0 ms")?;
-    let give_up_ms =
-        number(&t.give_up_ms, deadline_ms.max(5000.0), "give_up_ms", &|x| x.is_finite() && x >= deadline_ms, &format!("a time >= deadline_ms ({deadline_ms} ms)"))?;
+    let give_up_ms = number(
+        &t.give_up_ms,
+        deadline_ms.max(5000.0),
+        "give_up_ms",
+        &|x| x.is_finite() && x >= deadline_ms,
+        &format!("a time >= deadline_ms ({deadline_ms} ms)"),
+    )?;
     let us_per_expansion =
         number(&t.simulated_us_per_expansion, 20.0, "simulated_us_per_expansion", &non_negative, "a time >= 0 µs")?;
     let mut stands: Vec<StandSpec> = Vec::new();

@@ -416,6 +416,8 @@ impl RunSummary {
 struct Observer {
     summaries: Vec<AgentSummary>,
     pending: Vec<bool>,
+    /// The task-level deliberation has not delivered yet.
+    task_pending: bool,
     events: Vec<(f64, String, Event)>,
     switches: Vec<(f64, String, String)>,
     last_behaviour: Vec<String>,
@@ -438,6 +440,7 @@ impl Observer {
                 .map(|a| AgentSummary { name: a.name.clone(), ..AgentSummary::default() })
                 .collect(),
             pending: vec![false; scenario.agents.len()],
+            task_pending: scenario.task.is_some(),
             events: Vec::new(),
             switches: Vec::new(),
             last_behaviour: vec![String::new(); agents],
@@ -450,6 +453,9 @@ impl Observer {
         let mut s = 0;
         for (k, a) in r.agents.iter().enumerate() {
             for e in &a.events {
+                if matches!(e, Event::TaskPlanFound { .. } | Event::TaskPlanFailed { .. }) {
+                    self.task_pending = false;
+                }
                 self.events.push((r.time, a.agent.clone(), e.clone()));
                 if k < self.summaries.len() {
                     tally(&mut self.summaries[k], &mut self.pending[k], e);
@@ -573,8 +579,9 @@ impl System {
             let robot = Arc::new(agent.robot.clone());
             if scenario.task.as_ref().is_some_and(|t| t.arms.contains(&k)) {
                 let state = crate::task::TaskArm::new(coordinator_id);
-                let a = Agent::embodied(agent.name.clone(), robot, Some(&agent.start), state, crate::task::arm_program())
-                    .map_err(|e| failed(&agent.name, &e))?;
+                let a =
+                    Agent::embodied(agent.name.clone(), robot, Some(&agent.start), state, crate::task::arm_program())
+                        .map_err(|e| failed(&agent.name, &e))?;
                 runtime.add_agent(a);
                 continue;
             }
@@ -753,7 +760,7 @@ impl System {
         let r = self.runtime.last_record();
         self.observer.observe(r);
         self.started.get_or_insert(started);
-        if self.clock == ClockSpec::Wall && self.observer.pending.iter().any(|p| *p) {
+        if self.clock == ClockSpec::Wall && (self.observer.task_pending || self.observer.pending.iter().any(|p| *p)) {
             let dt = self.runtime.config().dt;
             let (t0, s0) = *self.pace.get_or_insert((Instant::now(), r.step));
             let due = t0 + Duration::from_secs_f64((r.step + 1 - s0) as f64 * dt);

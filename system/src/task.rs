@@ -33,8 +33,7 @@ use std::sync::mpsc::{Receiver, TryRecvError, channel};
 use std::time::{Duration, Instant};
 
 use embodied_executor::{
-    AgentId, Event, InputImages, Message, Move, OutputImages, Predicate, Primitive, Reactive, Sequence,
-    Wait,
+    AgentId, Event, InputImages, Message, Move, OutputImages, Predicate, Primitive, Reactive, Sequence, Wait,
 };
 use embodied_models::collision::{CollisionModel, Environment, Obstacle};
 use embodied_models::nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
@@ -291,7 +290,8 @@ impl TaskDomain {
         for p in 0..self.parts.len() {
             let Some((s, l)) = self.goal_of[p] else { continue };
             // In place: at its goal level with every goal part below it in place.
-            let below_ok = (0..l).all(|m| (0..self.parts.len()).any(|q| self.goal_of[q] == Some((s, m)) && holds(self.at[q][s][m])));
+            let below_ok = (0..l)
+                .all(|m| (0..self.parts.len()).any(|q| self.goal_of[q] == Some((s, m)) && holds(self.at[q][s][m])));
             if holds(self.at[p][s][l]) && below_ok {
                 continue;
             }
@@ -342,7 +342,12 @@ fn grasp_configuration(robot: &Robot, model: &CollisionModel, start: &[f64], tar
 fn travel_time(robot: &Robot, a: &[f64], b: &[f64]) -> f64 {
     let space = robot.config_space();
     let b = space.unwrap_towards(a, b);
-    robot.limits().iter().zip(a.iter().zip(&b)).map(|(lim, (x, y))| (y - x).abs() / lim.max_velocity).fold(0.0, f64::max)
+    robot
+        .limits()
+        .iter()
+        .zip(a.iter().zip(&b))
+        .map(|(lim, (x, y))| (y - x).abs() / lim.max_velocity)
+        .fold(0.0, f64::max)
 }
 
 /// The search with pruned operator instances.
@@ -501,6 +506,18 @@ pub fn deliberate(domain: &TaskDomain, scenario: &Scenario, budget: &TaskBudget)
         let mut refined = Vec::with_capacity(plan.operators.len());
         let mut failed = false;
         for (i, &rule) in plan.operators.iter().enumerate() {
+            // On the wall clock the refinement under way counts too (it is added to the report
+            // only when the loop ends).
+            let running_ms = match budget.clock {
+                ClockSpec::Wall => motion_started.elapsed().as_secs_f64() * 1e3,
+                ClockSpec::Simulated { .. } => 0.0,
+            };
+            if spent_ms(&report) + running_ms > budget.give_up_ms {
+                report.motion_wall += motion_started.elapsed();
+                report.best_partial = Some(i);
+                report.failure = Some(format!("out_of_time: refinement ran past the {} ms budget", budget.give_up_ms));
+                return report;
+            }
             let state = &plan.states[i];
             let key_q: Vec<u64> = arm_q.iter().flatten().map(|x| x.to_bits()).collect();
             let key = (state.clone(), rule, key_q);
@@ -538,7 +555,7 @@ pub fn deliberate(domain: &TaskDomain, scenario: &Scenario, budget: &TaskBudget)
         if failed {
             continue;
         }
-        if spent_ms(&report) > budget.give_up_ms && budget.clock != ClockSpec::Wall {
+        if spent_ms(&report) > budget.give_up_ms {
             report.failure = Some(format!("out_of_time: refinement ran past the {} ms budget", budget.give_up_ms));
             return report;
         }
@@ -614,7 +631,8 @@ fn refine(
     let (path, work) = if space.distance(start, &goal) < 1e-9 {
         (vec![start.clone(), goal.clone()], 0)
     } else {
-        let plan = plan_motion(&model, start, &Goal::Configuration(goal.clone()), &settings).map_err(|e| e.to_string())?;
+        let plan =
+            plan_motion(&model, start, &Goal::Configuration(goal.clone()), &settings).map_err(|e| e.to_string())?;
         let w = plan.stats.collision_checks;
         (plan.path, w)
     };
@@ -671,7 +689,13 @@ fn order_constraints(domain: &TaskDomain, rules: &[RuleId], ops: &mut [RefinedOp
 /// arm's links along its path, and its part where it picks or places it) for good: the time of
 /// the first sample after the last one that meets it, `f64::INFINITY` when `i`'s last
 /// configuration meets it, `None` when no sample does. Also the collision checks spent.
-fn clear_after(domain: &TaskDomain, rules: &[RuleId], ops: &[RefinedOperator], i: usize, j: usize) -> (Option<f64>, u64) {
+fn clear_after(
+    domain: &TaskDomain,
+    rules: &[RuleId],
+    ops: &[RefinedOperator],
+    i: usize,
+    j: usize,
+) -> (Option<f64>, u64) {
     let (_, pj, sj, lj, _) = domain.ops[rules[j].0];
     let mut env = Environment::new();
     for o in bodies_as_obstacles(&domain.robots[ops[j].arm], &ops[j].path, SWEEP_STEP, "sweep") {
@@ -746,7 +770,13 @@ pub struct TaskCoordinator {
 
 impl TaskCoordinator {
     /// A coordinator for `scenario`'s task with arms at `arm_ids`.
-    pub fn new(domain: Arc<TaskDomain>, scenario: Arc<Scenario>, clock: ClockSpec, dt: f64, arm_ids: Vec<AgentId>) -> Self {
+    pub fn new(
+        domain: Arc<TaskDomain>,
+        scenario: Arc<Scenario>,
+        clock: ClockSpec,
+        dt: f64,
+        arm_ids: Vec<AgentId>,
+    ) -> Self {
         let spec = &domain.spec;
         let budget = TaskBudget { clock, give_up_ms: spec.give_up_ms };
         let deadline_ms = spec.deadline_ms;
@@ -869,7 +899,8 @@ impl TaskCoordinator {
             let passed = |&(i, t): &(usize, f64)| {
                 self.finished[i]
                     || (t.is_finite()
-                        && self.started_at[i].is_some_and(|s0| (now.saturating_sub(s0)) as f64 * self.dt >= t + LAG_MARGIN_S))
+                        && self.started_at[i]
+                            .is_some_and(|s0| (now.saturating_sub(s0)) as f64 * self.dt >= t + LAG_MARGIN_S))
             };
             let ready = own_previous.is_none_or(|i| self.finished[i]) && ops[j].after.iter().all(passed);
             if ready {
@@ -966,13 +997,12 @@ fn hold(i: &InputImages, o: &mut OutputImages) {
 /// An arm's program: `Wait(an operator was handed over)`, `Move(first: take it, next: track
 /// it, terminal: its time is up and the arm has arrived)`, then report it done; again.
 pub fn arm_program() -> Reactive<TaskArm> {
-    let await_operator = Wait::new("await_operator", Predicate::new("operator_handed_over", |c: &TaskArm, _| {
-        !c.inbox.is_empty()
-    }))
-    .during(|c: &mut TaskArm, i: &InputImages, o: &mut OutputImages| {
-        c.read(i);
-        hold(i, o);
-    });
+    let await_operator =
+        Wait::new("await_operator", Predicate::new("operator_handed_over", |c: &TaskArm, _| !c.inbox.is_empty()))
+            .during(|c: &mut TaskArm, i: &InputImages, o: &mut OutputImages| {
+                c.read(i);
+                hold(i, o);
+            });
     let operator = Move::new(
         "operator",
         |c: &mut TaskArm, i: &InputImages, o: &mut OutputImages| {
@@ -993,9 +1023,8 @@ pub fn arm_program() -> Reactive<TaskArm> {
     let report = Primitive::new("report_done", 1, |c: &mut TaskArm, i: &InputImages, o: &mut OutputImages| {
         c.read(i);
         if let Some((index, name, traj, _)) = c.current.take() {
-            let error = traj.q.last().map_or(0.0, |end| {
-                end.iter().zip(i.q()).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max)
-            });
+            let error =
+                traj.q.last().map_or(0.0, |end| end.iter().zip(i.q()).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max));
             o.event(Event::OperatorFinished { index, operator: name.to_string(), error });
             o.send(c.coordinator, Message::OperatorDone { index });
             if let Some(end) = traj.q.last().filter(|e| e.len() == i.dof()) {

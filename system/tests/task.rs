@@ -64,7 +64,9 @@ fn two_irp6_stack_deliberation_plans_handovers_and_buffering() {
     let domain = TaskDomain::new(&scenario).unwrap();
     let clock = ClockSpec::Simulated { us_per_check: 2.0 };
     let report = deliberate(&domain, &scenario, &TaskBudget { clock, give_up_ms: 10_000.0 });
-    let ops = report.operators.as_ref().unwrap_or_else(|| panic!("no plan: {:?}; failures: {:?}", report.failure, &report.failures[..report.failures.len().min(8)]));
+    let ops = report.operators.as_ref().unwrap_or_else(|| {
+        panic!("no plan: {:?}; failures: {:?}", report.failure, &report.failures[..report.failures.len().min(8)])
+    });
     for (k, o) in ops.iter().enumerate() {
         eprintln!("{k:2} {} after {:?} {:.2} s", o.name, o.after, o.trajectory.duration());
     }
@@ -82,9 +84,10 @@ fn two_irp6_stack_deliberation_plans_handovers_and_buffering() {
     assert!(places_on_x.iter().all(|n| n.contains("level=0")), "parts were stacked on x: {places_on_x:?}");
     assert!(ops.iter().any(|o| o.arm == 0) && ops.iter().any(|o| o.arm == 1));
     // Some operator may run alongside one of the other arm (not every pair is ordered).
-    let independent = ops.iter().enumerate().any(|(j, o)| {
-        (0..j).any(|i| ops[i].arm != o.arm && o.after.iter().all(|(k, t)| *k != i || t.is_finite()))
-    });
+    let independent = ops
+        .iter()
+        .enumerate()
+        .any(|(j, o)| (0..j).any(|i| ops[i].arm != o.arm && o.after.iter().all(|(k, t)| *k != i || t.is_finite())));
     assert!(independent, "the plan leaves no room for the arms to act at once");
     let (planning_ms, motion_ms) = report.planning_ms(clock, 20.0);
     assert!(report.expansions > 0 && report.refinements as usize >= ops.len() && motion_ms > 0.0);
@@ -178,6 +181,11 @@ fn irp6_pick_plan_lifts_the_wrist_over_the_pillar() {
         .map(|q| agent.robot.end_effector_poses(q, 0).1.translation.vector.z)
         .fold(f64::NEG_INFINITY, f64::max);
     let tool = |q: &[f64]| agent.robot.end_effector_poses(q, 0).1.translation.vector.z;
-    eprintln!("irp6-pick: {} waypoints, tool z start {:.3} goal {:.3} highest {highest:.3}, pillar top {top:.3}", path.len(), tool(&agent.start), tool(goal));
+    eprintln!(
+        "irp6-pick: {} waypoints, tool z start {:.3} goal {:.3} highest {highest:.3}, pillar top {top:.3}",
+        path.len(),
+        tool(&agent.start),
+        tool(goal)
+    );
     assert!(highest > top, "the tool never rises over the pillar's top ({highest:.3} <= {top:.3})");
 }
