@@ -29,6 +29,7 @@
 
 use std::collections::{HashMap, HashSet, VecDeque};
 use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{Receiver, TryRecvError, channel};
 use std::time::{Duration, Instant};
 
@@ -114,6 +115,8 @@ impl TaskDomain {
     /// Build the domain of `scenario`'s `[task]`: decide which stand levels each arm reaches
     /// (inverse kinematics, tool pointing down, collision-free among the static obstacles),
     /// then generate the ground rules.
+    // Indices name arms, stands, levels and parts across several tables at once.
+    #[allow(clippy::needless_range_loop)]
     pub fn new(scenario: &Scenario) -> Result<Self, SystemError> {
         let spec = scenario
             .task
@@ -455,6 +458,19 @@ pub struct TaskBudget {
     pub clock: ClockSpec,
     /// Give up after this much planning time (as the clock counts it), ms.
     pub give_up_ms: f64,
+    /// Set to stop the deliberation (its owner has gone).
+    pub cancel: Option<Arc<AtomicBool>>,
+}
+
+impl TaskBudget {
+    /// A budget of `give_up_ms` on `clock`, not cancellable.
+    pub fn new(clock: ClockSpec, give_up_ms: f64) -> Self {
+        Self { clock, give_up_ms, cancel: None }
+    }
+
+    fn cancelled(&self) -> bool {
+        self.cancel.as_ref().is_some_and(|c| c.load(Ordering::Relaxed))
+    }
 }
 
 /// Run the task-level deliberation: A* over the production rules, lazy refinement of the best
@@ -472,12 +488,15 @@ pub fn deliberate(domain: &TaskDomain, scenario: &Scenario, budget: &TaskBudget)
             report.failure = Some(format!("out_of_time: the {} ms budget is spent", budget.give_up_ms));
             return report;
         }
-        let deadline = match budget.clock {
+        let mut deadline = match budget.clock {
             ClockSpec::Wall => Deadline::after(Duration::from_secs_f64(left_ms / 1e3)),
             ClockSpec::Simulated { .. } => {
                 Deadline::expansions((left_ms * 1e3 / us_per_expansion.max(1e-6)).floor().max(1.0) as u64)
             }
         };
+        if let Some(flag) = &budget.cancel {
+            deadline = deadline.with_cancel_flag(flag.clone());
+        }
         let search_started = Instant::now();
         let searched = solve(&Pruned { domain, pruned: &pruned }, &deadline);
         report.search_wall += search_started.elapsed();
@@ -512,7 +531,7 @@ pub fn deliberate(domain: &TaskDomain, scenario: &Scenario, budget: &TaskBudget)
                 ClockSpec::Wall => motion_started.elapsed().as_secs_f64() * 1e3,
                 ClockSpec::Simulated { .. } => 0.0,
             };
-            if spent_ms(&report) + running_ms > budget.give_up_ms {
+            if spent_ms(&report) + running_ms > budget.give_up_ms || budget.cancelled() {
                 report.motion_wall += motion_started.elapsed();
                 report.best_partial = Some(i);
                 report.failure = Some(format!("out_of_time: refinement ran past the {} ms budget", budget.give_up_ms));
@@ -778,7 +797,7 @@ impl TaskCoordinator {
         arm_ids: Vec<AgentId>,
     ) -> Self {
         let spec = &domain.spec;
-        let budget = TaskBudget { clock, give_up_ms: spec.give_up_ms };
+        let budget = TaskBudget { clock, give_up_ms: spec.give_up_ms, cancel: Some(Arc::new(AtomicBool::new(false))) };
         let deadline_ms = spec.deadline_ms;
         Self {
             domain: Some(domain),
@@ -909,6 +928,15 @@ impl TaskCoordinator {
                     Message::Operator { index: j, name: ops[j].name.clone(), trajectory: ops[j].trajectory.clone() };
                 o.send(self.arm_ids[ops[j].arm], message);
             }
+        }
+    }
+}
+
+impl Drop for TaskCoordinator {
+    fn drop(&mut self) {
+        // A deliberation still running has no one to deliver to: stop it.
+        if let Some(flag) = &self.budget.cancel {
+            flag.store(true, Ordering::Relaxed);
         }
     }
 }

@@ -1,5 +1,6 @@
 //! Task-level deliberation end to end: the production-rule A* in the coordinator's `c_c`, its
 //! operators refined into certified motion, the plan run by both arms as `Wait` / `Move`.
+#![allow(clippy::unwrap_used)]
 
 mod common;
 
@@ -63,7 +64,7 @@ fn two_irp6_stack_deliberation_plans_handovers_and_buffering() {
     let scenario = load_scenario("two-irp6-stack").unwrap();
     let domain = TaskDomain::new(&scenario).unwrap();
     let clock = ClockSpec::Simulated { us_per_check: 2.0 };
-    let report = deliberate(&domain, &scenario, &TaskBudget { clock, give_up_ms: 10_000.0 });
+    let report = deliberate(&domain, &scenario, &TaskBudget::new(clock, 10_000.0));
     let ops = report.operators.as_ref().unwrap_or_else(|| {
         panic!("no plan: {:?}; failures: {:?}", report.failure, &report.failures[..report.failures.len().min(8)])
     });
