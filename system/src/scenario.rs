@@ -25,6 +25,7 @@ pub const BUILTIN_SCENARIOS: &[(&str, &str)] = &[
     ("two-irp6-together", include_str!("../scenarios/two-irp6-together.toml")),
     ("two-irp6-carry", include_str!("../scenarios/two-irp6-carry.toml")),
     ("two-irp6-stack", include_str!("../scenarios/two-irp6-stack.toml")),
+    ("polycrank-sort", include_str!("../scenarios/polycrank-sort.toml")),
 ];
 
 /// The scenario `embodied run` uses when given none.

@@ -38,7 +38,7 @@ use embodied_executor::{
 };
 use embodied_models::collision::{CollisionModel, Environment, Obstacle};
 use embodied_models::nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
-use embodied_models::{JointKind, Robot, Shape};
+use embodied_models::{IkOptions, JointKind, Robot, Shape};
 use embodied_planner::deadline::Deadline;
 use embodied_planner::motion::{Goal, plan_motion};
 use embodied_planner::outcome::Outcome;
@@ -136,7 +136,10 @@ impl TaskDomain {
             for s in 0..spec.stands.len() {
                 let mut per_level = Vec::new();
                 for l in 0..levels {
-                    per_level.push(grasp_configuration(robot, &model, &starts[a], &tool_pose(&spec, s, l)));
+                    // The level below's configuration is a good seed for this one.
+                    let below = per_level.last().and_then(|r: &Option<Reach>| r.as_ref()).map(|r| r.q.clone());
+                    let target = tool_pose(&spec, s, l);
+                    per_level.push(grasp_configuration(robot, &model, &starts[a], below.as_deref(), &target));
                 }
                 per_stand.push(per_level);
             }
@@ -275,6 +278,15 @@ impl TaskDomain {
         self.reach.get(arm).and_then(|r| r.get(stand)).is_some_and(|levels| levels.iter().any(Option::is_some))
     }
 
+    /// Per level of stand `stand`: whether arm `arm` reaches it.
+    pub fn reach_levels(&self, arm: usize, stand: usize) -> Vec<bool> {
+        self.reach
+            .get(arm)
+            .and_then(|r| r.get(stand))
+            .map(|l| l.iter().map(Option::is_some).collect())
+            .unwrap_or_default()
+    }
+
     /// Index of the stand named `name`.
     pub fn stand_index(&self, name: &str) -> Option<usize> {
         self.spec.stands.iter().position(|s| s.name == name)
@@ -321,7 +333,13 @@ fn tool_pose(spec: &TaskSpec, s: usize, l: usize) -> Isometry3<f64> {
 
 /// A collision-free configuration putting the first end effector at `target`, or `None`.
 /// Prismatic joints outside the arm (a track) are seeded towards the target's y.
-fn grasp_configuration(robot: &Robot, model: &CollisionModel, start: &[f64], target: &Isometry3<f64>) -> Option<Reach> {
+fn grasp_configuration(
+    robot: &Robot,
+    model: &CollisionModel,
+    start: &[f64],
+    near: Option<&[f64]>,
+    target: &Isometry3<f64>,
+) -> Option<Reach> {
     let limits = robot.limits();
     let mut seeds = vec![start.to_vec()];
     if let Some(d) = (0..robot.dof()).find(|&d| robot.dof_joint(d).kind == JointKind::Prismatic) {
@@ -335,6 +353,32 @@ fn grasp_configuration(robot: &Robot, model: &CollisionModel, start: &[f64], tar
     for seed in &seeds {
         let Ok(solutions) = robot.inverse_kinematics_all(0, target, seed) else { continue };
         if let Some(q) = solutions.into_iter().find(|q| !model.collides(q)) {
+            return Some(Reach { q });
+        }
+    }
+    if robot.closed_form(0).is_some() {
+        return None;
+    }
+    // No closed form (Polycrank): damped least squares from the start turned towards the
+    // target about the first joint (by the start's own offset and a few others), with restarts.
+    let options = IkOptions { restarts: 8, ..IkOptions::default() };
+    if let Some(seed) = near
+        && let Ok(q) = robot.inverse_kinematics(0, target, seed, &options)
+        && !model.collides(&q)
+    {
+        return Some(Reach { q });
+    }
+    let t = target.translation.vector - robot.base().translation.vector;
+    let start_tool = robot.end_effector_poses(start, 0).1.translation.vector - robot.base().translation.vector;
+    let turn = t.y.atan2(t.x) - start_tool.y.atan2(start_tool.x);
+    for offset in [0.0, 0.4, -0.4, 0.8, -0.8] {
+        let mut seed = start.to_vec();
+        if robot.dof() > 0 && robot.dof_joint(0).kind == JointKind::Continuous {
+            seed[0] = embodied_models::wrap_angle(start[0] + turn + offset);
+        }
+        if let Ok(q) = robot.inverse_kinematics(0, target, &seed, &options)
+            && !model.collides(&q)
+        {
             return Some(Reach { q });
         }
     }

@@ -111,12 +111,27 @@ fn two_irp6_stack_deliberation_plans_handovers_and_buffering() {
 /// once at some time, and the coordinator hears that all is done. Two runs write the same log.
 #[test]
 fn two_irp6_stack_runs_concurrently_and_replays_bit_for_bit() {
-    let dir = common::TempDir::new("stack");
+    let spans = run_twice("two-irp6-stack");
+    let overlap = spans.iter().any(|(a, s0, e0)| spans.iter().any(|(b, s1, e1)| a != b && s0 < e1 && s1 < e0));
+    assert!(overlap, "the two arms never moved at the same time");
+}
+
+#[test]
+fn polycrank_sort_runs_and_replays_bit_for_bit() {
+    let spans = run_twice("polycrank-sort");
+    assert!(spans.len() >= 6, "{spans:?}");
+}
+
+/// Run scenario `name` twice with its seed; both logs must be the same bytes. Returns the
+/// operators' (agent, start, end) of the first run, after checking them.
+fn run_twice(name: &str) -> Vec<(String, f64, f64)> {
+    let dir = common::TempDir::new(name);
+    let mut spans = Vec::new();
     let logs: Vec<String> = (0..2)
         .map(|k| {
             let log = dir.join(format!("run{k}.jsonl"));
             let args = RunArgs {
-                scenario: "two-irp6-stack".into(),
+                scenario: name.into(),
                 log: Some(log.clone()),
                 options: RunOptions::default(),
                 ..RunArgs::default()
@@ -124,15 +139,16 @@ fn two_irp6_stack_runs_concurrently_and_replays_bit_for_bit() {
             let (summary, _) = run_scenario(&args).unwrap();
             assert!(summary.failure.is_none(), "{:?}", summary.failure);
             if k == 0 {
-                check_run(&summary.events);
+                spans = check_run(name, &summary.events);
             }
             std::fs::read_to_string(&log).unwrap()
         })
         .collect();
-    assert!(logs[0] == logs[1], "two runs with the same seed differ");
+    assert!(logs[0] == logs[1], "{name}: two runs with the same seed differ");
+    spans
 }
 
-fn check_run(events: &[(f64, String, Event)]) {
+fn check_run(name: &str, events: &[(f64, String, Event)]) -> Vec<(String, f64, f64)> {
     let found = events.iter().find_map(|(t, _, e)| match e {
         Event::TaskPlanFound { operators, .. } => Some((*t, *operators)),
         _ => None,
@@ -154,11 +170,10 @@ fn check_run(events: &[(f64, String, Event)]) {
         assert!(error < 0.01, "operator {index} ended {error} from its last configuration");
         spans.push((agent, t0, t1));
     }
-    let overlap = spans.iter().any(|(a, s0, e0)| spans.iter().any(|(b, s1, e1)| a != b && s0 < e1 && s1 < e0));
-    assert!(overlap, "the two arms never moved at the same time");
     assert!(events.iter().any(|(_, a, e)| a == "coordinator" && matches!(e, Event::AllDone)), "no all_done");
     let end = spans.iter().map(|s| s.2).fold(0.0, f64::max);
-    eprintln!("two-irp6-stack run: plan landed at {t_plan:.3} s, {n} operators executed by {end:.3} s");
+    eprintln!("{name} run: plan landed at {t_plan:.3} s, {n} operators executed by {end:.3} s");
+    spans
 }
 
 /// `irp6-pick` is true to its description: the straight joint-space line from the front
@@ -189,4 +204,44 @@ fn irp6_pick_plan_lifts_the_wrist_over_the_pillar() {
         tool(goal)
     );
     assert!(highest > top, "the tool never rises over the pillar's top ({highest:.3} <= {top:.3})");
+}
+
+/// `polycrank-sort`: the order is the search's (the parts must pass the buffer), and the
+/// continuous joint 1 crosses +-pi on the short way between the stations.
+#[test]
+fn polycrank_sort_orders_the_parts_and_crosses_pi() {
+    let scenario = load_scenario("polycrank-sort").unwrap();
+    let domain = TaskDomain::new(&scenario).unwrap();
+    for name in ["a", "b", "c"] {
+        eprintln!("{name}: {:?}", domain.reach_levels(0, stand(&domain, name)));
+        assert!(domain.reaches(0, stand(&domain, name)), "Polycrank does not reach {name}");
+    }
+    let clock = ClockSpec::Simulated { us_per_check: 2.0 };
+    let report = deliberate(&domain, &scenario, &TaskBudget::new(clock, 10_000.0));
+    let ops =
+        report.operators.as_ref().unwrap_or_else(|| panic!("no plan: {:?} {:?}", report.failure, report.failures));
+    for (k, o) in ops.iter().enumerate() {
+        let q1: Vec<f64> = o.path.iter().map(|q| q[0]).collect();
+        eprintln!("{k:2} {} {:.2} s q1 {:?}", o.name, o.trajectory.duration(), q1);
+    }
+    let via_c = ops.iter().filter(|o| o.name.contains("stand=c,")).count();
+    assert!(via_c >= 2, "the parts do not pass the buffer: {via_c}");
+    // Crossing +-pi: an unwrapped joint-1 value beyond pi in magnitude along some path.
+    let crosses = ops.iter().any(|o| {
+        o.path.windows(2).any(|w| (w[0][0].abs() <= std::f64::consts::PI) != (w[1][0].abs() <= std::f64::consts::PI))
+    });
+    assert!(crosses, "no motion crosses +-pi");
+    let (planning_ms, motion_ms) = report.planning_ms(clock, 20.0);
+    eprintln!(
+        "polycrank-sort: {} operators, cost {:.2}, {} expansions, {} searches, refinements {} tried / {} failed, {} checks, planning {planning_ms:.1} ms (motion {motion_ms:.1} ms) simulated; wall: search {:?}, motion {:?}",
+        ops.len(),
+        report.cost,
+        report.expansions,
+        report.searches,
+        report.refinements,
+        report.refinements_failed,
+        report.collision_checks,
+        report.search_wall,
+        report.motion_wall
+    );
 }
