@@ -358,6 +358,8 @@ pub struct AgentSummary {
     pub goal_error: Option<f64>,
     /// Largest |qd| / max velocity over the run.
     pub max_speed_ratio: f64,
+    /// Task operators it finished (an arm of a `[task]`).
+    pub operators_done: usize,
 }
 
 /// What a run did. Serialised into the log (without the wall-clock figures, so that the
@@ -504,6 +506,7 @@ fn tally(s: &mut AgentSummary, pending: &mut bool, e: &Event) {
         Event::HaltStarted { .. } => s.safe_halts += 1,
         Event::Replan { .. } => s.replans += 1,
         Event::GoalReached { .. } => s.goal_reached = true,
+        Event::OperatorFinished { .. } => s.operators_done += 1,
         _ => {}
     }
 }
@@ -966,6 +969,7 @@ pub fn render_summary(s: &RunSummary) -> String {
     for a in &s.agents {
         let plan = match (a.planning_ms, a.plan_duration_s) {
             (Some(ms), Some(d)) => format!("last plan in {ms:.2} ms, {d:.2} s of motion"),
+            _ if a.operators_done > 0 => format!("{} task operators done", a.operators_done),
             _ => "no plan".to_string(),
         };
         let goal = a.goal_error.map_or(String::new(), |e| format!(", distance to goal {e:.4}"));
