@@ -277,6 +277,83 @@ pub enum Event {
         /// What went wrong.
         message: String,
     },
+    /// The task-level search (production-rule A* in the coordinator's `c_c`, its operators
+    /// refined lazily into certified motion) delivered a plan.
+    TaskPlanFound {
+        /// Operators in the plan.
+        operators: usize,
+        /// The plan's path cost (estimated execution time of its operators, s).
+        cost: f64,
+        /// A* expansions over every search (one per pruning).
+        expansions: u64,
+        /// Searches run (the first, and one after every failed refinement).
+        searches: u32,
+        /// Operator refinements tried (each a motion plan, certified).
+        refinements: u32,
+        /// Refinements that failed (each pruned its operator instance).
+        refinements_failed: u32,
+        /// Collision checks the motion planners and the concurrency checks spent.
+        collision_checks: u64,
+        /// Task-level planning time (search and refinement) as the run's clock counts it, ms.
+        planning_ms: f64,
+        /// Of which motion planning (refinements), ms.
+        motion_ms: f64,
+        /// Whether it came within the deadline.
+        in_time: bool,
+    },
+    /// The task-level search ended without a plan: out of time or infeasible (the arms hold).
+    TaskPlanFailed {
+        /// `out_of_time` or `infeasible`, with detail.
+        reason: String,
+        /// A* expansions over every search.
+        expansions: u64,
+        /// Operators of the best partial plan, when the search ran out of time.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        best_partial: Option<usize>,
+        /// Planning time as the run's clock counts it, ms.
+        planning_ms: f64,
+    },
+    /// An operator of the task plan was refined into a certified motion.
+    OperatorRefined {
+        /// Index in the task plan.
+        index: usize,
+        /// The ground operator (`pick(arm=irp6p, part=p1, stand=b, level=0)`).
+        operator: String,
+        /// The agent that runs it.
+        agent: String,
+        /// Motion time of its trajectory, s.
+        duration_s: f64,
+        /// Collision checks its motion planning took.
+        work: u64,
+        /// Operators of the plan it must wait for (other than the agent's own previous one).
+        after: Vec<usize>,
+    },
+    /// An operator could not be refined into motion: that operator instance is pruned and the
+    /// search goes on.
+    RefinementFailed {
+        /// The ground operator.
+        operator: String,
+        /// The agent that would have run it.
+        agent: String,
+        /// Why (the motion planner's or the verifier's words).
+        reason: String,
+    },
+    /// An agent began an operator's `Move`.
+    OperatorStarted {
+        /// Index in the task plan.
+        index: usize,
+        /// The ground operator.
+        operator: String,
+    },
+    /// An operator's `Move` met its terminal condition.
+    OperatorFinished {
+        /// Index in the task plan.
+        index: usize,
+        /// The ground operator.
+        operator: String,
+        /// Largest joint distance from the operator's final configuration at the end, rad or m.
+        error: f64,
+    },
     /// A user's own event (free text, never parsed).
     Note {
         /// The text.
@@ -320,6 +397,12 @@ impl Event {
             Event::Release => "release",
             Event::ObjectPlaced { .. } => "object_placed",
             Event::SpecificationError { .. } => "specification_error",
+            Event::TaskPlanFound { .. } => "task_plan_found",
+            Event::TaskPlanFailed { .. } => "task_plan_failed",
+            Event::OperatorRefined { .. } => "operator_refined",
+            Event::RefinementFailed { .. } => "refinement_failed",
+            Event::OperatorStarted { .. } => "operator_started",
+            Event::OperatorFinished { .. } => "operator_finished",
             Event::Note { .. } => "note",
         }
     }
@@ -412,6 +495,42 @@ impl fmt::Display for Event {
             Event::ForceLimit { force_n } => write!(f, "{kind}: {force_n:.1} N, plan abandoned"),
             Event::ObjectPlaced { error_m } => write!(f, "{kind}: {error_m:.4} m from its goal"),
             Event::SpecificationError { message } => write!(f, "{kind}; safe halt: {message}"),
+            Event::TaskPlanFound {
+                operators,
+                cost,
+                expansions,
+                searches,
+                refinements,
+                refinements_failed,
+                collision_checks,
+                planning_ms,
+                motion_ms,
+                in_time: t,
+            } => write!(
+                f,
+                "{kind} {} operators={operators} cost={cost:.3} expansions={expansions} searches={searches} refinements={refinements} failed={refinements_failed} checks={collision_checks} planning_ms={planning_ms:.3} motion_ms={motion_ms:.3}",
+                in_time(*t)
+            ),
+            Event::TaskPlanFailed { reason, expansions, best_partial, planning_ms } => {
+                write!(f, "{kind}: {reason} expansions={expansions} planning_ms={planning_ms:.3}")?;
+                if let Some(n) = best_partial {
+                    write!(f, " best_partial={n}")?;
+                }
+                Ok(())
+            }
+            Event::OperatorRefined { index, operator, agent, duration_s, work, after } => {
+                write!(
+                    f,
+                    "{kind} #{index} {operator} by {agent}: duration_s={duration_s:.3} work={work} after={after:?}"
+                )
+            }
+            Event::RefinementFailed { operator, agent, reason } => {
+                write!(f, "{kind} {operator} by {agent}: {reason}")
+            }
+            Event::OperatorStarted { index, operator } => write!(f, "{kind} #{index} {operator}"),
+            Event::OperatorFinished { index, operator, error } => {
+                write!(f, "{kind} #{index} {operator} error={error:.6}")
+            }
             Event::Note { text } => f.write_str(text),
             Event::PlanSuspended
             | Event::SensorNonFinite
@@ -459,6 +578,10 @@ mod tests {
             Event::ObjectPlaced { error_m: 0.1 },
             Event::GoalReached { id: None },
             Event::SensorNonFinite,
+            Event::OperatorStarted { index: 0, operator: "pick(arm=a)".into() },
+            Event::OperatorFinished { index: 0, operator: "pick(arm=a)".into(), error: 0.0 },
+            Event::RefinementFailed { operator: "o".into(), agent: "a".into(), reason: "r".into() },
+            Event::TaskPlanFailed { reason: "infeasible".into(), expansions: 3, best_partial: None, planning_ms: 0.0 },
         ];
         for e in all {
             let v: serde_json::Value = serde_json::to_value(&e).expect("serialisable");

@@ -47,6 +47,26 @@ pub enum Message {
         /// The configurations, shared (sending does not copy them).
         configurations: std::sync::Arc<[Vec<f64>]>,
     },
+    /// The coordinator hands the receiver operator `index` of a task plan, to start now: its
+    /// certified motion, from where the receiver's previous operator ended.
+    Operator {
+        /// Index in the task plan.
+        index: usize,
+        /// The ground operator, for the log.
+        name: std::sync::Arc<str>,
+        /// The motion (shared: sending does not copy it).
+        trajectory: std::sync::Arc<embodied_planner::trajectory::Trajectory>,
+    },
+    /// The sender started operator `index` of the task plan.
+    OperatorStarted {
+        /// Index in the task plan.
+        index: usize,
+    },
+    /// The sender finished operator `index` of the task plan.
+    OperatorDone {
+        /// Index in the task plan.
+        index: usize,
+    },
 }
 
 impl Message {

@@ -9,6 +9,12 @@
 //! run's log events: the share of plans delivered within the deadline, the safe halts with
 //! their stopping distance and time, and the deadline overshoot (how long past the deadline a
 //! stopped search took to return).
+//!
+//! Scenarios with a `[task]` form a third set, `tasks`: the whole system runs on the wall
+//! clock with the task-level deliberation (A* over production rules plus the refinement of
+//! its operators into certified motion) given the deadline as its budget. A task plan counts
+//! as in time when it lands within the deadline; while none is there the arms hold at rest
+//! (a halt at zero speed); a deliberation stopped by the deadline reports its overshoot.
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -134,6 +140,70 @@ struct Problem {
     resolution: f64,
 }
 
+/// The scenarios with a `[task]` among those the benchmark covers.
+fn task_scenarios(args: &DeadlineArgs) -> Result<Vec<crate::scenario::Scenario>, SystemError> {
+    let names: Vec<String> = if args.scenarios.is_empty() && args.mbm.is_none() {
+        crate::scenario::BUILTIN_SCENARIOS.iter().map(|(n, _)| (*n).to_string()).collect()
+    } else {
+        args.scenarios.clone()
+    };
+    let mut out = Vec::new();
+    for name in &names {
+        let sc = load_scenario(name)?;
+        if sc.task.is_some() {
+            out.push(sc);
+        }
+    }
+    Ok(out)
+}
+
+/// One task-level deliberation under deadline `deadline_ms`, run in the system on the wall
+/// clock until its plan (or its failure) lands, read back from the coordinator's events.
+fn run_task(scenario: &crate::scenario::Scenario, deadline_ms: f64, args: &DeadlineArgs) -> Result<Tally, SystemError> {
+    let mut sc = scenario.clone();
+    if let Some(task) = &mut sc.task {
+        task.deadline_ms = deadline_ms;
+        task.give_up_ms = deadline_ms;
+    }
+    let options = crate::system::RunOptions {
+        seed: Some(args.seed),
+        clock: Some(crate::scenario::ClockSpec::Wall),
+        duration: Some(args.max_steps as f64 * 1e-3),
+        ..crate::system::RunOptions::default()
+    };
+    let mut system = crate::system::System::new(&sc, &options)?;
+    let mut t = Tally { requested: 1, ..Tally::default() };
+    let mut landed = false;
+    while !landed && system.time() < system.duration() {
+        let record = system.step()?;
+        for agent in &record.agents {
+            for e in &agent.events {
+                match e {
+                    Event::TaskPlanFound { in_time, planning_ms, .. } => {
+                        landed = true;
+                        if *in_time && *planning_ms <= deadline_ms {
+                            t.in_time += 1;
+                        } else {
+                            // Not there when needed: the arms held at rest.
+                            t.halts += 1;
+                        }
+                        t.goal = true;
+                    }
+                    Event::TaskPlanFailed { reason, planning_ms, .. } => {
+                        landed = true;
+                        t.halts += 1;
+                        if reason.starts_with("out_of_time") {
+                            t.overshoot_us.push(((planning_ms - deadline_ms) * 1e3).max(0.0));
+                        }
+                    }
+                    _ => {}
+                }
+            }
+        }
+    }
+    Ok(t)
+}
+
 fn problems(args: &DeadlineArgs) -> Result<Vec<Problem>, SystemError> {
     let names: Vec<String> = if args.scenarios.is_empty() && args.mbm.is_none() {
         crate::scenario::BUILTIN_SCENARIOS.iter().map(|(n, _)| (*n).to_string()).collect()
@@ -173,8 +243,10 @@ fn problems(args: &DeadlineArgs) -> Result<Vec<Problem>, SystemError> {
             });
         }
     }
-    if out.is_empty() {
-        return Err(SystemError::Usage("no problem to plan: no scenario agent with a goal, no MBM problem".into()));
+    if out.is_empty() && task_scenarios(args)?.is_empty() {
+        return Err(SystemError::Usage(
+            "no problem to plan: no scenario agent with a goal, no [task], no MBM problem".into(),
+        ));
     }
     Ok(out)
 }
@@ -354,17 +426,50 @@ pub fn run_deadline_bench(args: &DeadlineArgs) -> Result<DeadlineReport, SystemE
             });
         }
     }
-    Ok(DeadlineReport {
-        generator: crate::generator(),
-        problems: problems.into_iter().map(|p| (p.set.to_string(), p.name)).collect(),
-        rows,
-    })
+    let tasks = task_scenarios(args)?;
+    if !tasks.is_empty() {
+        for &d in &args.deadlines_ms {
+            let mut total = Tally::default();
+            let mut planned = 0;
+            for sc in &tasks {
+                let t = run_task(sc, d, args)?;
+                total.requested += t.requested;
+                total.in_time += t.in_time;
+                planned += usize::from(t.goal);
+                total.halts += t.halts;
+                total.overshoot_us.extend(t.overshoot_us);
+            }
+            rows.push(DeadlineRow {
+                set: "tasks".to_string(),
+                deadline_ms: d,
+                problems: tasks.len(),
+                requested: total.requested,
+                delivered_in_time: total.in_time,
+                delivered_share: if total.requested == 0 { 0.0 } else { total.in_time as f64 / total.requested as f64 },
+                // Task plans found at all (in time or late).
+                goals_reached: planned,
+                safe_halts: total.halts,
+                halts_from_speed: 0,
+                halt_distance_mean: 0.0,
+                halt_distance_max: 0.0,
+                halt_time_mean_ms: 0.0,
+                halt_time_max_ms: 0.0,
+                stopped: total.overshoot_us.len(),
+                overshoot_p50_us: median(&total.overshoot_us),
+                overshoot_max_us: total.overshoot_us.iter().copied().fold(0.0, f64::max),
+                halts: Vec::new(),
+            });
+        }
+    }
+    let mut names: Vec<(String, String)> = problems.into_iter().map(|p| (p.set.to_string(), p.name)).collect();
+    names.extend(tasks.iter().map(|sc| ("tasks".to_string(), sc.name.clone())));
+    Ok(DeadlineReport { generator: crate::generator(), problems: names, rows })
 }
 
 /// The report as a terminal table.
 pub fn render_table(report: &DeadlineReport) -> String {
     let mut s = String::new();
-    for set in ["scenarios", "mbm"] {
+    for set in ["scenarios", "mbm", "tasks"] {
         let names: Vec<&str> = report.problems.iter().filter(|(k, _)| k == set).map(|(_, n)| n.as_str()).collect();
         if !names.is_empty() {
             s.push_str(&format!("{set} ({}): {}\n", names.len(), names.join(", ")));
@@ -437,7 +542,7 @@ pub fn plot_svg(report: &DeadlineReport, path: &Path) -> Result<(), SystemError>
         .y_desc("delivered in time")
         .draw()
         .map_err(|e| fail(e.to_string()))?;
-    for (set, colour) in [("scenarios", BLUE), ("mbm", RED)] {
+    for (set, colour) in [("scenarios", BLUE), ("mbm", RED), ("tasks", GREEN)] {
         let pts: Vec<(f64, f64)> =
             report.rows.iter().filter(|r| r.set == set).map(|r| (r.deadline_ms.max(0.1), r.delivered_share)).collect();
         if pts.is_empty() {

@@ -43,13 +43,14 @@ pub mod plan;
 pub mod plot;
 pub mod scenario;
 pub mod system;
+pub mod task;
 pub mod verify;
 pub mod view;
 
 pub use error::SystemError;
 pub use scenario::{
     AgentSpec, CarrySpec, ClockSpec, Coordination, GoalSpec, ObstacleSpec, PlannerSpec, RunSpec, Scenario,
-    ScenarioBuilder,
+    ScenarioBuilder, StandSpec, TaskSpec,
 };
 pub use system::{AgentSummary, RunOptions, RunSummary, System};
 

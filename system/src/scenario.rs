@@ -24,6 +24,8 @@ pub const BUILTIN_SCENARIOS: &[(&str, &str)] = &[
     ("irp6-late-plan", include_str!("../scenarios/irp6-late-plan.toml")),
     ("two-irp6-together", include_str!("../scenarios/two-irp6-together.toml")),
     ("two-irp6-carry", include_str!("../scenarios/two-irp6-carry.toml")),
+    ("two-irp6-stack", include_str!("../scenarios/two-irp6-stack.toml")),
+    ("polycrank-sort", include_str!("../scenarios/polycrank-sort.toml")),
 ];
 
 /// The scenario `embodied run` uses when given none.
@@ -46,6 +48,39 @@ struct RawScenario {
     run: RawRun,
     #[serde(default)]
     carry: Option<Spanned<RawCarry>>,
+    #[serde(default)]
+    task: Option<Spanned<RawTask>>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawTask {
+    arms: Spanned<Vec<String>>,
+    #[serde(default)]
+    part_size: Option<Spanned<f64>>,
+    #[serde(default)]
+    clearance: Option<Spanned<f64>>,
+    #[serde(default)]
+    handling_s: Option<Spanned<f64>>,
+    #[serde(default)]
+    deadline_ms: Option<Spanned<f64>>,
+    #[serde(default)]
+    give_up_ms: Option<Spanned<f64>>,
+    #[serde(default)]
+    simulated_us_per_expansion: Option<Spanned<f64>>,
+    stands: Vec<Spanned<RawStand>>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawStand {
+    name: String,
+    xyz: [f64; 3],
+    size: [f64; 3],
+    #[serde(default)]
+    start: Vec<String>,
+    #[serde(default)]
+    goal: Vec<String>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -297,6 +332,45 @@ pub struct CarrySpec {
     pub lattice_step: f64,
 }
 
+/// A stand of a stacking task (`[[task.stands]]`): a box whose top face is centred at `top`,
+/// with a stack of parts on it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct StandSpec {
+    /// Its name (the obstacle is `stand_<name>`).
+    pub name: String,
+    /// Centre of its top face, m (world frame).
+    pub top: [f64; 3],
+    /// Box sizes, m.
+    pub size: [f64; 3],
+    /// Parts stacked on it at the start, bottom first.
+    pub start: Vec<String>,
+    /// Parts that must end stacked on it, bottom first (empty: no goal here).
+    pub goal: Vec<String>,
+}
+
+/// A stacking task (`[task]`) for task-level deliberation: parts (cubes) stacked on stands,
+/// moved one at a time by the `arms`, to end in the goal stacks. The coordinator plans it with
+/// A* over production rules and refines the operators into motion (see `embodied_system::task`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct TaskSpec {
+    /// Scenario agent indices of the arms that run operators (agents without a goal).
+    pub arms: Vec<usize>,
+    /// The stands.
+    pub stands: Vec<StandSpec>,
+    /// Edge of the cubic parts, m.
+    pub part_size: f64,
+    /// Height of the tool above a part's top face where it picks or places it, m.
+    pub clearance: f64,
+    /// Time to grasp or release, s (part of each operator's cost).
+    pub handling_s: f64,
+    /// When the task plan is needed, ms (a later plan counts as late).
+    pub deadline_ms: f64,
+    /// When the task-level deliberation gives up, ms.
+    pub give_up_ms: f64,
+    /// Simulated clock: planning time per A* expansion, µs.
+    pub us_per_expansion: f64,
+}
+
 /// A loaded, checked scenario.
 #[derive(Debug, Clone)]
 pub struct Scenario {
@@ -320,6 +394,8 @@ pub struct Scenario {
     pub run: RunSpec,
     /// The two-handed carry, if any.
     pub carry: Option<CarrySpec>,
+    /// The stacking task, if any.
+    pub task: Option<TaskSpec>,
 }
 
 impl Scenario {
@@ -440,6 +516,7 @@ impl ScenarioBuilder {
                 },
                 run: RunSpec { duration: None, coordination: Coordination::Sequential },
                 carry: None,
+                task: None,
                 name,
             },
         }
@@ -919,6 +996,24 @@ pub fn parse_scenario(text: &str, file: &Path, dir: &Path) -> Result<Scenario, S
         None => None,
         Some(c) => Some(parse_carry(&ctx, c, &agents)?),
     };
+    let task = match &raw.task {
+        None => None,
+        Some(t) => Some(parse_task(&ctx, t, &agents, carry.as_ref())?),
+    };
+    if let Some(t) = &task {
+        for stand in &t.stands {
+            let [x, y, z] = stand.size;
+            obstacles.push(ObstacleSpec {
+                obstacle: Obstacle {
+                    name: format!("stand_{}", stand.name),
+                    pose: pose([stand.top[0], stand.top[1], stand.top[2] - z / 2.0], None),
+                    shape: Shape::cuboid(x / 2.0, y / 2.0, z / 2.0),
+                },
+                appear_at: None,
+                velocity: None,
+            });
+        }
+    }
     Ok(Scenario {
         name: raw.name,
         description: raw.description,
@@ -930,7 +1025,117 @@ pub fn parse_scenario(text: &str, file: &Path, dir: &Path) -> Result<Scenario, S
         planner,
         run: RunSpec { duration, coordination },
         carry,
+        task,
     })
+}
+
+fn parse_task(
+    ctx: &Ctx,
+    spanned: &Spanned<RawTask>,
+    agents: &[AgentSpec],
+    carry: Option<&CarrySpec>,
+) -> Result<TaskSpec, SystemError> {
+    let t = spanned.get_ref();
+    let mut arms = Vec::new();
+    for name in t.arms.get_ref() {
+        let k = agents.iter().position(|a| a.name == *name).ok_or_else(|| {
+            let names: Vec<&str> = agents.iter().map(|a| a.name.as_str()).collect();
+            ctx.err(t.arms.span(), format!("task: arms: no agent `{name}`; expected one of {names:?}"))
+        })?;
+        if agents[k].goal.is_some() || carry.is_some_and(|c| c.agent == k) {
+            return Err(ctx.err(
+                t.arms.span(),
+                format!("task: arms: agent `{name}` has a goal or a carry; the task decides its motion, remove it"),
+            ));
+        }
+        if agents[k].robot.end_effectors().is_empty() {
+            return Err(ctx.err(t.arms.span(), format!("task: arms: agent `{name}`'s robot has no end effector")));
+        }
+        if arms.contains(&k) {
+            return Err(ctx.err(t.arms.span(), format!("task: arms: `{name}` listed twice")));
+        }
+        arms.push(k);
+    }
+    if arms.is_empty() {
+        return Err(ctx.err(t.arms.span(), "task: arms: expected at least one agent name"));
+    }
+    if let Some(a) = agents.iter().find(|a| a.goal.is_some()) {
+        return Err(ctx.err(
+            spanned.span(),
+            format!(
+                "task: agent `{}` has a goal; in a scenario with a [task] the task coordinator drives the agents",
+                a.name
+            ),
+        ));
+    }
+    let number = |v: &Option<Spanned<f64>>, default: f64, what: &str, ok: &dyn Fn(f64) -> bool, expected: &str| match v
+    {
+        None => Ok(default),
+        Some(x) if ok(*x.get_ref()) => Ok(*x.get_ref()),
+        Some(x) => Err(ctx.err(x.span(), format!("task: {what}: expected {expected}, got {}", x.get_ref()))),
+    };
+    let positive = |x: f64| x.is_finite() && x > 0.0;
+    let non_negative = |x: f64| x.is_finite() && x >= 0.0;
+    let part_size = number(&t.part_size, 0.05, "part_size", &positive, "a length > 0 m")?;
+    let clearance = number(&t.clearance, 0.02, "clearance", &non_negative, "a length >= 0 m")?;
+    let handling_s = number(&t.handling_s, 0.5, "handling_s", &non_negative, "a time >= 0 s")?;
+    let deadline_ms = number(&t.deadline_ms, 500.0, "deadline_ms", &non_negative, "a time >= 0 ms")?;
+    let give_up_ms = number(
+        &t.give_up_ms,
+        deadline_ms.max(5000.0),
+        "give_up_ms",
+        &|x| x.is_finite() && x >= deadline_ms,
+        &format!("a time >= deadline_ms ({deadline_ms} ms)"),
+    )?;
+    let us_per_expansion =
+        number(&t.simulated_us_per_expansion, 20.0, "simulated_us_per_expansion", &non_negative, "a time >= 0 µs")?;
+    let mut stands: Vec<StandSpec> = Vec::new();
+    let mut seen_start: Vec<&str> = Vec::new();
+    let mut seen_goal: Vec<&str> = Vec::new();
+    for st in &t.stands {
+        let r = st.get_ref();
+        if stands.iter().any(|s| s.name == r.name) {
+            return Err(ctx.err(st.span(), format!("task: two stands are named `{}`", r.name)));
+        }
+        if !r.xyz.iter().all(|v| v.is_finite()) || !r.size.iter().all(|v| v.is_finite() && *v > 0.0) {
+            return Err(ctx.err(
+                st.span(),
+                format!(
+                    "task: stand `{}`: expected finite xyz and three positive sizes in m, got xyz {:?}, size {:?}",
+                    r.name, r.xyz, r.size
+                ),
+            ));
+        }
+        for p in &r.start {
+            if seen_start.contains(&p.as_str()) {
+                return Err(ctx.err(st.span(), format!("task: part `{p}` starts on two stands (or twice)")));
+            }
+            seen_start.push(p);
+        }
+        for p in &r.goal {
+            if seen_goal.contains(&p.as_str()) {
+                return Err(ctx.err(st.span(), format!("task: part `{p}` is in two goal stacks (or twice)")));
+            }
+            seen_goal.push(p);
+        }
+        stands.push(StandSpec {
+            name: r.name.clone(),
+            top: r.xyz,
+            size: r.size,
+            start: r.start.clone(),
+            goal: r.goal.clone(),
+        });
+    }
+    if stands.is_empty() {
+        return Err(ctx.err(spanned.span(), "task: expected at least one [[task.stands]] table"));
+    }
+    if let Some(p) = seen_goal.iter().find(|p| !seen_start.contains(p)) {
+        return Err(ctx.err(
+            spanned.span(),
+            format!("task: part `{p}` is in a goal stack but starts on no stand; expected one of {seen_start:?}"),
+        ));
+    }
+    Ok(TaskSpec { arms, stands, part_size, clearance, handling_s, deadline_ms, give_up_ms, us_per_expansion })
 }
 
 fn parse_carry(ctx: &Ctx, spanned: &Spanned<RawCarry>, agents: &[AgentSpec]) -> Result<CarrySpec, SystemError> {

@@ -358,6 +358,8 @@ pub struct AgentSummary {
     pub goal_error: Option<f64>,
     /// Largest |qd| / max velocity over the run.
     pub max_speed_ratio: f64,
+    /// Task operators it finished (an arm of a `[task]`).
+    pub operators_done: usize,
 }
 
 /// What a run did. Serialised into the log (without the wall-clock figures, so that the
@@ -420,6 +422,8 @@ impl RunSummary {
 struct Observer {
     summaries: Vec<AgentSummary>,
     pending: Vec<bool>,
+    /// The task-level deliberation has not delivered yet.
+    task_pending: bool,
     events: Vec<(f64, String, Event)>,
     switches: Vec<(f64, String, String)>,
     last_behaviour: Vec<String>,
@@ -435,6 +439,7 @@ impl Observer {
                 .map(|a| AgentSummary { name: a.name.clone(), ..AgentSummary::default() })
                 .collect(),
             pending: vec![false; scenario.agents.len()],
+            task_pending: scenario.task.is_some(),
             events: Vec::new(),
             switches: Vec::new(),
             last_behaviour: vec![String::new(); agents],
@@ -445,6 +450,9 @@ impl Observer {
     fn observe(&mut self, r: &StepRecord) {
         for (k, a) in r.agents.iter().enumerate() {
             for e in &a.events {
+                if matches!(e, Event::TaskPlanFound { .. } | Event::TaskPlanFailed { .. }) {
+                    self.task_pending = false;
+                }
                 self.events.push((r.time, a.agent.clone(), e.clone()));
                 if k < self.summaries.len() {
                     tally(&mut self.summaries[k], &mut self.pending[k], e);
@@ -489,6 +497,7 @@ fn tally(s: &mut AgentSummary, pending: &mut bool, e: &Event) {
         Event::HaltStarted { .. } => s.safe_halts += 1,
         Event::Replan { .. } => s.replans += 1,
         Event::GoalReached { .. } => s.goal_reached = true,
+        Event::OperatorFinished { .. } => s.operators_done += 1,
         _ => {}
     }
 }
@@ -557,8 +566,20 @@ impl System {
             settings.obstacle_sensing = Some(f64::INFINITY);
         }
         let mut carry = None;
+        let task_domain = match &scenario.task {
+            Some(_) => Some(Arc::new(crate::task::TaskDomain::new(scenario)?)),
+            None => None,
+        };
         for (k, agent) in scenario.agents.iter().enumerate() {
             let robot = Arc::new(agent.robot.clone());
+            if scenario.task.as_ref().is_some_and(|t| t.arms.contains(&k)) {
+                let state = crate::task::TaskArm::new(coordinator_id);
+                let a =
+                    Agent::embodied(agent.name.clone(), robot, Some(&agent.start), state, crate::task::arm_program())
+                        .map_err(|e| failed(&agent.name, &e))?;
+                runtime.add_agent(a);
+                continue;
+            }
             if let Some(spec) = scenario.carry.as_ref().filter(|c| c.agent == k) {
                 let (a, record, header, wall_ms) = carry_parts(scenario, spec, dt, clock, options)?;
                 runtime.add_agent(a);
@@ -617,7 +638,16 @@ impl System {
             runtime.add_agent(a);
         }
         let mut coordinator = None;
-        if coordinated {
+        if let (Some(domain), Some(task)) = (task_domain, &scenario.task) {
+            let arm_ids: Vec<AgentId> = task.arms.iter().map(|&k| AgentId(k)).collect();
+            let c = crate::task::TaskCoordinator::new(domain, Arc::new(scenario.clone()), clock, dt, arm_ids.clone());
+            let id = runtime.add_agent(Coordinator::new("coordinator", c, crate::task::coordinator_program()));
+            let link = options.link.unwrap_or(Link::IDEAL);
+            for k in arm_ids {
+                runtime.connect_both(id, k, link).map_err(|e| SystemError::Failed(e.to_string()))?;
+            }
+            coordinator = Some(id);
+        } else if coordinated {
             let order: Vec<(AgentId, usize)> = planners.iter().map(|&k| (AgentId(k), k)).collect();
             let n = scenario.agents.len();
             let mut index_of = vec![None; n + 1];
@@ -726,7 +756,7 @@ impl System {
         let r = self.runtime.last_record();
         self.observer.observe(r);
         self.started.get_or_insert(started);
-        if self.clock == ClockSpec::Wall && self.observer.pending.iter().any(|p| *p) {
+        if self.clock == ClockSpec::Wall && (self.observer.task_pending || self.observer.pending.iter().any(|p| *p)) {
             let dt = self.runtime.config().dt;
             let (t0, s0) = *self.pace.get_or_insert((Instant::now(), r.step));
             let due = t0 + Duration::from_secs_f64((r.step + 1 - s0) as f64 * dt);
@@ -945,6 +975,7 @@ pub fn render_summary(s: &RunSummary) -> String {
     for a in &s.agents {
         let plan = match (a.planning_ms, a.plan_duration_s) {
             (Some(ms), Some(d)) => format!("last plan in {ms:.2} ms, {d:.2} s of motion"),
+            _ if a.operators_done > 0 => format!("{} task operators done", a.operators_done),
             _ => "no plan".to_string(),
         };
         let goal = a.goal_error.map_or(String::new(), |e| format!(", distance to goal {e:.4}"));

@@ -77,3 +77,26 @@ fn bad_deadlines_are_a_usage_error() {
     let args = DeadlineArgs { deadlines_ms: vec![-1.0], ..DeadlineArgs::default() };
     assert!(run_deadline_bench(&args).is_err());
 }
+
+/// Scenarios with a `[task]` are their own set: the task-level deliberation (search and
+/// refinement) under each deadline, read back from the coordinator's events. A deadline of
+/// 0.5 ms stops it (the arms hold, the overshoot is recorded); 20 s lets it finish.
+#[test]
+fn task_plans_are_benchmarked_as_their_own_set() {
+    let args = DeadlineArgs {
+        deadlines_ms: vec![0.5, 20_000.0],
+        scenarios: vec!["two-irp6-stack".into()],
+        max_steps: 40_000,
+        ..DeadlineArgs::default()
+    };
+    let report = run_deadline_bench(&args).expect("bench runs");
+    assert!(report.problems.contains(&("tasks".to_string(), "two-irp6-stack".to_string())), "{:?}", report.problems);
+    let rows: Vec<_> = report.rows.iter().filter(|r| r.set == "tasks").collect();
+    assert_eq!(rows.len(), 2, "{:?}", report.rows);
+    let (short, long) = (rows[0], rows[1]);
+    assert_eq!((short.requested, short.delivered_in_time, short.safe_halts, short.stopped), (1, 0, 1, 1), "{short:?}");
+    assert_eq!((long.requested, long.delivered_in_time, long.goals_reached, long.safe_halts), (1, 1, 1, 0), "{long:?}");
+    let table = render_table(&report);
+    assert!(table.contains("tasks (1): two-irp6-stack"), "{table}");
+    eprintln!("{table}");
+}
