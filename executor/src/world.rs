@@ -32,10 +32,23 @@ impl Obstacle {
     }
 }
 
-/// Everything outside the agents.
+/// An agent's body in the world, as other agents' receptors see it: the bounding spheres of
+/// its shapes where its joints stood after the last step.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct Body {
+    /// Index of the agent in the runtime.
+    pub agent: usize,
+    /// Its name.
+    pub name: String,
+    /// Centre (m) and radius (m) of each shape's bounding sphere.
+    pub spheres: Vec<([f64; 3], f64)>,
+}
+
+/// Everything outside the agents' control subsystems: the obstacles and the agents' bodies.
 #[derive(Debug, Clone, Default)]
 pub struct World {
     obstacles: Vec<Obstacle>,
+    bodies: Vec<Body>,
     step: u64,
 }
 
@@ -50,6 +63,18 @@ impl World {
     /// All obstacles, present or not, at their current positions.
     pub fn obstacles(&self) -> &[Obstacle] {
         &self.obstacles
+    }
+    /// The agents' bodies (placed by the runtime's [`crate::runtime::StepMonitor`] after every
+    /// step; empty without one).
+    pub fn bodies(&self) -> &[Body] {
+        &self.bodies
+    }
+    /// Replace the agents' bodies.
+    pub fn set_bodies(&mut self, bodies: Vec<Body>) {
+        self.bodies = bodies;
+    }
+    pub(crate) fn bodies_mut(&mut self) -> &mut Vec<Body> {
+        &mut self.bodies
     }
     /// The current step.
     pub fn step(&self) -> u64 {
@@ -70,8 +95,11 @@ impl World {
 /// One obstacle as the detector saw it.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ObstacleEcho {
-    /// Index in [`World::obstacles`].
+    /// Index in [`World::obstacles`]; for a shape of another agent's body (see `agent`), the
+    /// number of obstacles plus the index of the shape among all bodies' shapes.
     pub id: usize,
+    /// The agent whose body this is, when it is one.
+    pub agent: Option<usize>,
     /// Measured centre (with noise).
     pub position: [f64; 3],
     /// Distance from the sensing point to the obstacle surface (negative = penetration).
@@ -153,6 +181,8 @@ pub(crate) struct Receptors {
     pub(crate) spec: ReceptorSpec,
     pub(crate) robot: Option<(Arc<Robot>, usize)>,
     pub(crate) rng: Rng,
+    /// The agent's own index (its own body is not an obstacle to it).
+    pub(crate) own: Option<usize>,
 }
 
 impl Receptors {
@@ -180,14 +210,14 @@ impl Receptors {
             _ => [0.0; 3],
         };
         let p = out.sensing_point;
-        for (id, o) in world.obstacles().iter().enumerate() {
-            if !o.present_at(world.step) {
-                continue;
-            }
-            let d = [p[0] - o.position[0], p[1] - o.position[1], p[2] - o.position[2]];
+        let rng = &mut self.rng;
+        let mut sense = |id: usize, agent: Option<usize>, position: [f64; 3], radius: f64| {
+            let d = [p[0] - position[0], p[1] - position[1], p[2] - position[2]];
             let centre_dist = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
-            let distance = centre_dist - o.radius;
+            let distance = centre_dist - radius;
+            // The force sensor feels obstacles; another robot's body is seen, not felt.
             if let Some(k) = spec.force_stiffness
+                && agent.is_none()
                 && distance < 0.0
                 && centre_dist > 0.0
             {
@@ -198,13 +228,27 @@ impl Receptors {
             if let Some(range) = spec.detector_range
                 && distance <= range
             {
-                let mut position = o.position;
+                let mut position = position;
                 if spec.detector_noise > 0.0 {
                     for c in position.iter_mut() {
-                        *c += spec.detector_noise * noise(&mut self.rng);
+                        *c += spec.detector_noise * noise(rng);
                     }
                 }
-                out.obstacles.push(ObstacleEcho { id, position, distance });
+                out.obstacles.push(ObstacleEcho { id, agent, position, distance });
+            }
+        };
+        for (id, o) in world.obstacles().iter().enumerate() {
+            if o.present_at(world.step) {
+                sense(id, None, o.position, o.radius);
+            }
+        }
+        let mut id = world.obstacles().len();
+        for b in &world.bodies {
+            for &(position, radius) in &b.spheres {
+                if Some(b.agent) != self.own {
+                    sense(id, Some(b.agent), position, radius);
+                }
+                id += 1;
             }
         }
         if spec.force_stiffness.is_some() && spec.force_noise > 0.0 {

@@ -36,6 +36,7 @@
 #![warn(missing_docs)]
 
 pub mod bench_qp;
+pub mod clearance;
 pub mod deadlines;
 pub mod error;
 pub mod log;

@@ -20,7 +20,11 @@
 //! scenario robot's limits, the logged `qd` against the velocity limits, the finite difference
 //! of the logged `qd` over the header's `step_s` against the acceleration limits, and when the
 //! header names a `closed_chain`, the relative tool pose between each `grasp` event of that
-//! agent and the next `release` (the release step itself is not checked). A log whose last line
+//! agent and the next `release` (the release step itself is not checked). Every logged motion
+//! is certified collision-free between consecutive steps by the certified
+//! [`embodied_planner::verify::Verifier`]: each robot against the scenario's obstacles at their
+//! times (scripted ones where and once they are there) and against itself, and every two robots
+//! against each other at the same steps (see [`crate::clearance`]). A log whose last line
 //! is incomplete, or that has no summary line, is checked up to its last complete line and the
 //! report says so (`complete: false`).
 
@@ -36,6 +40,7 @@ use serde::Serialize;
 use serde_json::Value;
 
 use crate::SystemError;
+use crate::clearance::{LoggedMotion, MotionCheck, ObstacleTimeline, certify_environment, certify_pair};
 use crate::plan::{PlanFile, agent_problem, read_plan};
 use crate::scenario::{GoalSpec, Scenario, load_scenario};
 
@@ -340,6 +345,8 @@ pub struct LogAgent {
     pub max_velocity_ratio: f64,
     pub max_acceleration_ratio: f64,
     pub closure: Option<LogClosure>,
+    /// Its motion certified free of the obstacles and of itself, step to step.
+    pub collision: Option<MotionCheck>,
 }
 
 /// A run log checked against a scenario.
@@ -355,7 +362,14 @@ pub struct LogVerification {
     pub step_s: f64,
     pub warnings: Vec<String>,
     pub agents: Vec<LogAgent>,
+    /// Every two robots certified apart, step to step.
+    pub robot_robot: Vec<MotionCheck>,
     pub time_s: f64,
+}
+
+/// The logged motion of an agent, for the collision certificate.
+fn motion<'b>(st: &'b AgentState<'_>) -> LoggedMotion<'b> {
+    LoggedMotion { agent: &st.name, robot: st.robot, steps: &st.steps, t: &st.times, q: &st.qs }
 }
 
 struct AgentState<'a> {
@@ -367,6 +381,10 @@ struct AgentState<'a> {
     out: LogAgent,
     closure: Option<(usize, usize)>,
     holding: Option<Isometry3<f64>>,
+    /// Logged steps, times and joints, for the collision certificate.
+    steps: Vec<u64>,
+    times: Vec<f64>,
+    qs: Vec<Vec<f64>>,
 }
 
 fn parse_err(file: &Path, line: usize, column: usize, message: String) -> SystemError {
@@ -461,9 +479,13 @@ pub fn verify_log(scenario: &Scenario, file: &Path, settings: &CheckSettings) ->
                 max_velocity_ratio: 0.0,
                 max_acceleration_ratio: 0.0,
                 closure: None,
+                collision: None,
             },
             closure: None,
             holding: None,
+            steps: Vec::new(),
+            times: Vec::new(),
+            qs: Vec::new(),
         });
     }
     let chain: Option<LogClosedChain> = match header.get("closed_chain") {
@@ -562,6 +584,9 @@ pub fn verify_log(scenario: &Scenario, file: &Path, settings: &CheckSettings) ->
             let h = st.prev_step.map_or(f64::NAN, |p| step.saturating_sub(p).max(1) as f64 * step_s);
             st.limits.push_with_interval(t, h, &q, &qd);
             st.prev_step = Some(step);
+            st.steps.push(step);
+            st.times.push(t);
+            st.qs.push(q.clone());
             let events: Vec<Event> = match a.get("events") {
                 None => Vec::new(),
                 Some(v) => serde_json::from_value(v.clone()).map_err(|e| {
@@ -603,28 +628,52 @@ pub fn verify_log(scenario: &Scenario, file: &Path, settings: &CheckSettings) ->
     if !complete && note.is_none() {
         note = Some(format!("no summary line: the run did not finish; checked its {steps} steps"));
     }
+    // Collisions: every robot against the obstacles at their times, every two robots at the
+    // same steps.
+    let verifier = Verifier::certified(0.0).with_settings(*settings);
+    let timeline = ObstacleTimeline::new(scenario, step_s);
+    let mut robot_robot = Vec::new();
+    for (i, a) in agents.iter().enumerate() {
+        for b in &agents[i + 1..] {
+            if a.steps == b.steps {
+                robot_robot.push(certify_pair(&motion(a), &motion(b), &verifier));
+            } else {
+                warnings.push(format!(
+                    "agents {} and {} are not logged at the same steps: not checked against each other",
+                    a.name, b.name
+                ));
+            }
+        }
+    }
+    let collisions: Vec<MotionCheck> =
+        agents.iter().map(|st| certify_environment(&motion(st), &timeline, &verifier)).collect();
     let agents: Vec<LogAgent> = agents
         .into_iter()
-        .map(|st| {
+        .zip(collisions)
+        .map(|(st, collision)| {
             let mut a = st.out;
+            a.collision = Some(collision);
             a.violation = st.limits.first().cloned();
             a.violations = st.limits.violations();
             a.max_velocity_ratio = st.limits.max_velocity_ratio();
             a.max_acceleration_ratio = st.limits.max_acceleration_ratio();
-            a.certified = a.violation.is_none() && a.closure.as_ref().is_none_or(|c| c.ok);
+            a.certified = a.violation.is_none()
+                && a.closure.as_ref().is_none_or(|c| c.ok)
+                && a.collision.as_ref().is_none_or(|c| c.ok);
             a
         })
         .collect();
     Ok(LogVerification {
         log_file: file.to_path_buf(),
         scenario: scenario.name.clone(),
-        certified: agents.iter().all(|a| a.certified),
+        certified: agents.iter().all(|a| a.certified) && robot_robot.iter().all(|c| c.ok),
         complete,
         note,
         steps,
         step_s,
         warnings,
         agents,
+        robot_robot,
         time_s: start.elapsed().as_secs_f64(),
     })
 }
@@ -672,9 +721,28 @@ pub fn render_log(v: &LogVerification) -> String {
                 s.push_str(&format!("  first violation: {f}\n"));
             }
         }
+        if let Some(c) = &a.collision {
+            render_motion_check(&mut s, c);
+        }
+    }
+    for c in &v.robot_robot {
+        render_motion_check(&mut s, c);
     }
     s.push_str(&format!("certified: {} [{:.1} ms]\n", if v.certified { "yes" } else { "no" }, v.time_s * 1e3));
     s
+}
+
+fn render_motion_check(s: &mut String, c: &MotionCheck) {
+    s.push_str(&format!(
+        "  collision ({}): {} ({} step-to-step motions certified, smallest distance measured {:.4} m)\n",
+        c.what,
+        ok_word(c.ok),
+        c.segments,
+        c.min_clearance_m
+    ));
+    if let Some(f) = &c.violation {
+        s.push_str(&format!("  first violation: {f}\n"));
+    }
 }
 
 /// `embodied verify SCENARIO [PLAN.json] [--log FILE.jsonl] [--json]`: prints the reports and
