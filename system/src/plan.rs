@@ -47,6 +47,10 @@ pub struct PlanFile {
     pub format: String,
     pub scenario: NamedHash,
     pub plans: Vec<AgentPlan>,
+    /// Groups of agents (by name) whose plans run at the same time, all from `t = 0`; plans
+    /// not in a group run one after another in file order. Absent: every plan runs alone.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub together: Vec<Vec<String>>,
 }
 
 /// SHA-256 of a robot's kinematic description (names, kinds, limits, frames, base).
@@ -209,6 +213,7 @@ pub fn plan_scenario(scenario: &Scenario, deadline_ms: Option<f64>) -> Result<Pl
         format: PLAN_FORMAT.to_string(),
         scenario: NamedHash { name: scenario.name.clone(), hash: scenario.hash.clone() },
         plans,
+        together: Vec::new(),
     })
 }
 

@@ -13,6 +13,10 @@
 //! **Other agents.** Plans in a file run one after another in file order (this is how
 //! `embodied plan` makes them): while agent `k` moves, every agent whose plan comes earlier in
 //! the file stands where its plan ends, every other agent stands at its start configuration.
+//! Plans the file's `together` groups name run at the same time, from `t = 0`: each pair of
+//! them is certified against each other in time (agent A at `t` against agent B at `t`, both
+//! sampled at the finer of their sample steps; a plan that has ended stands at its end), not one
+//! after another.
 //! Obstacles are those present at time zero (scripted obstacles that appear later are the run's
 //! business, not the plan's).
 //!
@@ -34,6 +38,7 @@ use std::time::Instant;
 use embodied_executor::Event;
 use embodied_models::Robot;
 use embodied_models::nalgebra::Isometry3;
+use embodied_planner::trajectory::Trajectory;
 use embodied_planner::verify::certified::pose_error;
 use embodied_planner::verify::{CheckSettings, Finding, LimitsChecker, TrajectoryReport, Verifier};
 use serde::Serialize;
@@ -69,6 +74,8 @@ pub struct PlanVerification {
     pub certified: bool,
     pub warnings: Vec<String>,
     pub agents: Vec<AgentVerification>,
+    /// Plans that run together, certified against each other in time.
+    pub together: Vec<MotionCheck>,
     pub settings: CheckSettings,
     pub time_s: f64,
 }
@@ -154,7 +161,37 @@ fn match_plan(scenario: &Scenario, plan: &PlanFile, file: &Path) -> Result<(Vec<
         }
         index.push(k);
     }
+    for (g, group) in plan.together.iter().enumerate() {
+        for (m, name) in group.iter().enumerate() {
+            if !plan.plans.iter().any(|p| p.agent == *name) {
+                return Err(usage(file, format!("together[{g}][{m}]: no plan for agent `{name}` in the file")));
+            }
+            let elsewhere = plan.together.iter().enumerate().any(|(h, other)| h != g && other.contains(name));
+            if elsewhere || group[..m].contains(name) {
+                return Err(usage(file, format!("together[{g}][{m}]: agent `{name}` is named twice")));
+            }
+        }
+    }
     Ok((warnings, index))
+}
+
+/// Group of plan `j`'s agent in `plan.together`, if any.
+fn group_of(plan: &PlanFile, j: usize) -> Option<usize> {
+    plan.together.iter().position(|g| g.contains(&plan.plans[j].agent))
+}
+
+/// Plans `a` and `b` sampled at the same times from `t = 0` (the finer sample step; a plan
+/// that has ended stands at its end).
+fn in_time(a: &Trajectory, b: &Trajectory) -> (Vec<f64>, Vec<Vec<f64>>, Vec<Vec<f64>>) {
+    let step = |t: &Trajectory| t.t.windows(2).map(|w| w[1] - w[0]).filter(|h| *h > 0.0).fold(f64::INFINITY, f64::min);
+    let h = step(a).min(step(b));
+    let end = a.duration().max(b.duration());
+    let h = if h.is_finite() && h > 0.0 { h.max(end / 1e6) } else { end.max(1e-3) };
+    let n = (end / h).ceil() as usize;
+    let times: Vec<f64> = (0..=n).map(|k| (k as f64 * h).min(end)).collect();
+    let qa = times.iter().map(|&t| a.sample(t).0).collect();
+    let qb = times.iter().map(|&t| b.sample(t).0).collect();
+    (times, qa, qb)
 }
 
 /// Start at t = 0 at rest at the scenario's start, end at rest (and at the goal, for
@@ -203,7 +240,14 @@ pub fn verify_plan(
     for (j, (p, &k)) in plan.plans.iter().zip(&index).enumerate() {
         let mut occupied = Vec::new();
         let mut others = Vec::new();
+        let group = group_of(plan, j);
         for (m, a) in scenario.agents.iter().enumerate() {
+            let moves_along = |jj: usize| index[jj] == m && group.is_some() && group_of(plan, jj) == group;
+            if m != k && (0..plan.plans.len()).any(moves_along) {
+                occupied.push(Vec::new());
+                others.push(format!("{}: moving at the same time (checked in time)", a.name));
+                continue;
+            }
             let earlier = plan.plans[..j].iter().zip(&index).find(|(_, mi)| **mi == m);
             match earlier.and_then(|(ep, _)| ep.trajectory.q.last()) {
                 Some(end) => {
@@ -233,12 +277,29 @@ pub fn verify_plan(
             report,
         });
     }
+    let verifier = Verifier::certified(0.0).with_settings(*settings);
+    let mut together = Vec::new();
+    for i in 0..plan.plans.len() {
+        for j in i + 1..plan.plans.len() {
+            if group_of(plan, i).is_none() || group_of(plan, i) != group_of(plan, j) {
+                continue;
+            }
+            let (pa, pb) = (&plan.plans[i], &plan.plans[j]);
+            let (ra, rb) = (&scenario.agents[index[i]].robot, &scenario.agents[index[j]].robot);
+            let (times, qa, qb) = in_time(&pa.trajectory, &pb.trajectory);
+            let steps: Vec<u64> = (0..times.len() as u64).collect();
+            let a = LoggedMotion { agent: &pa.agent, robot: ra, steps: &steps, t: &times, q: &qa };
+            let b = LoggedMotion { agent: &pb.agent, robot: rb, steps: &steps, t: &times, q: &qb };
+            together.push(certify_pair(&a, &b, &verifier));
+        }
+    }
     Ok(PlanVerification {
         plan_file: file.to_path_buf(),
         scenario: scenario.name.clone(),
-        certified: agents.iter().all(|a| a.certified),
+        certified: agents.iter().all(|a| a.certified) && together.iter().all(|c| c.ok),
         warnings,
         agents,
+        together,
         settings: *settings,
         time_s: start.elapsed().as_secs_f64(),
     })
@@ -305,6 +366,9 @@ pub fn render_plan(v: &PlanVerification) -> String {
             s.push_str(&format!("  timing: {t}\n"));
         }
         s.push_str(&format!("  others: {}\n", a.others.join("; ")));
+    }
+    for c in &v.together {
+        render_motion_check(&mut s, c);
     }
     s.push_str(&format!("certified: {} [{:.1} ms]\n", if v.certified { "yes" } else { "no" }, v.time_s * 1e3));
     s
