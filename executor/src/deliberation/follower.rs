@@ -109,6 +109,8 @@ struct Join {
     needed_at: u64,
     /// Time along the followed trajectory at which the braking begins, s.
     t_brake: f64,
+    /// Largest joint speed there, rad/s or m/s.
+    speed: f64,
     /// The braking samples after `t_brake` (every control step; the last one at rest): the
     /// current path brought to rest within the acceleration limits.
     brake_q: Vec<Vec<f64>>,
@@ -622,9 +624,7 @@ fn sense(s: &mut DeliberativeState, inputs: &InputImages, outputs: &mut OutputIm
     let k = sample_at(&plan.trajectory, step.saturating_sub(plan.started_at) as f64 * inputs.dt());
     let hit = remaining_collides(&s.collision, &plan.trajectory, k, s.settings.verify_resolution);
     if hit && s.settings.replan_in_motion && !s.settings.halt_on_any_change {
-        if let Some(e) = replan_in_motion(s, step, inputs.dt(), outputs) {
-            outputs.event(Event::Replan { reason: ReplanReason::ObstacleInPath });
-            outputs.event(e);
+        if replan_in_motion(s, step, inputs.dt(), outputs) {
             return;
         }
     }
@@ -652,8 +652,38 @@ fn sense(s: &mut DeliberativeState, inputs: &InputImages, outputs: &mut OutputIm
 /// `brake_fraction` of its acceleration limit, on the path's straight segment) from the
 /// deadline on. `None` (and nothing asked) when that cannot work: no time before the
 /// deadline, the path ends first, the braking leaves the limits, or the path up to the stop
-/// is blocked too. Returns the event to log.
-fn replan_in_motion(s: &mut DeliberativeState, step: u64, dt: f64, outputs: &mut OutputImages) -> Option<Event> {
+/// is blocked too. Returns whether it asked.
+fn replan_in_motion(s: &mut DeliberativeState, step: u64, dt: f64, outputs: &mut OutputImages) -> bool {
+    let Some((join, start)) = prepare_join(s, step, dt) else { return false };
+    let request = PlanRequest {
+        id: 0,
+        world_version: s.world_version,
+        step,
+        start,
+        goal: s.goal.clone(),
+        dt,
+        environment: Some(s.environment()),
+        budget: s.settings.budget,
+    };
+    let id = s.deliberator.request(request);
+    s.next_request_at = step;
+    s.late_reported = false;
+    s.attempts = 0;
+    let t_now = s.plan.as_ref().map_or(0.0, |p| step.saturating_sub(p.started_at) as f64 * dt);
+    outputs.event(Event::Replan { reason: ReplanReason::ObstacleInPath });
+    outputs.event(Event::ReplanInMotion { plan: join.plan, id, join_after_s: join.t_brake - t_now, speed: join.speed });
+    outputs.event(Event::PlanRequested {
+        id,
+        world: s.world_version,
+        deadline_ms: s.settings.budget.steps as f64 * dt * 1e3,
+    });
+    s.join = Some(Join { id, ..join });
+    true
+}
+
+/// Where and when a plan asked for now would join `s.plan` (see [`replan_in_motion`]), and
+/// the new plan's start.
+fn prepare_join(s: &DeliberativeState, step: u64, dt: f64) -> Option<(Join, Vec<f64>)> {
     let plan = s.plan.as_ref()?;
     let budget = s.settings.budget.steps;
     if budget == 0 || s.fault.is_some() || s.abandoned || step < plan.started_at {
@@ -697,24 +727,8 @@ fn replan_in_motion(s: &mut DeliberativeState, step: u64, dt: f64, outputs: &mut
     if path_collides(&s.collision, &traj, k0, k1, res) || !s.collision.motion_is_free(&qb, &start, res) {
         return None;
     }
-    let request = PlanRequest {
-        id: 0,
-        world_version: s.world_version,
-        step,
-        start,
-        goal: s.goal.clone(),
-        dt,
-        environment: Some(s.environment()),
-        budget: s.settings.budget,
-    };
-    let id = s.deliberator.request(request);
-    s.next_request_at = step;
-    s.late_reported = false;
-    s.attempts = 0;
-    s.join = Some(Join { id, plan: plan_id, needed_at, t_brake, brake_q, brake_qd });
-    outputs.event(Event::PlanRequested { id, world: s.world_version, deadline_ms: budget as f64 * dt * 1e3 });
     let speed = qdb.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
-    Some(Event::ReplanInMotion { plan: plan_id, id, join_after_s: t_brake - t_now, speed })
+    Some((Join { id: 0, plan: plan_id, needed_at, t_brake, speed, brake_q, brake_qd }, start))
 }
 
 /// The followed trajectory up to `j.t_brake`, the braking, then `new` (which starts at rest
