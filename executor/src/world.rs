@@ -264,6 +264,27 @@ mod tests {
     use super::*;
 
     #[test]
+    fn the_detector_sees_other_agents_bodies_but_not_its_own_and_feels_only_obstacles() {
+        let mut world = World::new();
+        world.add_obstacle(Obstacle::fixed("ball", [0.5, 0.0, 0.0], 0.1));
+        world.set_bodies(vec![
+            Body { agent: 0, name: "me".into(), spheres: vec![([0.0, 0.0, 0.0], 0.2)] },
+            Body { agent: 1, name: "other".into(), spheres: vec![([0.0, 0.05, 0.0], 0.3), ([0.0, 2.0, 0.0], 0.1)] },
+        ]);
+        let spec = ReceptorSpec { detector_range: Some(1.0), force_stiffness: Some(100.0), ..ReceptorSpec::default() };
+        let mut r = Receptors { spec, robot: None, rng: Rng::new(1), own: Some(0) };
+        let mut out = ReceptorReadings::default();
+        r.sample(&world, &[], &[], &mut out);
+        // The sensing point is the origin (no robot): the ball, and the other agent's near
+        // shape (id: one obstacle, then the bodies' shapes in order: own 1, other 2 and 3).
+        let seen: Vec<(usize, Option<usize>)> = out.obstacles.iter().map(|e| (e.id, e.agent)).collect();
+        assert_eq!(seen, vec![(0, None), (2, Some(1))]);
+        assert!((out.obstacles[1].distance - (0.05 - 0.3)).abs() < 1e-12);
+        // Inside the other's body sphere, but a body is seen, not felt.
+        assert_eq!(out.force, [0.0; 3]);
+    }
+
+    #[test]
     fn noise_scale_gives_unit_variance() {
         // Variance of one uniform 16-bit word is (65536^2 - 1) / 12; four of them sum to a third.
         let variance = (65536.0_f64 * 65536.0 - 1.0) / 3.0;

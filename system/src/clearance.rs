@@ -69,9 +69,7 @@ impl ObstacleTimeline {
     /// Whether anything changes between world steps `from` and `to` (an obstacle appears or
     /// moves).
     pub fn changes_between(&self, from: u64, to: u64) -> bool {
-        self.obstacles
-            .iter()
-            .any(|o| (o.appear_step > from && o.appear_step <= to) || (o.velocity.norm() > 0.0 && o.appear_step <= to))
+        self.obstacles.iter().any(|o| o.appear_step <= to && (o.appear_step > from || o.velocity.norm() > 0.0))
     }
 
     /// What a motion during world steps `from..=to` must avoid: every obstacle present at one
@@ -320,7 +318,9 @@ pub struct ClearanceMeter {
     robots: Vec<Option<(String, Arc<Robot>)>>,
     /// Per scenario agent: its robot without self pairs against the obstacles.
     env_models: Vec<Option<CollisionModel>>,
-    /// Whether the environment changed since the last step.
+    /// Per pair of agents `(i, j)`, `i < j`: robot `i` without self pairs against robot `j`.
+    pair_models: Vec<((usize, usize), CollisionModel)>,
+    /// The world step whose obstacles the environment models hold.
     last_world_step: Option<u64>,
 }
 
@@ -333,7 +333,15 @@ impl ClearanceMeter {
             .iter()
             .map(|r| r.as_ref().map(|(_, robot)| CollisionModel::new(&without_self_pairs(robot), Environment::new())))
             .collect();
-        Self { timeline: ObstacleTimeline::new(scenario, dt), robots, env_models, last_world_step: None }
+        let mut pair_models = Vec::new();
+        for i in 0..robots.len() {
+            for j in i + 1..robots.len() {
+                if let Some((_, robot)) = &robots[i] {
+                    pair_models.push(((i, j), CollisionModel::new(&without_self_pairs(robot), Environment::new())));
+                }
+            }
+        }
+        Self { timeline: ObstacleTimeline::new(scenario, dt), robots, env_models, pair_models, last_world_step: None }
     }
 }
 
@@ -384,22 +392,17 @@ impl StepMonitor for ClearanceMeter {
             }
         }
         let mut robot_min: Option<f64> = None;
-        let n = self.robots.len().min(agents.len());
-        for i in 0..n {
-            for j in i + 1..n {
-                let (Some((_, ra)), Some((_, rb))) = (&self.robots[i], &self.robots[j]) else { continue };
-                let (qa, qb) = (&agents[i].q, &agents[j].q);
-                if qa.len() != ra.dof() || qb.len() != rb.dof() {
-                    continue;
-                }
-                let env = posed_shapes(rb, qb, &[], "other").into_iter().fold(Environment::new(), Environment::with);
-                let Some(Some(m)) = self.env_models.get_mut(i) else { continue };
-                let saved = m.environment().clone();
-                m.set_environment(env);
-                let d = m.distance(qa).distance;
-                m.set_environment(saved);
-                robot_min = Some(robot_min.map_or(d, |x| x.min(d)));
+        for ((i, j), m) in &mut self.pair_models {
+            let (Some(Some((_, rb))), Some(a), Some(b)) = (self.robots.get(*j), agents.get(*i), agents.get(*j)) else {
+                continue;
+            };
+            if a.q.len() != m.robot().dof() || b.q.len() != rb.dof() {
+                continue;
             }
+            let env = posed_shapes(rb, &b.q, &[], "other").into_iter().fold(Environment::new(), Environment::with);
+            m.set_environment(env);
+            let d = m.distance(&a.q).distance;
+            robot_min = Some(robot_min.map_or(d, |x| x.min(d)));
         }
         Clearance { robot_robot_m: robot_min, robot_environment_m: env_min }
     }

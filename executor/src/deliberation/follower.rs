@@ -623,10 +623,12 @@ fn sense(s: &mut DeliberativeState, inputs: &InputImages, outputs: &mut OutputIm
     let Some(plan) = &s.plan else { return };
     let k = sample_at(&plan.trajectory, step.saturating_sub(plan.started_at) as f64 * inputs.dt());
     let hit = remaining_collides(&s.collision, &plan.trajectory, k, s.settings.verify_resolution);
-    if hit && s.settings.replan_in_motion && !s.settings.halt_on_any_change {
-        if replan_in_motion(s, step, inputs.dt(), outputs) {
-            return;
-        }
+    if hit
+        && s.settings.replan_in_motion
+        && !s.settings.halt_on_any_change
+        && replan_in_motion(s, step, inputs.dt(), outputs)
+    {
+        return;
     }
     let Some(plan) = &s.plan else { return };
     if hit || s.settings.halt_on_any_change {
