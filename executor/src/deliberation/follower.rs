@@ -224,6 +224,7 @@ impl DeliberativeState {
     /// decided the task cannot go on). The behaviour halts from then on.
     pub fn abandon(&mut self) {
         self.plan = None;
+        self.join = None;
         self.deliberator.cancel();
         self.abandoned = true;
     }
@@ -323,8 +324,14 @@ impl<C: AsDeliberation + Send> Behaviour<C> for PlanFollower {
     fn step(&mut self, cc: &mut C, inputs: &InputImages, outputs: &mut OutputImages) -> Result<Status, Violation> {
         let s = cc.deliberation();
         let step = inputs.step();
-        if std::mem::take(&mut self.suspended) && s.plan.take().is_some() {
-            outputs.event(Event::PlanSuspended);
+        if std::mem::take(&mut self.suspended) {
+            if s.join.take().is_some() {
+                // The plan asked for in motion would join a plan that is no longer followed.
+                s.deliberator.cancel();
+            }
+            if s.plan.take().is_some() {
+                outputs.event(Event::PlanSuspended);
+            }
         }
         sense(s, inputs, outputs);
         if let Some(d) = s.deliberator.poll(step) {
@@ -353,6 +360,7 @@ impl<C: AsDeliberation + Send> Behaviour<C> for PlanFollower {
             s.plan = None;
             s.late_reported = true;
             s.halt_reason = Some(HaltReason::PlanLate);
+            s.halted_since.get_or_insert(step);
             outputs.event(Event::PlanLate { id });
         }
         if let Some(plan) = &s.plan {
@@ -462,6 +470,10 @@ fn halt(s: &mut DeliberativeState, inputs: &InputImages, outputs: &mut OutputIma
             None => HaltReason::NoValidPlan,
         };
         outputs.event(Event::HaltStarted { reason, speed, detail: None });
+    }
+    if at_rest(qd) && s.halt.is_none() {
+        // Nothing to stop: a reason set for this halt does not carry over to a later one.
+        s.halt_reason = None;
     }
     if at_rest(qd)
         && let Some(h) = s.halt.take()
