@@ -11,4 +11,24 @@ pub mod model_report;
 pub mod moveit_cli;
 
 pub use embodied_system::SystemError as AppError;
-pub use embodied_system::{bench_qp, deadlines, log, mbm, plan, scenario, system, verify};
+pub use embodied_system::{VERSION, generator};
+pub use embodied_system::{bench_qp, deadlines, error, log, mbm, plan, plot, scenario, system, verify, view};
+
+/// `println!` that returns [`AppError::Output`] instead of panicking when standard output is
+/// closed (`embodied plan X | head`).
+#[macro_export]
+macro_rules! outln {
+    ($($arg:tt)*) => {{
+        use std::io::Write as _;
+        writeln!(std::io::stdout(), $($arg)*).map_err($crate::AppError::Output)?
+    }};
+}
+
+/// `print!` that returns [`AppError::Output`] instead of panicking when standard output is closed.
+#[macro_export]
+macro_rules! out {
+    ($($arg:tt)*) => {{
+        use std::io::Write as _;
+        write!(std::io::stdout(), $($arg)*).map_err($crate::AppError::Output)?
+    }};
+}

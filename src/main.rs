@@ -8,6 +8,12 @@ use clap::{Parser, Subcommand};
 use embodied::AppError;
 use embodied::model_report::{load_robot, model_report, parse_q, render_text};
 
+use embodied::{out, outln};
+
+const EXIT_STATUS_HELP: &str = "Exit status: 0 success; 1 the work was done but did not succeed (no plan, not \
+certified, a goal not reached, a run that failed); 2 bad input (arguments, files). File arguments \
+accept `-` for standard input.";
+
 fn builtin_help() -> String {
     let mut s = String::from("Built-in robots (and where their numbers come from):\n");
     for (name, source) in embodied_models::builtin_summaries() {
@@ -19,8 +25,9 @@ fn builtin_help() -> String {
 #[derive(Parser, Debug)]
 #[command(
     name = "embodied",
-    version,
-    about = "Deliberative planning and verification of multi-robot systems (embodied agents)"
+    version = embodied::VERSION,
+    about = "Deliberative planning and verification of multi-robot systems (embodied agents)",
+    after_help = EXIT_STATUS_HELP
 )]
 struct Cli {
     #[command(subcommand)]
@@ -75,6 +82,9 @@ enum Command {
         /// Write an SVG plot of every joint's trajectory here.
         #[arg(long)]
         plot: Option<PathBuf>,
+        /// Write a 3-D viewer page of the run here (one HTML file; opens offline).
+        #[arg(long)]
+        html: Option<PathBuf>,
         /// Print the summary as JSON.
         #[arg(long)]
         json: bool,
@@ -122,6 +132,22 @@ enum Command {
         /// Print a JSON summary (with -o) or the plan itself.
         #[arg(long)]
         json: bool,
+        /// Write a 3-D viewer page of the plan here (one HTML file; opens offline).
+        #[arg(long)]
+        html: Option<PathBuf>,
+    },
+    /// Write a 3-D viewer page (one self-contained HTML file) of a run log or a plan file:
+    /// the robots, obstacles and carried object moving along the logged or planned motion,
+    /// with a timeline of the events and the clearance.
+    View {
+        /// A run log (`embodied run --log RUN.jsonl`) or a plan file (`embodied plan -o PLAN.json`).
+        input: PathBuf,
+        /// The scenario (built-in name or TOML file; default: the built-in one the input names).
+        #[arg(long)]
+        scenario: Option<String>,
+        /// Where to write the page (default: the input's name with `.html`).
+        #[arg(short = 'o', long = "out")]
+        out: Option<PathBuf>,
     },
     /// Check a plan (and/or a run log) against a scenario, independently of the planner: limits,
     /// collisions certified over the whole continuous path, closed-chain spans, timing.
@@ -158,6 +184,13 @@ enum Command {
     /// Benchmarks: MotionBenchMaker problems, planning deadlines.
     #[command(subcommand)]
     Bench(BenchCommand),
+    /// Print a shell completion script (e.g. `embodied completions bash > /etc/bash_completion.d/embodied`).
+    Completions {
+        /// The shell.
+        shell: clap_complete::Shell,
+    },
+    /// Print the manual page (roff; e.g. `embodied man > embodied.1 && man ./embodied.1`).
+    Man,
     /// List the built-in scenarios (name and one-line description).
     Scenarios {
         /// Print a JSON array of {"name", "description", "agents", "obstacles"}.
@@ -201,6 +234,23 @@ enum BenchCommand {
         /// Random shortcut attempts per path after the greedy pass (more: shorter paths, slower).
         #[arg(long)]
         shortcut_attempts: Option<usize>,
+        /// Planners racing per problem on the rayon pool (1: one planner; 2: two differently
+        /// seeded planners, the first path wins and stops the other).
+        #[arg(long, default_value_t = 1)]
+        threads: usize,
+        /// RRT-Connect's largest step (rad).
+        #[arg(long)]
+        rrt_range: Option<f64>,
+        /// RRT-Connect without dynamic domain (Yershova et al. 2005; on by default).
+        #[arg(long)]
+        no_dynamic_domain: bool,
+        /// RRT-Connect swaps its trees every iteration instead of growing the smaller one while
+        /// the other has twice its nodes (the default).
+        #[arg(long)]
+        no_balance: bool,
+        /// How RRT-Connect draws samples: uniform or halton.
+        #[arg(long, default_value = "uniform")]
+        sampler: embodied_planner::motion::Sampler,
     },
     /// The closed-chain QP of a two-handed carry, every held step solved by the fast dense
     /// solver (which drives) and by clarabel: time percentiles, late steps, agreement.
@@ -242,6 +292,19 @@ enum BenchCommand {
     },
 }
 
+/// A spinner with elapsed time on standard error while a long verb works, only on a terminal.
+fn spinner(message: &str) -> indicatif::ProgressBar {
+    if !std::io::IsTerminal::is_terminal(&std::io::stderr()) {
+        return indicatif::ProgressBar::hidden();
+    }
+    let bar = indicatif::ProgressBar::new_spinner().with_message(message.to_string());
+    if let Ok(style) = indicatif::ProgressStyle::with_template("{spinner} {msg} ({elapsed})") {
+        bar.set_style(style);
+    }
+    bar.enable_steady_tick(std::time::Duration::from_millis(120));
+    bar
+}
+
 fn to_json<T: serde::Serialize>(value: &T) -> Result<String, AppError> {
     serde_json::to_string(value).map_err(|e| AppError::Failed(e.to_string()))
 }
@@ -260,16 +323,16 @@ fn run(cli: Cli) -> Result<(), AppError> {
             }
             if json {
                 let text = serde_json::to_string(&report).map_err(|e| AppError::Failed(e.to_string()))?;
-                println!("{text}");
+                outln!("{text}");
             } else {
-                print!("{}", render_text(&report));
+                out!("{}", render_text(&report));
             }
             if report.ik.as_ref().is_some_and(|r| r.solutions.is_empty()) {
                 std::process::exit(1);
             }
             Ok(())
         }
-        Command::Run { scenario, duration, seed, log, plot, json, clock, us_per_check } => {
+        Command::Run { scenario, duration, seed, log, plot, html, json, clock, us_per_check } => {
             use embodied::scenario::ClockSpec;
             let scenario = scenario.unwrap_or_else(|| embodied::scenario::DEFAULT_SCENARIO.to_string());
             let clock = match (clock.as_deref(), us_per_check) {
@@ -297,16 +360,35 @@ fn run(cli: Cli) -> Result<(), AppError> {
             {
                 return Err(AppError::Usage(format!("--duration must be a positive number of seconds, got {d}")));
             }
+            let html_note = html.clone();
             let options = embodied::system::RunOptions { duration, seed, clock, ..Default::default() };
-            let args = embodied::system::RunArgs { scenario, options, log, plot };
-            let (summary, _) = embodied::system::run_scenario(&args)?;
+            let args = embodied::system::RunArgs { scenario, options, log, plot, html };
+            let bar = spinner("running");
+            let result = embodied::system::run_scenario(&args);
+            bar.finish_and_clear();
+            let (summary, _) = result?;
             if json {
-                println!("{}", serde_json::to_string(&summary).map_err(|e| AppError::Failed(e.to_string()))?);
+                outln!("{}", serde_json::to_string(&summary).map_err(|e| AppError::Failed(e.to_string()))?);
             } else {
-                print!("{}", embodied::system::render_summary(&summary));
+                out!("{}", embodied::system::render_summary(&summary));
+                match &html_note {
+                    Some(path) => outln!("viewer page written to {} (open it in a browser)", path.display()),
+                    None => outln!("to see it in 3-D: embodied run --html run.html (or embodied view RUN.jsonl)"),
+                }
             }
+            // An agent with a goal (it asked for a plan, got one or has a goal distance) that did
+            // not reach it: the run did not succeed.
+            let unreached: Vec<&str> = summary
+                .agents
+                .iter()
+                .filter(|a| (a.plans_requested > 0 || a.planned || a.goal_error.is_some()) && !a.goal_reached)
+                .map(|a| a.name.as_str())
+                .collect();
             match summary.failure {
                 Some(f) => Err(AppError::Failed(format!("run failed: {f}"))),
+                None if !unreached.is_empty() => {
+                    Err(AppError::Failed(format!("goal not reached by: {}", unreached.join(", "))))
+                }
                 None => Ok(()),
             }
         }
@@ -316,23 +398,31 @@ fn run(cli: Cli) -> Result<(), AppError> {
             };
             let args = embodied::moveit_cli::MoveitPlanArgs { urdf, srdf, scene, request, limits, deadline_ms };
             let format = format.unwrap_or(embodied::moveit_cli::PlanFormat::JointTrajectory);
-            let (text, summary) = embodied::moveit_cli::plan_moveit(&args, format, out.as_deref())?;
+            let bar = spinner("planning");
+            let result = embodied::moveit_cli::plan_moveit(&args, format, out.as_deref());
+            bar.finish_and_clear();
+            let (text, summary) = result?;
             match out {
                 Some(path) => {
-                    std::fs::write(&path, &text).map_err(|e| AppError::io(&path, e))?;
-                    println!(
-                        "{summary}
-plan written to {}",
-                        path.display()
-                    );
+                    std::fs::write(&path, &text).map_err(|e| AppError::write(&path, e))?;
+                    outln!("{summary}\nplan written to {}", path.display());
                 }
-                None => print!("{text}"),
+                None => out!("{text}"),
             }
             Ok(())
         }
-        Command::Plan { scenario, out, deadline_ms, json, format, .. } => {
+        Command::Plan { scenario, out, deadline_ms, json, format, html, .. } => {
             let scenario = embodied::scenario::load_scenario(&scenario.unwrap_or_default())?;
-            let plan = embodied::plan::plan_scenario(&scenario, deadline_ms)?;
+            let bar = spinner("planning");
+            let plan = embodied::plan::plan_scenario(&scenario, deadline_ms);
+            bar.finish_and_clear();
+            let plan = plan?;
+            if let Some(path) = &html {
+                let track = embodied::view::track_from_plan(&scenario, &plan)?;
+                let title = format!("{}: plan", scenario.name);
+                let scene = embodied::view::build_scene(&scenario, &track, &title, "embodied plan")?;
+                embodied::view::write_html(path, &scene)?;
+            }
             let text = match format {
                 Some(embodied::moveit_cli::PlanFormat::JointTrajectory) => {
                     embodied::moveit_cli::plan_file_as_joint_trajectory(&plan, out.as_deref())?
@@ -341,17 +431,17 @@ plan written to {}",
             };
             match out {
                 Some(path) => {
-                    std::fs::write(&path, &text).map_err(|e| AppError::io(&path, e))?;
+                    std::fs::write(&path, &text).map_err(|e| AppError::write(&path, e))?;
                     let summary: Vec<serde_json::Value> = plan
                         .plans
                         .iter()
                         .map(|p| serde_json::json!({"agent": p.agent, "duration_s": p.trajectory.duration(), "waypoints": p.path.len(), "stats": p.stats}))
                         .collect();
                     if json {
-                        println!("{}", serde_json::json!({"plan_file": path, "plans": summary}));
+                        outln!("{}", serde_json::json!({"plan_file": path, "plans": summary}));
                     } else {
                         for p in &plan.plans {
-                            println!(
+                            outln!(
                                 "{}: {} waypoints, {:.3} s of motion, planned by {} in {} us",
                                 p.agent,
                                 p.path.len(),
@@ -364,11 +454,33 @@ plan written to {}",
                                 )
                             );
                         }
-                        println!("plan written to {}", path.display());
+                        outln!("plan written to {}", path.display());
                     }
                 }
-                None => println!("{text}"),
+                None => outln!("{text}"),
             }
+            Ok(())
+        }
+        Command::View { input, scenario, out } => {
+            let out = out.unwrap_or_else(|| input.with_extension("html"));
+            if out == input {
+                return Err(AppError::Usage(format!(
+                    "{}: the page would overwrite its input; pass -o",
+                    input.display()
+                )));
+            }
+            let bar = spinner("building the scene");
+            let scene = embodied::view::view_file(&input, scenario.as_deref());
+            bar.finish_and_clear();
+            let scene = scene?;
+            embodied::view::write_html(&out, &scene)?;
+            outln!(
+                "viewer page written to {} ({} frames, {} bodies, {} events)",
+                out.display(),
+                scene.times.len(),
+                scene.bodies.len(),
+                scene.events.len()
+            );
             Ok(())
         }
         Command::Verify { scenario, plan, log, json, trajectory, urdf, srdf, scene, limits } => {
@@ -382,7 +494,14 @@ plan written to {}",
                     json,
                 )?,
                 _ => {
-                    embodied::verify::verify_cli(&scenario.unwrap_or_default(), plan.as_deref(), log.as_deref(), json)?
+                    let v =
+                        embodied::verify::verify_files(&scenario.unwrap_or_default(), plan.as_deref(), log.as_deref())?;
+                    if json {
+                        outln!("{}", v.to_json()?);
+                    } else {
+                        out!("{}", v.render());
+                    }
+                    v.certified
                 }
             };
             if !certified {
@@ -405,9 +524,27 @@ plan written to {}",
             algorithm,
             resolution,
             shortcut_attempts,
+            threads,
+            rrt_range,
+            no_dynamic_domain,
+            no_balance,
+            sampler,
         }) => {
+            if threads == 0 {
+                return Err(AppError::Usage("--threads must be at least 1".into()));
+            }
             let mut args = embodied::mbm::MbmArgs::new(urdf, srdf, problems);
             args.algorithm = algorithm;
+            args.threads = threads;
+            args.dynamic_domain = !no_dynamic_domain;
+            args.balance = !no_balance;
+            args.sampler = sampler;
+            if let Some(r) = rrt_range {
+                if !(r.is_finite() && r > 0.0) {
+                    return Err(AppError::Usage(format!("--rrt-range must be a positive number, got {r}")));
+                }
+                args.rrt_range = r;
+            }
             if let Some(r) = resolution {
                 args.resolution = r;
                 args.edge_check = embodied_planner::motion::EdgeCheck::Sampled;
@@ -429,21 +566,24 @@ plan written to {}",
             })?;
             bar.finish_and_clear();
             if let Some(path) = &out {
-                std::fs::write(path, to_json(&report.paths_file())?).map_err(|e| AppError::io(path, e))?;
+                std::fs::write(path, to_json(&report.paths_file())?).map_err(|e| AppError::write(path, e))?;
             }
             if json {
-                println!("{}", to_json(&report)?);
+                outln!("{}", to_json(&report)?);
             } else {
-                print!("{}", embodied::mbm::render_table(&report));
+                out!("{}", embodied::mbm::render_table(&report));
             }
             Ok(())
         }
         Command::Bench(BenchCommand::Qp { scenario, json }) => {
-            let report = embodied::bench_qp::bench_qp(&scenario)?;
+            let bar = spinner("solving every held step's QP twice");
+            let report = embodied::bench_qp::bench_qp(&scenario);
+            bar.finish_and_clear();
+            let report = report?;
             if json {
-                println!("{}", to_json(&report)?);
+                outln!("{}", to_json(&report)?);
             } else {
-                print!("{}", embodied::bench_qp::render_bench_qp(&report));
+                out!("{}", embodied::bench_qp::render_bench_qp(&report));
             }
             Ok(())
         }
@@ -478,15 +618,34 @@ plan written to {}",
                 mbm,
                 ..embodied::deadlines::DeadlineArgs::default()
             };
-            let report = embodied::deadlines::run_deadline_bench(&args)?;
+            let bar = spinner("planning under every deadline");
+            let report = embodied::deadlines::run_deadline_bench(&args);
+            bar.finish_and_clear();
+            let report = report?;
             if let Some(path) = &plot {
                 embodied::deadlines::plot_svg(&report, path)?;
             }
             if json {
-                println!("{}", to_json(&report)?);
+                outln!("{}", to_json(&report)?);
             } else {
-                print!("{}", embodied::deadlines::render_table(&report));
+                out!("{}", embodied::deadlines::render_table(&report));
             }
+            Ok(())
+        }
+        Command::Completions { shell } => {
+            use clap::CommandFactory;
+            let mut script = Vec::new();
+            clap_complete::generate(shell, &mut Cli::command(), "embodied", &mut script);
+            out!("{}", String::from_utf8_lossy(&script));
+            Ok(())
+        }
+        Command::Man => {
+            use clap::CommandFactory;
+            let mut page = Vec::new();
+            clap_mangen::Man::new(Cli::command())
+                .render(&mut page)
+                .map_err(|e| AppError::Failed(format!("man page: {e}")))?;
+            out!("{}", String::from_utf8_lossy(&page));
             Ok(())
         }
         Command::Scenarios { json } => {
@@ -502,11 +661,11 @@ plan written to {}",
                 }));
             }
             if json {
-                println!("{}", serde_json::Value::Array(list));
+                outln!("{}", serde_json::Value::Array(list));
             } else {
                 for item in &list {
                     let default = if item["default"] == true { " (default)" } else { "" };
-                    println!(
+                    outln!(
                         "{:<22} {}{}",
                         item["name"].as_str().unwrap_or(""),
                         item["description"].as_str().unwrap_or(""),
@@ -529,8 +688,11 @@ fn main() -> ExitCode {
     match run(cli) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("error: {e}");
-            ExitCode::from(2)
+            // A closed standard output is not worth a word: the reader has what it wanted.
+            if !matches!(&e, AppError::Output(io) if io.kind() == std::io::ErrorKind::BrokenPipe) {
+                eprintln!("error: {e}");
+            }
+            ExitCode::from(e.exit_code())
         }
     }
 }

@@ -41,8 +41,11 @@ pub fn parse_q(robot: &Robot, text: &str) -> Result<Vec<f64>, AppError> {
 }
 
 #[derive(Debug, Serialize)]
+/// A pose as JSON: translation and unit quaternion.
 pub struct PoseJson {
+    /// Translation x, y, z, m.
     pub translation: [f64; 3],
+    /// Rotation as the unit quaternion x, y, z, w.
     pub quaternion_xyzw: [f64; 4],
 }
 
@@ -55,48 +58,77 @@ impl From<&Isometry3<f64>> for PoseJson {
 }
 
 #[derive(Debug, Serialize)]
+/// One degree of freedom of the report.
 pub struct JointJson {
+    /// The joint's name.
     pub name: String,
+    /// `revolute`, `continuous` or `prismatic`.
     pub kind: &'static str,
+    /// Lower position limit, rad or m (`None` when unbounded).
     pub lower: Option<f64>,
+    /// Upper position limit, rad or m (`None` when unbounded).
     pub upper: Option<f64>,
+    /// Velocity limit, rad/s or m/s.
     pub max_velocity: f64,
+    /// Acceleration limit, rad/s^2 or m/s^2.
     pub max_acceleration: f64,
 }
 
 #[derive(Debug, Serialize)]
+/// One link and its world pose at `q`.
 pub struct LinkJson {
+    /// The link's name.
     pub name: String,
+    /// Position of the link frame in the world frame, m.
     pub translation: [f64; 3],
+    /// Rotation of the link frame in the world frame, as the unit quaternion x, y, z, w.
     pub quaternion_xyzw: [f64; 4],
 }
 
 #[derive(Debug, Serialize)]
+/// One end effector and its world poses at `q`.
 pub struct EndEffectorJson {
+    /// The end effector's name.
     pub name: String,
+    /// Pose of the flange (its link frame) in the world frame.
     pub flange: PoseJson,
+    /// Pose of the tool frame in the world frame.
     pub tool: PoseJson,
 }
 
 #[derive(Debug, Serialize)]
+/// Two bodies of the robot, by name.
 pub struct CollisionPairJson {
+    /// One body ("link `x`").
     pub a: String,
+    /// The other body.
     pub b: String,
 }
 
 /// The `embodied model --json` object.
 #[derive(Debug, Serialize)]
 pub struct ModelReport {
+    /// The robot's name.
     pub robot: String,
+    /// Number of degrees of freedom.
     pub dof: usize,
+    /// The configuration reported on (rad or m).
     pub q: Vec<f64>,
+    /// The degrees of freedom, in `q` order.
     pub joints: Vec<JointJson>,
+    /// Every link with its pose.
     pub links: Vec<LinkJson>,
+    /// Every end effector with its poses.
     pub end_effectors: Vec<EndEffectorJson>,
+    /// Whether the robot collides with itself at `q`.
     pub self_collision: bool,
+    /// The first colliding pair, if any.
     pub colliding_pair: Option<CollisionPairJson>,
+    /// Signed distance of the closest pair, m (negative: penetration).
     pub min_distance: f64,
+    /// The closest pair of bodies.
     pub closest_pair: CollisionPairJson,
+    /// Where the robot's numbers come from, and what is assumed.
     pub provenance: String,
     /// `--ik`: the solutions for a tool pose.
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -106,6 +138,7 @@ pub struct ModelReport {
 /// One inverse-kinematics solution of `embodied model --ik`.
 #[derive(Debug, Serialize)]
 pub struct IkSolutionJson {
+    /// The solution's joint values (rad or m).
     pub q: Vec<f64>,
     /// Whether the robot collides with itself there.
     pub self_collision: bool,
@@ -114,10 +147,13 @@ pub struct IkSolutionJson {
 /// The `--ik` part of `embodied model`: solutions nearest the seed first.
 #[derive(Debug, Serialize)]
 pub struct IkReport {
+    /// The end effector whose tool frame was posed.
     pub end_effector: String,
     /// `closed-form` (every solution within the limits) or `numerical` (one, from the seed).
     pub method: &'static str,
+    /// The requested tool pose, in the world frame.
     pub target: PoseJson,
+    /// The solutions found, nearest the seed first.
     pub solutions: Vec<IkSolutionJson>,
     /// Why there is none, when `solutions` is empty.
     #[serde(skip_serializing_if = "Option::is_none")]

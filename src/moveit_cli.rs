@@ -61,10 +61,15 @@ pub fn load_moveit_robot(
 /// What `embodied plan` was asked for a MoveIt request.
 #[derive(Debug, Clone)]
 pub struct MoveitPlanArgs {
+    /// The robot's URDF file.
     pub urdf: PathBuf,
+    /// The robot's SRDF file.
     pub srdf: PathBuf,
+    /// The MoveIt planning scene file (YAML).
     pub scene: PathBuf,
+    /// The MoveIt motion plan request file (YAML).
     pub request: PathBuf,
+    /// An optional `joint_limits.yaml` applied to the robot.
     pub limits: Option<PathBuf>,
     /// Deadline in milliseconds; default: the request's `allowed_planning_time`, else 5 s.
     pub deadline_ms: Option<f64>,
@@ -110,6 +115,7 @@ pub fn plan_moveit(
             let arm = problem.model.robot();
             let file = PlanFile {
                 format: PLAN_FORMAT.to_string(),
+                generator: Some(crate::generator()),
                 scenario: NamedHash { name: args.request.display().to_string(), hash: String::new() },
                 plans: vec![AgentPlan {
                     agent: request.group_name.clone(),
@@ -164,16 +170,16 @@ pub fn verify_joint_trajectory(
     let problem = trajectory_problem(&robot, state, env, &located.trajectory, trajectory).map_err(from_moveit)?;
     let report = Verifier::default().check_trajectory(&problem.model, &problem.trajectory, &[]);
     if json {
-        println!("{}", serde_json::to_string(&report).map_err(|e| AppError::Failed(e.to_string()))?);
+        crate::outln!("{}", serde_json::to_string(&report).map_err(|e| AppError::Failed(e.to_string()))?);
     } else {
-        println!(
+        crate::outln!(
             "{}: {} points, {:.3} s, joints {}",
             trajectory.display(),
             problem.trajectory.t.len(),
             problem.trajectory.duration(),
             problem.trajectory.joint_names.join(", ")
         );
-        println!(
+        crate::outln!(
             "  limits: {}  collision: {} ({} of {} segments certified, certified clearance {:.4} m)",
             if report.limits.ok { "ok" } else { "VIOLATED" },
             if report.collision.ok { "ok" } else { "VIOLATED" },
@@ -182,9 +188,9 @@ pub fn verify_joint_trajectory(
             report.collision.certified_clearance_m
         );
         for f in report.findings() {
-            println!("  first violation: {f}");
+            crate::outln!("  first violation: {f}");
         }
-        println!("certified: {}", if report.certified { "yes" } else { "no" });
+        crate::outln!("certified: {}", if report.certified { "yes" } else { "no" });
     }
     Ok(report.certified)
 }

@@ -87,8 +87,11 @@ fn cli_verifies_a_plan_it_wrote() {
     assert_eq!(code, 0);
     let v: serde_json::Value = serde_json::from_str(&out).unwrap();
     assert_eq!(v["certified"], true);
-    assert_eq!(v["agents"][0]["collision"]["ok"], true);
-    assert!(v["agents"][0]["collision"]["certified_segments"].as_u64().unwrap() > 0);
+    assert_eq!(v["agents"][0]["trajectory"]["collision"]["ok"], true);
+    assert!(v["agents"][0]["trajectory"]["collision"]["certified_segments"].as_u64().unwrap() > 0);
+    // Each object says `certified` once: the report, each agent, each agent's trajectory.
+    let agents = v["agents"].as_array().unwrap().len();
+    assert_eq!(out.matches("\"certified\":").count(), 1 + 2 * agents, "{out}");
 }
 
 // (b) A 1 mm plate between two free waypoints is caught.

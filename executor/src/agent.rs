@@ -130,6 +130,7 @@ impl<C: Send + 'static> Agent<C> {
 }
 
 impl<C> Agent<C> {
+    /// The agent's name.
     pub fn name(&self) -> &str {
         &self.name
     }
@@ -137,6 +138,7 @@ impl<C> Agent<C> {
     pub fn internal(&self) -> &C {
         &self.control.internal
     }
+    /// The control subsystem `c_j`: `c_c` and the input and output images.
     pub fn control(&self) -> &ControlSubsystem<C> {
         &self.control
     }

@@ -92,6 +92,7 @@ pub struct Sequence<C> {
 }
 
 impl<C> Sequence<C> {
+    /// An empty sequence named `name`; add children with [`Self::then`].
     pub fn new(name: impl Into<String>) -> Self {
         Self { name: name.into(), children: Vec::new(), index: 0 }
     }
@@ -177,6 +178,7 @@ pub struct Reactive<C> {
 }
 
 impl<C> Reactive<C> {
+    /// A reactive behaviour named `name` without rules yet; `selection` says which rules run in a step.
     pub fn new(name: impl Into<String>, selection: Selection) -> Self {
         Self {
             name: name.into(),

@@ -17,6 +17,7 @@ use crate::transition::TransitionFunction;
 
 /// An effector: it executes joint commands and reports its state (the source of `c^i_e`).
 pub trait Effector: Send {
+    /// Limits of the joints, one per degree of freedom.
     fn limits(&self) -> &[JointLimits];
     /// Measured joint positions.
     fn q(&self) -> &[f64];
@@ -231,6 +232,7 @@ pub struct SafetyLimiter<E> {
 }
 
 impl<E: Effector> SafetyLimiter<E> {
+    /// Wrap `inner` with the default position-loop gain (50 1/s).
     pub fn new(inner: E) -> Self {
         let n = inner.limits().len();
         Self {
@@ -248,6 +250,7 @@ impl<E: Effector> SafetyLimiter<E> {
     pub fn last_limited(&self) -> &JointCommand {
         &self.limited
     }
+    /// The wrapped effector.
     pub fn inner(&self) -> &E {
         &self.inner
     }

@@ -16,19 +16,52 @@ pub enum ExecutorError {
         "agent specification error in agent '{agent}' at step {step}, behaviour '{behaviour}': {}",
         describe_held(held)
     )]
-    SpecificationError { agent: String, step: u64, behaviour: String, held: Vec<String> },
+    SpecificationError {
+        /// The agent's name.
+        agent: String,
+        /// The step at which it happened.
+        step: u64,
+        /// The behaviour whose predicates were evaluated.
+        behaviour: String,
+        /// Names of the predicates that held (empty when none did).
+        held: Vec<String>,
+    },
     /// A transition function sent a message to an agent with no channel from the sender.
     #[error("agent '{agent}' at step {step} sent a message to agent #{to}, but no channel connects them")]
-    NoChannel { agent: String, step: u64, to: usize },
+    NoChannel {
+        /// The sending agent's name.
+        agent: String,
+        /// The step at which it happened.
+        step: u64,
+        /// Index of the receiving agent.
+        to: usize,
+    },
     /// A vector's length does not match the number of joints.
     #[error("{what}: expected {expected} values, got {got}")]
-    DimensionMismatch { what: String, expected: usize, got: usize },
+    DimensionMismatch {
+        /// What the vector is.
+        what: String,
+        /// The number of joints.
+        expected: usize,
+        /// The vector's length.
+        got: usize,
+    },
     /// A limit is not a valid number (negative, NaN, lower > upper).
     #[error("invalid limits for joint {joint}: {reason}")]
-    InvalidLimits { joint: usize, reason: String },
+    InvalidLimits {
+        /// Index of the joint.
+        joint: usize,
+        /// What is wrong with the limit.
+        reason: String,
+    },
     /// A name or index that refers to nothing.
     #[error("unknown {what} '{name}'")]
-    Unknown { what: &'static str, name: String },
+    Unknown {
+        /// What kind of thing was referred to.
+        what: &'static str,
+        /// The name or index given.
+        name: String,
+    },
     /// The closed-chain QP could not be solved.
     #[error("closed-chain QP failed: {0}")]
     Qp(String),
@@ -37,10 +70,18 @@ pub enum ExecutorError {
     QpInfeasible(String),
     /// An input holds NaN or an infinity where a finite number is needed.
     #[error("{what} is not finite")]
-    NotFinite { what: String },
+    NotFinite {
+        /// What holds the non-finite value.
+        what: String,
+    },
     /// A parameter outside its valid range.
     #[error("invalid {what}: {reason}")]
-    InvalidParameter { what: String, reason: String },
+    InvalidParameter {
+        /// The parameter.
+        what: String,
+        /// Why its value is invalid.
+        reason: String,
+    },
 }
 
 fn describe_held(held: &[String]) -> String {

@@ -91,6 +91,7 @@ pub struct Envelope {
 /// One virtual sensor reading `v_{j_k}` (eq. 3).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Reading {
+    /// The values; only the first `len` are meaningful.
     pub values: [f64; WORDS],
     /// How many of `values` are meaningful.
     pub len: usize,
@@ -124,13 +125,16 @@ impl Reading {
 /// A sphere-shaped region of interest in world coordinates.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Region {
+    /// Centre, m (world frame).
     pub center: [f64; 3],
+    /// Radius, m.
     pub radius: f64,
 }
 
 impl Region {
     /// The whole world.
     pub const EVERYWHERE: Region = Region { center: [0.0; 3], radius: f64::INFINITY };
+    /// Whether `p` (world frame, m) lies in the region (the boundary included).
     pub fn contains(&self, p: &[f64; 3]) -> bool {
         let d2: f64 = (0..3).map(|k| (p[k] - self.center[k]).powi(2)).sum();
         d2 <= self.radius * self.radius
@@ -158,7 +162,9 @@ impl Default for SensorConfig {
 /// Virtual sensor image: last reading and current configuration.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct SensorImage {
+    /// The last reading.
     pub reading: Reading,
+    /// The configuration in force.
     pub config: SensorConfig,
 }
 
@@ -174,8 +180,11 @@ pub enum CommandMode {
 /// The effector command `c^{i+1}_e`: joint position/velocity targets.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct JointCommand {
+    /// How the servo interprets `q` and `qd`.
     pub mode: CommandMode,
+    /// Joint position targets (rad or m).
     pub q: Vec<f64>,
+    /// Joint velocity targets or feed-forward (rad/s or m/s).
     pub qd: Vec<f64>,
 }
 
@@ -184,6 +193,7 @@ impl JointCommand {
     pub fn hold(q: &[f64]) -> Self {
         Self { mode: CommandMode::Position, q: q.to_vec(), qd: vec![0.0; q.len()] }
     }
+    /// Number of joints.
     pub fn dof(&self) -> usize {
         self.q.len()
     }

@@ -25,6 +25,7 @@ pub struct Move<C> {
 }
 
 impl<C> Move<C> {
+    /// A motion named `name`: `first_step` in its first step, then `next_step` until `terminal_condition` holds.
     pub fn new(
         name: impl Into<String>,
         first_step: impl TransitionFunction<C> + 'static,
@@ -73,6 +74,7 @@ pub struct Wait<C> {
 }
 
 impl<C: 'static> Wait<C> {
+    /// Wait named `name` until `initial_condition` holds, doing nothing meanwhile.
     pub fn new(name: impl Into<String>, initial_condition: Predicate<C>) -> Self {
         Self { name: name.into(), initial: initial_condition, during: Box::new(idle::<C>()) }
     }

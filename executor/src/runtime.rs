@@ -23,10 +23,12 @@ use crate::world::World;
 /// Whether to step agents on several threads.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub enum Parallelism {
+    /// Step every agent on the calling thread.
     Sequential,
     /// Use rayon when there are at least `min_agents` agents (a fork-join costs tens of
     /// microseconds, so small systems are faster on one thread).
     Rayon {
+        /// Fewest agents for which the step runs on several threads.
         min_agents: usize,
     },
 }
@@ -38,6 +40,7 @@ pub struct RuntimeConfig {
     pub dt: f64,
     /// Seed of all noise and losses.
     pub seed: u64,
+    /// Whether to step agents on several threads.
     pub parallelism: Parallelism,
     /// Fill the per-step [`StepRecord`] (off saves a little time in benchmarks).
     pub record: bool,
@@ -67,9 +70,11 @@ impl Default for RuntimeConfig {
 /// The log record of one step (one line of JSON Lines).
 #[derive(Debug, Clone, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct StepRecord {
+    /// Index of the step, from 0.
     pub step: u64,
     /// Time at the end of the step, seconds.
     pub time: f64,
+    /// One record per agent.
     pub agents: Vec<AgentRecord>,
     /// The step's smallest distances between robots and from robots to the environment,
     /// when the runtime has a [`StepMonitor`].
@@ -116,6 +121,7 @@ pub struct Runtime {
 }
 
 impl Runtime {
+    /// An empty system with `config` (a `dt` that is not a positive finite number becomes 0.001 s).
     pub fn new(config: RuntimeConfig) -> Self {
         let dt = if config.dt.is_finite() && config.dt > 0.0 { config.dt } else { 0.001 };
         Self {
@@ -157,6 +163,7 @@ impl Runtime {
         self.agents.iter().position(|a| a.name() == name).map(AgentId)
     }
 
+    /// Number of agents.
     pub fn agent_count(&self) -> usize {
         self.agents.len()
     }
@@ -180,16 +187,20 @@ impl Runtime {
         self.connect(b, a, link)
     }
 
+    /// Counters of the channel `from -> to`; `None` if there is none.
     pub fn channel_stats(&self, from: AgentId, to: AgentId) -> Option<ChannelStats> {
         self.transmitter.stats(from, to)
     }
 
+    /// The world outside the agents.
     pub fn world(&self) -> &World {
         &self.world
     }
+    /// The world outside the agents, to change it.
     pub fn world_mut(&mut self) -> &mut World {
         &mut self.world
     }
+    /// The runtime settings.
     pub fn config(&self) -> &RuntimeConfig {
         &self.config
     }

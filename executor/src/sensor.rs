@@ -10,6 +10,7 @@ use crate::world::ReceptorReadings;
 ///
 /// Any `FnMut(&SensorConfig, &ReceptorReadings) -> Reading + Send` is one.
 pub trait VirtualSensor: Send {
+    /// One reading `v_j` from the receptor readings `R`, under the sensor's configuration.
     fn aggregate(&mut self, config: &SensorConfig, receptors: &ReceptorReadings) -> Reading;
 }
 

@@ -8,6 +8,7 @@ use crate::image::{InputImages, OutputImages};
 ///
 /// Any `FnMut(&mut C, &InputImages, &mut OutputImages) + Send` is one.
 pub trait TransitionFunction<C>: Send {
+    /// Compute `c^{i+1}`: update `c_c` in place and write the output images, from `c^i`.
     fn compute(&mut self, cc: &mut C, inputs: &InputImages, outputs: &mut OutputImages);
 }
 
@@ -36,6 +37,7 @@ pub struct Predicate<C> {
 }
 
 impl<C> Predicate<C> {
+    /// A predicate named `name` that holds when `test` is true on `c^i`.
     pub fn new(name: impl Into<String>, test: impl Fn(&C, &InputImages) -> bool + Send + Sync + 'static) -> Self {
         Self { name: name.into(), test: Box::new(test) }
     }
@@ -43,6 +45,7 @@ impl<C> Predicate<C> {
     pub fn always(name: impl Into<String>) -> Self {
         Self::new(name, |_, _| true)
     }
+    /// The predicate's name.
     pub fn name(&self) -> &str {
         &self.name
     }

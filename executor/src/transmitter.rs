@@ -25,8 +25,11 @@ impl Link {
 /// Counters of one channel.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize)]
 pub struct ChannelStats {
+    /// Messages sent into the channel.
     pub sent: u64,
+    /// Messages lost in transit.
     pub lost: u64,
+    /// Messages delivered to the receiver.
     pub delivered: u64,
 }
 
@@ -48,6 +51,7 @@ pub struct Transmitter {
 }
 
 impl Transmitter {
+    /// No channels.
     pub fn new() -> Self {
         Self::default()
     }

@@ -9,11 +9,13 @@ use embodied_models::{Rng, Robot};
 /// A spherical obstacle.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Obstacle {
+    /// The obstacle's name.
     pub name: String,
     /// Centre at step 0 (or at `appears_at`), metres.
     pub position: [f64; 3],
     /// Constant velocity, m/s.
     pub velocity: [f64; 3],
+    /// Radius, m.
     pub radius: f64,
     /// First step at which the obstacle exists.
     pub appears_at: u64,
@@ -53,9 +55,11 @@ pub struct World {
 }
 
 impl World {
+    /// An empty world (no obstacles, step 0).
     pub fn new() -> Self {
         Self::default()
     }
+    /// Add an obstacle; returns its id (index).
     pub fn add_obstacle(&mut self, obstacle: Obstacle) -> usize {
         self.obstacles.push(obstacle);
         self.obstacles.len() - 1
@@ -109,9 +113,11 @@ pub struct ObstacleEcho {
 /// The receptor readings `R` of one agent in one step.
 #[derive(Debug, Clone, Default)]
 pub struct ReceptorReadings {
+    /// Step at which the readings were taken.
     pub step: u64,
     /// Joint encoders: positions and velocities with noise.
     pub joint_positions: Vec<f64>,
+    /// Measured joint velocities (rad/s or m/s) with noise; see `joint_positions`.
     pub joint_velocities: Vec<f64>,
     /// The sensing point (tool centre of the agent's end effector; the origin for an agent
     /// without a robot model).

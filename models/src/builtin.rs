@@ -9,7 +9,7 @@ use nalgebra::{Isometry3, Vector3};
 
 use crate::error::ModelError;
 use crate::geometry::{PlacedShape, Shape};
-use crate::ik::Irp6Lengths;
+use crate::ik::IRP6_DH;
 use crate::joint::{Dh, JointKind, JointLimits};
 use crate::robot::{ClosedForm, Robot, RobotBuilder};
 
@@ -102,18 +102,6 @@ fn dh_chain(
     }
     links
 }
-
-const IRP6_DH: [Dh; 6] = [
-    Dh::new(0.0, 0.0, 0.0, -FRAC_PI_2),
-    Dh::new(0.0, 0.0, 0.455, 0.0),
-    Dh::new(FRAC_PI_2, 0.0, 0.67, 0.0),
-    Dh::new(-FRAC_PI_2, 0.0, 0.0, -FRAC_PI_2),
-    Dh::new(0.0, 0.19, 0.0, FRAC_PI_2),
-    Dh::new(0.0, 0.0, 0.0, 0.0),
-];
-
-/// The lengths of [`IRP6_DH`] that the IRp-6's closed-form inverse kinematics needs.
-pub(crate) const IRP6_LENGTHS: Irp6Lengths = Irp6Lengths { a2: IRP6_DH[1].a, a3: IRP6_DH[2].a, d5: IRP6_DH[4].d };
 
 /// MRROC++ joint-space limits (README 1.5) with the assumed 1.5 rad/s, 7 rad/s^2.
 fn irp6_arm_limits() -> [JointLimits; 6] {

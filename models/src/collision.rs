@@ -79,17 +79,29 @@ pub const BATCH_LANES: usize = spheres::LANES;
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum Body {
     /// A link of the robot (`link` indexes [`Robot::links`]).
-    Link { link: usize, name: String },
+    Link {
+        /// Index into [`Robot::links`].
+        link: usize,
+        /// The link's name.
+        name: String,
+    },
     /// An obstacle of the environment (`index` indexes [`Environment::obstacles`]).
-    Obstacle { index: usize, name: String },
+    Obstacle {
+        /// Index into [`Environment::obstacles`].
+        index: usize,
+        /// The obstacle's name.
+        name: String,
+    },
 }
 
 impl Body {
+    /// The link's or obstacle's name.
     pub fn name(&self) -> &str {
         match self {
             Body::Link { name, .. } | Body::Obstacle { name, .. } => name,
         }
     }
+    /// Whether this is a robot link (not an obstacle).
     pub fn is_link(&self) -> bool {
         matches!(self, Body::Link { .. })
     }
@@ -107,7 +119,9 @@ impl fmt::Display for Body {
 /// A pair in contact: "link `ot_link3` and obstacle `table`". `a` is always a link.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Contact {
+    /// The robot link in contact.
     pub a: Body,
+    /// The other body: an obstacle or another link of the robot.
     pub b: Body,
 }
 
@@ -124,10 +138,15 @@ impl fmt::Display for Contact {
 /// the wrong length. Witness points are in the world frame.
 #[derive(Debug, Clone, PartialEq)]
 pub struct DistanceReport {
+    /// Signed distance (m): the gap when free, minus the penetration depth when overlapping.
     pub distance: f64,
+    /// The robot link of the nearest pair.
     pub a: Body,
+    /// The other body of the nearest pair: an obstacle or another link.
     pub b: Body,
+    /// Witness point on `a`, in the world frame.
     pub point_a: Point3<f64>,
+    /// Witness point on `b`, in the world frame.
     pub point_b: Point3<f64>,
 }
 
@@ -568,6 +587,7 @@ impl Default for CollisionScratch {
 }
 
 impl CollisionScratch {
+    /// An empty scratch space; it grows to the size the first query needs.
     pub const fn new() -> Self {
         Self {
             body_iso: Vec::new(),
@@ -673,6 +693,7 @@ pub struct CollisionModel {
 const GRID_MIN_OBSTACLES: usize = 128;
 
 impl CollisionModel {
+    /// The collision model of `robot` in `env`: geometry prepared once, queried per configuration.
     pub fn new(robot: &Robot, env: Environment) -> Self {
         Self::build(robot, env, true)
     }
@@ -721,9 +742,11 @@ impl CollisionModel {
         self.grid = None;
         self
     }
+    /// The robot this model checks.
     pub fn robot(&self) -> &Robot {
         &self.robot
     }
+    /// The obstacles this model checks against.
     pub fn environment(&self) -> &Environment {
         &self.env
     }

@@ -21,6 +21,7 @@ pub struct ConfigSpace {
 }
 
 impl ConfigSpace {
+    /// The space of `robot`'s configurations (its continuous joints wrap).
     pub fn new(robot: &Robot) -> Self {
         Self { wraps: (0..robot.dof()).map(|i| robot.is_continuous(i)).collect() }
     }
@@ -28,9 +29,11 @@ impl ConfigSpace {
     pub fn from_wraps(wraps: Vec<bool>) -> Self {
         Self { wraps }
     }
+    /// Number of degrees of freedom.
     pub fn dof(&self) -> usize {
         self.wraps.len()
     }
+    /// Whether degree of freedom `i` is an angle that wraps (a continuous joint).
     pub fn wraps(&self, i: usize) -> bool {
         self.wraps[i]
     }
@@ -45,6 +48,7 @@ impl ConfigSpace {
         self.distance_squared(a, b).sqrt()
     }
     #[inline]
+    /// Squared [`Self::distance`] (no square root).
     pub fn distance_squared(&self, a: &[f64], b: &[f64]) -> f64 {
         let mut s = 0.0;
         for i in 0..a.len() {
@@ -65,6 +69,7 @@ impl ConfigSpace {
             out[i] = a[i] + t * self.delta(i, a[i], b[i]);
         }
     }
+    /// The point at fraction `t` along the shortest way from `a` to `b` (see [`Self::interpolate_into`]).
     pub fn interpolate(&self, a: &[f64], b: &[f64], t: f64) -> Vec<f64> {
         let mut out = vec![0.0; a.len()];
         self.interpolate_into(a, b, t, &mut out);

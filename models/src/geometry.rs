@@ -12,13 +12,31 @@ use parry3d_f64::shape::ConvexPolyhedron;
 #[derive(Debug, Clone)]
 pub enum Shape {
     /// A ball centred at the origin.
-    Sphere { radius: f64 },
+    Sphere {
+        /// Radius (m).
+        radius: f64,
+    },
     /// The set of points within `radius` of the segment `a`-`b`.
-    Capsule { a: Point3<f64>, b: Point3<f64>, radius: f64 },
+    Capsule {
+        /// One end of the segment, in the shape's frame.
+        a: Point3<f64>,
+        /// The other end of the segment, in the shape's frame.
+        b: Point3<f64>,
+        /// Radius (m).
+        radius: f64,
+    },
     /// A box centred at the origin with these half extents.
-    Cuboid { half_extents: Vector3<f64> },
+    Cuboid {
+        /// Half the box's size along x, y and z (m).
+        half_extents: Vector3<f64>,
+    },
     /// A cylinder along z, centred at the origin (URDF convention).
-    Cylinder { radius: f64, half_height: f64 },
+    Cylinder {
+        /// Radius (m).
+        radius: f64,
+        /// Half the length along z (m).
+        half_height: f64,
+    },
     /// The convex hull of a mesh (URDF `<mesh>` collision elements are taken as convex hulls).
     ConvexMesh(Arc<ConvexHull>),
 }
@@ -26,7 +44,9 @@ pub enum Shape {
 /// A convex polyhedron with its vertices kept for bounding-volume computation.
 #[derive(Debug)]
 pub struct ConvexHull {
+    /// The hull's vertices, in the shape's frame.
     pub points: Vec<Point3<f64>>,
+    /// The hull as a parry polyhedron, for the narrow phase.
     pub polyhedron: ConvexPolyhedron,
 }
 
@@ -40,15 +60,19 @@ impl ConvexHull {
 }
 
 impl Shape {
+    /// A ball of `radius` (m) centred at the origin.
     pub fn sphere(radius: f64) -> Self {
         Shape::Sphere { radius }
     }
+    /// A capsule around the segment `a`-`b` (m) with `radius` (m).
     pub fn capsule(a: [f64; 3], b: [f64; 3], radius: f64) -> Self {
         Shape::Capsule { a: Point3::from(a), b: Point3::from(b), radius }
     }
+    /// A box centred at the origin with half extents `hx`, `hy`, `hz` (m).
     pub fn cuboid(hx: f64, hy: f64, hz: f64) -> Self {
         Shape::Cuboid { half_extents: Vector3::new(hx, hy, hz) }
     }
+    /// A cylinder along z centred at the origin, `radius` and `half_height` in m.
     pub fn cylinder(radius: f64, half_height: f64) -> Self {
         Shape::Cylinder { radius, half_height }
     }
@@ -86,11 +110,14 @@ impl Shape {
 /// A shape placed in a frame (a link frame or the world).
 #[derive(Debug, Clone)]
 pub struct PlacedShape {
+    /// Pose of the shape's frame in the enclosing frame.
     pub pose: Isometry3<f64>,
+    /// The shape.
     pub shape: Shape,
 }
 
 impl PlacedShape {
+    /// `shape` placed at `pose`.
     pub fn new(pose: Isometry3<f64>, shape: Shape) -> Self {
         Self { pose, shape }
     }

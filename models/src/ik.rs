@@ -3,7 +3,7 @@
 
 mod irp6;
 
-pub(crate) use irp6::Irp6Lengths;
+pub(crate) use irp6::IRP6_DH;
 
 use std::f64::consts::TAU;
 
@@ -112,9 +112,7 @@ impl Robot {
         for pitch_samples in [0, 35] {
             raw.clear();
             let singular = match chain.kind {
-                ClosedForm::Irp6 => {
-                    irp6::solve(&crate::builtin::IRP6_LENGTHS, &flange, &arm_seed, pitch_samples, &mut raw)
-                }
+                ClosedForm::Irp6 => irp6::solve(&irp6::IRP6_LENGTHS, &flange, &arm_seed, pitch_samples, &mut raw),
             };
             self.keep_solutions(chain, effector, target, seed, &limits, &raw, &mut found);
             if !singular || !found.is_empty() {

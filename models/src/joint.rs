@@ -33,7 +33,9 @@ impl JointKind {
 /// Continuous joints have `lower = -inf`, `upper = +inf`.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct JointLimits {
+    /// Lower position bound, rad or m.
     pub lower: f64,
+    /// Upper position bound, rad or m.
     pub upper: f64,
     /// |q-dot| bound, rad/s or m/s.
     pub max_velocity: f64,
@@ -42,6 +44,7 @@ pub struct JointLimits {
 }
 
 impl JointLimits {
+    /// Limits from position bounds (rad or m), velocity bound (rad/s or m/s) and acceleration bound (rad/s^2 or m/s^2).
     pub fn new(lower: f64, upper: f64, max_velocity: f64, max_acceleration: f64) -> Self {
         Self { lower, upper, max_velocity, max_acceleration }
     }
@@ -67,15 +70,23 @@ impl JointLimits {
 /// `post = Tz(d) Tx(a) Rx(alpha)`, so that the child link frame is DH frame i.
 #[derive(Debug, Clone)]
 pub struct Joint {
+    /// The joint's name.
     pub name: String,
+    /// Revolute, continuous, prismatic or fixed.
     pub kind: JointKind,
+    /// Index of the parent link in the robot's links.
     pub parent_link: usize,
+    /// Index of the child link in the robot's links.
     pub child_link: usize,
+    /// Fixed transform from the parent link frame to the joint frame.
     pub origin: Isometry3<f64>,
+    /// Rotation or translation axis, in the joint frame.
     pub axis: Unit<Vector3<f64>>,
     /// Added to the joint variable before the motion (DH theta offsets).
     pub offset: f64,
+    /// Fixed transform after the motion (DH `Tz(d) Tx(a) Rx(alpha)`; identity for URDF joints).
     pub post: Isometry3<f64>,
+    /// Position, velocity and acceleration limits.
     pub limits: JointLimits,
     /// Index into the robot's configuration vector; `None` for fixed joints.
     pub dof_index: Option<usize>,
@@ -106,13 +117,18 @@ impl Joint {
 /// with `theta = q + theta_offset`.
 #[derive(Debug, Clone, Copy)]
 pub struct Dh {
+    /// Added to the joint variable: `theta = q + theta_offset` (rad).
     pub theta_offset: f64,
+    /// Offset along the previous z axis (m).
     pub d: f64,
+    /// Length along the new x axis (m).
     pub a: f64,
+    /// Twist about the new x axis (rad).
     pub alpha: f64,
 }
 
 impl Dh {
+    /// DH parameters `theta_offset` (rad), `d` (m), `a` (m), `alpha` (rad).
     pub const fn new(theta_offset: f64, d: f64, a: f64, alpha: f64) -> Self {
         Self { theta_offset, d, a, alpha }
     }

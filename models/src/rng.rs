@@ -10,6 +10,7 @@ pub struct Rng {
 }
 
 impl Rng {
+    /// A generator seeded by `seed` (the same seed gives the same sequence).
     pub fn new(seed: u64) -> Self {
         let mut x = seed;
         let mut next = || {
@@ -22,6 +23,7 @@ impl Rng {
         Self { s: [next(), next(), next(), next()] }
     }
     #[inline]
+    /// The next 64 random bits.
     pub fn next_u64(&mut self) -> u64 {
         let result = self.s[1].wrapping_mul(5).rotate_left(7).wrapping_mul(9);
         let t = self.s[1] << 17;

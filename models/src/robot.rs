@@ -35,15 +35,18 @@ pub(crate) struct ArmChain {
 /// A rigid body of the tree with its collision shapes (in the link frame).
 #[derive(Debug, Clone)]
 pub struct Link {
+    /// The link's name.
     pub name: String,
     /// The joint whose child this link is; `None` for the root.
     pub parent_joint: Option<usize>,
+    /// Collision shapes, placed in the link frame.
     pub shapes: Vec<PlacedShape>,
 }
 
 /// An end effector: a flange frame (a link frame) and a tool frame fixed to it.
 #[derive(Debug, Clone)]
 pub struct EndEffector {
+    /// The end effector's name.
     pub name: String,
     /// The link whose frame is the flange.
     pub link: usize,
@@ -87,6 +90,7 @@ pub struct RobotBuilder {
 }
 
 impl RobotBuilder {
+    /// An empty builder for a robot named `name`.
     pub fn new(name: impl Into<String>) -> Self {
         Self {
             name: name.into(),
@@ -359,6 +363,7 @@ fn arm_chain(links: &[Link], joints: &[Joint], flange: usize, kind: ClosedForm) 
 }
 
 impl Robot {
+    /// The robot's name.
     pub fn name(&self) -> &str {
         &self.name
     }
@@ -370,9 +375,11 @@ impl Robot {
     pub fn dof(&self) -> usize {
         self.dof_joints.len()
     }
+    /// The links, parents before children.
     pub fn links(&self) -> &[Link] {
         &self.links
     }
+    /// The joints, in the order of their child links (joint `k` moves link `k + 1`).
     pub fn joints(&self) -> &[Joint] {
         &self.joints
     }
@@ -396,9 +403,11 @@ impl Robot {
     pub fn is_continuous(&self, i: usize) -> bool {
         self.joints[self.dof_joints[i]].kind == JointKind::Continuous
     }
+    /// The end effectors.
     pub fn end_effectors(&self) -> &[EndEffector] {
         &self.end_effectors
     }
+    /// The home configuration `q` (default: zeros clamped into the limits).
     pub fn home(&self) -> &[f64] {
         &self.home
     }
@@ -410,9 +419,11 @@ impl Robot {
     pub fn set_base(&mut self, base: Isometry3<f64>) {
         self.base = base;
     }
+    /// Index of the link named `name`.
     pub fn link_index(&self, name: &str) -> Option<usize> {
         self.links.iter().position(|l| l.name == name)
     }
+    /// Index of the joint named `name`.
     pub fn joint_index(&self, name: &str) -> Option<usize> {
         self.joints.iter().position(|j| j.name == name)
     }

@@ -8,6 +8,7 @@ use serde::{Deserialize, Serialize};
 /// A rigid box carried by two end effectors.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct CarriedObject {
+    /// The object's name.
     pub name: String,
     /// Full box sizes along the object's x, y, z, m.
     pub size: [f64; 3],
@@ -60,12 +61,15 @@ impl CarriedObject {
 /// the pose of the second tool frame relative to the first must stay what it is at `from_s`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct ClosedChainSpan {
+    /// Start of the span, s from the trajectory's start.
     pub from_s: f64,
+    /// End of the span, s from the trajectory's start.
     pub to_s: f64,
     /// End-effector names of the robot (see [`Robot::end_effectors`]).
     pub end_effectors: [String; 2],
     /// Largest allowed change of the relative position, m, and rotation angle, rad.
     pub tolerance_m: f64,
+    /// Largest allowed change of the relative rotation angle, rad (see `tolerance_m`).
     pub tolerance_rad: f64,
     /// The object, attached to the first end effector (its collisions count too).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -101,12 +105,15 @@ pub struct CarryTask {
     pub start: Vec<f64>,
     /// The object's name and full box sizes, m.
     pub object_name: String,
+    /// Full box sizes of the object along its x, y, z, m (see `object_name`).
     pub object_size: [f64; 3],
     /// The object's pose at the start and at the goal (world frame).
     pub object_start: Isometry3<f64>,
+    /// The object's goal pose (world frame); see `object_start`.
     pub object_goal: Isometry3<f64>,
     /// End effectors `[holder, other]` and their tool frames in the object frame.
     pub end_effectors: [usize; 2],
+    /// The tool frames of `end_effectors[0]` and `end_effectors[1]` in the object frame.
     pub grasps: [Isometry3<f64>; 2],
 }
 
@@ -130,6 +137,7 @@ pub struct CarrySettings {
     pub max_joint_jump: f64,
     /// Allowed drift of the grasp while the object is held (the plan's closed-chain tolerance).
     pub tolerance_m: f64,
+    /// Allowed rotation drift of the grasp while the object is held, rad (see `tolerance_m`).
     pub tolerance_rad: f64,
     /// The free approach motion (joint space).
     pub motion: MotionSettings,
@@ -137,6 +145,7 @@ pub struct CarrySettings {
     /// cost more (weight `clearance_weight`), and a shortcut may not come closer than the
     /// lattice path it replaces.
     pub clearance: f64,
+    /// Weight of the clearance term in a lattice edge's cost (see `clearance`).
     pub clearance_weight: f64,
     /// Lazy search rounds (an edge found in collision is removed and the search repeated).
     pub max_rounds: usize,
@@ -170,17 +179,27 @@ impl Default for CarrySettings {
 pub struct CarryStats {
     /// What made the plan.
     pub planner: String,
+    /// Wall-clock time of the whole carry planning, ms.
     pub planning_ms: f64,
+    /// Wall-clock time of planning the free approach motion, ms.
     pub approach_ms: f64,
+    /// Lazy search rounds run.
     pub search_rounds: usize,
+    /// A* expansions over every round.
     pub expansions: u64,
+    /// Lattice poses whose two-arm inverse kinematics was tried.
     pub lattice_poses: usize,
+    /// Lattice poses with no acceptable two-arm configuration (no IK solution, a jump larger than `max_joint_jump`, or in collision).
     pub ik_failures: usize,
+    /// Lattice edges the held object could not follow (removed before the next round).
     pub edges_rejected: usize,
     /// Straight object segments after shortcutting, and lattice steps before.
     pub object_segments: usize,
+    /// Lattice steps of the found object path, before shortcutting (see `object_segments`).
     pub lattice_steps: usize,
+    /// Length of the object's path after shortcutting, m.
     pub object_path_m: f64,
+    /// Collision checks made.
     pub collision_checks: u64,
 }
 
@@ -188,12 +207,15 @@ pub struct CarryStats {
 /// which the object is held.
 #[derive(Debug, Clone)]
 pub struct CarryPlan {
+    /// The timed joint trajectory: approach, insert, carry, retreat.
     pub trajectory: Trajectory,
     /// The joint-space waypoints at rest (phase ends and object segment ends).
     pub waypoints: Vec<Vec<f64>>,
+    /// The span in which both end effectors hold the object.
     pub span: ClosedChainSpan,
     /// Object positions at the ends of its straight segments, start to goal.
     pub object_path: Vec<[f64; 3]>,
+    /// What planning took.
     pub stats: CarryStats,
 }
 

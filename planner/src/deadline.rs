@@ -31,6 +31,9 @@ pub struct Deadline {
     at: Option<Instant>,
     max_expansions: Option<u64>,
     cancel: Option<Arc<AtomicBool>>,
+    /// A second flag: a race of planners stops its losers with it, whatever flag the caller
+    /// gave.
+    race: Option<Arc<AtomicBool>>,
 }
 
 impl Deadline {
@@ -85,6 +88,14 @@ impl Deadline {
         self
     }
 
+    /// Adds a second cancellation flag beside the caller's (a race of planners stops its
+    /// losers with it); the search stops when either flag is raised.
+    #[must_use]
+    pub fn with_race_flag(mut self, flag: Arc<AtomicBool>) -> Self {
+        self.race = Some(flag);
+        self
+    }
+
     /// The wall-clock instant, if any.
     pub fn instant(&self) -> Option<Instant> {
         self.at
@@ -114,7 +125,9 @@ impl Deadline {
             return Some(Interrupt::ExpansionBudget);
         }
         if read_clock {
-            if self.cancel.as_ref().is_some_and(|flag| flag.load(Ordering::Relaxed)) {
+            if self.cancel.as_ref().is_some_and(|flag| flag.load(Ordering::Relaxed))
+                || self.race.as_ref().is_some_and(|flag| flag.load(Ordering::Relaxed))
+            {
                 return Some(Interrupt::Cancelled);
             }
             if self.at.is_some_and(|at| Instant::now() >= at) {
@@ -127,7 +140,7 @@ impl Deadline {
     /// True when the deadline needs a clock read or a flag load at all.
     #[inline]
     pub(crate) fn has_clock(&self) -> bool {
-        self.at.is_some() || self.cancel.is_some()
+        self.at.is_some() || self.cancel.is_some() || self.race.is_some()
     }
 }
 

@@ -86,11 +86,19 @@ pub struct Planned {
 pub enum PlanFailure {
     /// [`crate::outcome::Outcome::OutOfTime`]: stopped by the deadline.
     #[error("out of time after {work} work units ({reason})")]
-    OutOfTime { work: u64, reason: String },
+    OutOfTime {
+        /// Work units spent before stopping.
+        work: u64,
+        /// Why it stopped.
+        reason: String,
+    },
     /// [`crate::outcome::Outcome::Infeasible`]: no plan exists (or none within the planner's
     /// sample budget).
     #[error("infeasible after {work} work units")]
-    Infeasible { work: u64 },
+    Infeasible {
+        /// Work units spent.
+        work: u64,
+    },
     /// The planner could not plan (malformed input, start or goal in collision...).
     #[error("{0}")]
     Error(String),

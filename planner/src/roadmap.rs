@@ -34,7 +34,9 @@ pub enum EdgeState {
 /// An edge of the roadmap: its C-space length and what is known of it.
 #[derive(Debug, Clone, Copy)]
 pub struct RoadEdge {
+    /// Length of the edge in configuration space (the C-space metric, rad or m).
     pub length: f64,
+    /// Whether the edge is known to be free, in collision, or not checked yet.
     pub state: EdgeState,
 }
 

@@ -17,10 +17,13 @@ use embodied_models::Robot;
 /// interval's acceleration is the average over it, within the limits).
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Trajectory {
+    /// Names of the degrees of freedom, in the order of the values in `q` and `qd`.
     pub joint_names: Vec<String>,
     /// Sample times, seconds, strictly increasing from 0.
     pub t: Vec<f64>,
+    /// Joint positions (rad or m), one vector per sample time.
     pub q: Vec<Vec<f64>>,
+    /// Joint velocities (rad/s or m/s), one vector per sample time.
     pub qd: Vec<Vec<f64>>,
 }
 

@@ -9,8 +9,8 @@ use embodied_models::{Robot, Shape, builtin};
 use embodied_planner::PlanError;
 use embodied_planner::deadline::{Deadline, Interrupt};
 use embodied_planner::motion::{
-    CERTIFY_TOLERANCE, Goal, LazyPrm, MotionSettings, Outcome, PlannerKind, RrtConnect, StateValidity, plan_motion,
-    plan_with_kind,
+    CERTIFY_TOLERANCE, Goal, LazyPrm, MotionSettings, Outcome, PlannerKind, RrtConnect, Sampler, StateValidity,
+    plan_motion, plan_with_kind,
 };
 use embodied_planner::roadmap::Roadmap;
 use embodied_planner::trajectory::time_parameterize;
@@ -63,6 +63,46 @@ fn irp6_plans_around_a_box_with_both_planners() {
         assert!(plan.path.len() > 2);
         assert_ne!(plan.stats.planner, "direct");
     }
+}
+
+#[test]
+fn rrt_connect_variants_and_races_return_certified_paths() {
+    let (model, start, goal) = irp6_around_box();
+    let goal_q = Goal::Configuration(goal.clone());
+    let variants = [
+        (true, false, Sampler::Uniform, 1.0, 1),
+        (false, true, Sampler::Uniform, 1.0, 1),
+        (true, true, Sampler::Halton, 2.0, 1),
+        (false, false, Sampler::Uniform, 1.0, 2),
+        (true, true, Sampler::Halton, 2.0, 3),
+    ];
+    for (dd, balance, sampler, range, racers) in variants {
+        for seed in 0..3 {
+            let s = MotionSettings {
+                seed,
+                rrt_dynamic_domain: dd,
+                rrt_balance: balance,
+                sampler,
+                rrt_range: range,
+                racers,
+                ..settings(PlannerKind::RrtConnect)
+            };
+            let what = format!("dd {dd}, balance {balance}, {sampler}, range {range}, racers {racers}, seed {seed}");
+            let plan = plan_motion(&model, &start, &goal_q, &s).unwrap_or_else(|e| panic!("{what}: {e}"));
+            assert_plan_ok(&model, &start, &goal, &plan.path);
+            for w in plan.path.windows(2) {
+                assert!(model.motion_is_certified_free(&w[0], &w[1], CERTIFY_TOLERANCE), "{what}: uncertified {w:?}");
+            }
+            if racers == 1 {
+                let again = plan_motion(&model, &start, &goal_q, &s).expect("same settings");
+                assert_eq!(plan.path, again.path, "{what}: not deterministic");
+            }
+        }
+    }
+    // A race honours the caller's deadline: an exhausted budget stops every racer.
+    let s = MotionSettings { racers: 2, deadline: Deadline::expansions(3), ..MotionSettings::default() };
+    let err = plan_motion(&model, &start, &goal_q, &s).expect_err("three expansions cannot solve it");
+    assert!(matches!(err, PlanError::OutOfTime { .. }), "{err}");
 }
 
 #[test]

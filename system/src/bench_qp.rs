@@ -10,24 +10,35 @@ use crate::system::{RunArgs, RunOptions, run_scenario};
 /// `embodied bench qp`: the closed-chain QPs of one carry run, both solvers.
 #[derive(Debug, Clone, Serialize)]
 pub struct QpBenchReport {
+    /// The scenario run.
     pub scenario: String,
+    /// Held steps whose QP both solvers solved.
     pub steps: usize,
     /// Fast dense solver (Goldfarb–Idnani, warm-started): data assembly and solve, µs.
     pub dense_p50_us: f64,
+    /// Fast dense solver, 99th percentile, µs.
     pub dense_p99_us: f64,
+    /// Fast dense solver, largest, µs.
     pub dense_max_us: f64,
     /// Clarabel (one solver, data updated in place) on the same QPs, µs.
     pub clarabel_p50_us: f64,
+    /// Clarabel, 99th percentile, µs.
     pub clarabel_p99_us: f64,
+    /// Clarabel, largest, µs.
     pub clarabel_max_us: f64,
     /// Clarabel p50 / dense p50.
     pub speedup_p50: f64,
     /// Steps whose QP (dense) alone took longer than the 1 ms control step.
     pub dense_late_steps: usize,
+    /// Steps whose QP (clarabel) alone took longer than the 1 ms control step.
     pub clarabel_late_steps: usize,
+    /// Largest `||qd_dense - qd_clarabel||∞ / max(1, ||qd_clarabel||∞)` over the steps.
     pub max_qd_difference: f64,
+    /// Largest `|f_dense - f_clarabel| / max(1, |f_clarabel|)` over the steps (objective values).
     pub max_objective_difference: f64,
+    /// Safe halts begun during the run.
     pub halts: usize,
+    /// Largest drift of the relative pose of the two tools from its value at the grasp, m.
     pub max_closure_error_m: f64,
 }
 

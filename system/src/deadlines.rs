@@ -26,7 +26,9 @@ use crate::scenario::load_scenario;
 /// A sample of MotionBenchMaker problems to add to the built-in scenarios.
 #[derive(Debug, Clone)]
 pub struct MbmSample {
+    /// The robot's URDF file.
     pub urdf: PathBuf,
+    /// The robot's SRDF file.
     pub srdf: PathBuf,
     /// Folder of family folders (e.g. the unpacked `problems/`).
     pub problems: PathBuf,
@@ -64,9 +66,11 @@ impl Default for DeadlineArgs {
 /// One safe halt.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct HaltRecord {
+    /// `scenario/agent` or `family/index` of the problem.
     pub problem: String,
     /// Largest joint travel from the start of the halt to rest (rad or m).
     pub distance: f64,
+    /// Duration of the halt, ms.
     pub time_ms: f64,
 }
 
@@ -75,7 +79,9 @@ pub struct HaltRecord {
 pub struct DeadlineRow {
     /// `scenarios` or `mbm`.
     pub set: String,
+    /// The planning deadline, ms.
     pub deadline_ms: f64,
+    /// Problems run.
     pub problems: usize,
     /// Plans asked for.
     pub requested: usize,
@@ -85,19 +91,23 @@ pub struct DeadlineRow {
     pub delivered_share: f64,
     /// Problems whose goal was reached.
     pub goals_reached: usize,
+    /// Safe halts begun.
     pub safe_halts: usize,
     /// Halts from speed (the others are holds at rest while a plan is late).
     pub halts_from_speed: usize,
     /// Largest joint travel during a halt from speed (rad or m): mean and max.
     pub halt_distance_mean: f64,
+    /// Largest joint travel of any halt from speed (rad or m).
     pub halt_distance_max: f64,
     /// Duration of a halt from speed, ms: mean and max.
     pub halt_time_mean_ms: f64,
+    /// Longest halt from speed, ms.
     pub halt_time_max_ms: f64,
     /// Searches stopped by the deadline.
     pub stopped: usize,
     /// How long past the deadline a stopped search returned, µs: median and max.
     pub overshoot_p50_us: f64,
+    /// Largest overshoot of a stopped search past the deadline, µs.
     pub overshoot_max_us: f64,
     /// Every halt from speed.
     pub halts: Vec<HaltRecord>,
@@ -106,8 +116,11 @@ pub struct DeadlineRow {
 /// The whole benchmark.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct DeadlineReport {
+    /// The program (version and commit) that made the report.
+    pub generator: String,
     /// `scenario/agent` or `family/index` of every problem, per set.
     pub problems: Vec<(String, String)>,
+    /// One row per deadline and problem set.
     pub rows: Vec<DeadlineRow>,
 }
 
@@ -347,7 +360,11 @@ pub fn run_deadline_bench(args: &DeadlineArgs) -> Result<DeadlineReport, SystemE
             });
         }
     }
-    Ok(DeadlineReport { problems: problems.into_iter().map(|p| (p.set.to_string(), p.name)).collect(), rows })
+    Ok(DeadlineReport {
+        generator: crate::generator(),
+        problems: problems.into_iter().map(|p| (p.set.to_string(), p.name)).collect(),
+        rows,
+    })
 }
 
 /// The report as a terminal table.

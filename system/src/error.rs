@@ -1,6 +1,7 @@
 //! The crate's one error type: each error names the file, the place and what was expected.
 
-use std::path::PathBuf;
+use std::io::Read;
+use std::path::{Path, PathBuf};
 
 /// What can go wrong when a system is read, assembled, run, planned or checked.
 #[derive(Debug, thiserror::Error)]
@@ -39,6 +40,9 @@ pub enum SystemError {
         #[source]
         source: std::io::Error,
     },
+    /// Standard output could not be written (a closed pipe: the reader has what it wanted).
+    #[error("cannot write to standard output: {0}")]
+    Output(std::io::Error),
     /// The request itself is wrong (an unknown name, a value out of range).
     #[error("{0}")]
     Usage(String),
@@ -47,7 +51,23 @@ pub enum SystemError {
     Failed(String),
 }
 
+/// Exit status: the work was done and succeeded.
+pub const EXIT_OK: u8 = 0;
+/// Exit status: the work was done but did not succeed (no plan, not certified, goal not reached).
+pub const EXIT_NOT_SUCCEEDED: u8 = 1;
+/// Exit status: bad input (arguments, files), nothing was done.
+pub const EXIT_BAD_INPUT: u8 = 2;
+
 impl SystemError {
+    /// The process exit status this error stands for.
+    pub fn exit_code(&self) -> u8 {
+        match self {
+            SystemError::Failed(_) => EXIT_NOT_SUCCEEDED,
+            SystemError::Output(e) if e.kind() == std::io::ErrorKind::BrokenPipe => EXIT_OK,
+            _ => EXIT_BAD_INPUT,
+        }
+    }
+
     /// A read error on `file`.
     pub fn io(file: impl Into<PathBuf>, source: std::io::Error) -> Self {
         SystemError::Io { file: file.into(), source }
@@ -56,5 +76,16 @@ impl SystemError {
     /// A write error on `file`.
     pub fn write(file: impl Into<PathBuf>, source: std::io::Error) -> Self {
         SystemError::Write { file: file.into(), source }
+    }
+}
+
+/// The text of a file argument; `-` reads standard input.
+pub fn read_input(path: &Path) -> Result<String, SystemError> {
+    if path == Path::new("-") {
+        let mut text = String::new();
+        std::io::stdin().read_to_string(&mut text).map_err(|e| SystemError::io("<stdin>", e))?;
+        Ok(text)
+    } else {
+        std::fs::read_to_string(path).map_err(|e| SystemError::io(path, e))
     }
 }

@@ -33,7 +33,6 @@
 //! # Ok::<(), embodied_system::SystemError>(())
 //! ```
 #![forbid(unsafe_code)]
-#![warn(missing_docs)]
 
 pub mod bench_qp;
 pub mod clearance;
@@ -42,9 +41,11 @@ pub mod error;
 pub mod log;
 pub mod mbm;
 pub mod plan;
+pub mod plot;
 pub mod scenario;
 pub mod system;
 pub mod verify;
+pub mod view;
 
 pub use error::SystemError;
 pub use scenario::{
@@ -52,3 +53,12 @@ pub use scenario::{
     ScenarioBuilder,
 };
 pub use system::{AgentSummary, RunOptions, RunSummary, System};
+
+/// The program's version and the git commit it was built from (`unknown` when built outside
+/// a git checkout), as `--version`, log headers, plan files and reports give it.
+pub const VERSION: &str = concat!(env!("CARGO_PKG_VERSION"), " (commit ", env!("EMBODIED_GIT_COMMIT"), ")");
+
+/// `embodied VERSION`: what made a file.
+pub fn generator() -> String {
+    format!("embodied {VERSION}")
+}

@@ -21,7 +21,7 @@ use embodied_models::urdf::load_urdf;
 use embodied_models::{CollisionModel, ConfigSpace, Robot};
 use embodied_planner::PlanError;
 use embodied_planner::deadline::Deadline;
-use embodied_planner::motion::{CERTIFY_TOLERANCE, EdgeCheck, Goal, MotionSettings, PlannerKind, plan_motion};
+use embodied_planner::motion::{CERTIFY_TOLERANCE, EdgeCheck, Goal, MotionSettings, PlannerKind, Sampler, plan_motion};
 use embodied_planner::moveit::{MoveitError, load_request, load_scene};
 use embodied_planner::verify::Verifier;
 use serde::Serialize;
@@ -58,6 +58,17 @@ pub struct MbmArgs {
     pub shortcut_attempts: usize,
     /// The planner after the straight segment (default: RRT-Connect).
     pub algorithm: PlannerKind,
+    /// RRT-Connect's largest step (rad).
+    pub rrt_range: f64,
+    /// RRT-Connect with dynamic domain.
+    pub dynamic_domain: bool,
+    /// RRT-Connect grows the smaller tree while the other has twice its nodes.
+    pub balance: bool,
+    /// How RRT-Connect draws samples.
+    pub sampler: Sampler,
+    /// Planners racing per problem (1: one planner on one thread; 2: two differently seeded
+    /// planners on the rayon pool, first path wins).
+    pub threads: usize,
     /// Only these families (all when `None`).
     pub families: Option<Vec<String>>,
     /// At most this many problems per family (the lowest indices).
@@ -83,6 +94,11 @@ impl MbmArgs {
             resolution: VERIFY_RESOLUTION,
             shortcut_attempts: MotionSettings::default().shortcut_attempts,
             algorithm: PlannerKind::RrtConnect,
+            rrt_range: MotionSettings::default().rrt_range,
+            dynamic_domain: MotionSettings::default().rrt_dynamic_domain,
+            balance: MotionSettings::default().rrt_balance,
+            sampler: MotionSettings::default().sampler,
+            threads: 1,
             families: None,
             limit: None,
             progress: false,
@@ -94,6 +110,7 @@ impl MbmArgs {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "snake_case")]
 pub enum ProblemStatus {
+    /// A path that verifies came back within the deadline.
     Solved,
     /// The request's start configuration is in collision or outside the joint limits.
     InvalidStart,
@@ -106,6 +123,7 @@ pub enum ProblemStatus {
 }
 
 impl ProblemStatus {
+    /// Whether the problem itself is invalid (start or goal in collision or outside the limits).
     pub fn is_invalid(self) -> bool {
         matches!(self, ProblemStatus::InvalidStart | ProblemStatus::InvalidGoal)
     }
@@ -114,13 +132,19 @@ impl ProblemStatus {
 /// One problem's outcome; `path` runs from the request's start to its goal over `joint_names`.
 #[derive(Debug, Clone, Serialize)]
 pub struct ProblemResult {
+    /// The problem's family (its folder name).
     pub family: String,
+    /// The problem's index within its family.
     pub index: u32,
+    /// Whether the status is [`ProblemStatus::Solved`].
     pub solved: bool,
+    /// How the problem ended.
     pub status: ProblemStatus,
     /// Wall-clock time of the `plan_motion` call, microseconds (absent for invalid problems).
     pub planning_us: Option<f64>,
+    /// Names of the joints of `path`, in order.
     pub joint_names: Vec<String>,
+    /// The path's waypoints, rad (empty when none came back).
     pub path: Vec<Vec<f64>>,
     /// Joint-space length of `path` (the configuration space's metric).
     pub path_length: Option<f64>,
@@ -137,39 +161,72 @@ pub struct ProblemResult {
 /// Counts and planning-time percentiles of a set of problems (a family or all).
 #[derive(Debug, Clone, Serialize, PartialEq)]
 pub struct Summary {
+    /// The family's name, or `overall`.
     pub name: String,
+    /// Problems in the set.
     pub total: usize,
     /// Problems with a valid start and goal.
     pub valid: usize,
+    /// Problems with a start or goal in collision or outside the joint limits.
     pub invalid: usize,
+    /// Problems solved.
     pub solved: usize,
+    /// Problems the planner gave up at the deadline.
     pub out_of_time: usize,
+    /// Problems failed before the deadline or with a path that does not verify.
     pub failed: usize,
     /// Percentiles of the planning time of the solved problems, microseconds.
     pub p50_us: Option<f64>,
+    /// 95th percentile planning time of the solved problems, µs.
     pub p95_us: Option<f64>,
+    /// Longest planning time of the solved problems, µs.
     pub max_us: Option<f64>,
+    /// Mean planning time of the solved problems, µs.
     pub mean_us: Option<f64>,
+    /// Share of the valid problems solved within 1 ms (0..=1).
+    pub within_1ms: Option<f64>,
+    /// Median joint-space path length of the solved problems (rad).
+    pub median_path_length: Option<f64>,
     /// Mean joint-space path length of the solved problems (rad).
     pub mean_path_length: Option<f64>,
     /// Returned paths that failed the independent check (must be 0).
     pub verification_failures: usize,
+    /// Whether every returned path passed the independent check.
     pub all_paths_valid: bool,
 }
 
 /// The benchmark's settings, echoed in the report.
 #[derive(Debug, Clone, Serialize)]
 pub struct MbmSettings {
+    /// The robot's URDF file.
     pub urdf: PathBuf,
+    /// The robot's SRDF file.
     pub srdf: PathBuf,
+    /// Folder of the problem families.
     pub problems: PathBuf,
+    /// Planning deadline per problem, ms.
     pub deadline_ms: f64,
+    /// Base seed.
     pub seed: u64,
+    /// How the planner checked its edges.
     pub edge_check: EdgeCheck,
+    /// Collision-checking resolution of sampled edges (rad, largest joint step).
     pub resolution: f64,
+    /// Random shortcut attempts after the greedy shortcut pass.
     pub shortcut_attempts: usize,
     /// The planner after the straight segment.
     pub algorithm: PlannerKind,
+    /// RRT-Connect's largest step, rad.
+    pub rrt_range: f64,
+    /// Whether RRT-Connect's sampling was restricted to a dynamic domain around each tree.
+    pub dynamic_domain: bool,
+    /// Whether the smaller tree was grown while the other had twice its nodes.
+    pub balance: bool,
+    /// How RRT-Connect drew its samples.
+    pub sampler: Sampler,
+    /// Planners racing per problem.
+    pub threads: usize,
+    /// Resolution at which every returned path was re-checked (rad, largest joint step).
     pub verify_resolution: f64,
     /// Self-collision pairs disabled because they touch in every sampled configuration.
     pub always_colliding_disabled: Vec<(String, String)>,
@@ -181,9 +238,15 @@ pub struct MbmSettings {
 /// The whole benchmark: per-family and overall summaries and every problem with its path.
 #[derive(Debug, Clone, Serialize)]
 pub struct MbmReport {
+    /// The program (version and commit) that made the report.
+    pub generator: String,
+    /// The settings the benchmark ran with.
     pub settings: MbmSettings,
+    /// One summary per family.
     pub families: Vec<Summary>,
+    /// The summary over every problem.
     pub overall: Summary,
+    /// Every problem's outcome.
     pub problems: Vec<ProblemResult>,
 }
 
@@ -396,8 +459,11 @@ fn load_robot(args: &MbmArgs) -> Result<Loaded, AppError> {
 pub struct MbmProblem {
     /// `family/index`.
     pub name: String,
+    /// The planning arm among the scene's obstacles.
     pub model: CollisionModel,
+    /// Start configuration, rad.
     pub start: Vec<f64>,
+    /// Goal configuration, rad.
     pub goal: Vec<f64>,
 }
 
@@ -474,6 +540,11 @@ fn run_problem(args: &MbmArgs, loaded: &Loaded, p: &ProblemFiles) -> Result<Prob
         deadline: Deadline::after(budget),
         shortcut_attempts: args.shortcut_attempts,
         planner: args.algorithm,
+        rrt_range: args.rrt_range,
+        rrt_dynamic_domain: args.dynamic_domain,
+        rrt_balance: args.balance,
+        sampler: args.sampler,
+        racers: args.threads.max(1),
         ..MotionSettings::default()
     };
     let goal = Goal::Configuration(resolved.goal.clone());
@@ -540,6 +611,7 @@ pub fn run_mbm(args: &MbmArgs, on_progress: &mut dyn FnMut(usize, usize)) -> Res
     let all: Vec<&ProblemResult> = results.iter().collect();
     let overall = summarize("overall", &all);
     Ok(MbmReport {
+        generator: crate::generator(),
         settings: MbmSettings {
             urdf: args.urdf.clone(),
             srdf: args.srdf.clone(),
@@ -550,6 +622,11 @@ pub fn run_mbm(args: &MbmArgs, on_progress: &mut dyn FnMut(usize, usize)) -> Res
             resolution: args.resolution,
             shortcut_attempts: args.shortcut_attempts,
             algorithm: args.algorithm,
+            rrt_range: args.rrt_range,
+            dynamic_domain: args.dynamic_domain,
+            balance: args.balance,
+            sampler: args.sampler,
+            threads: args.threads.max(1),
             verify_resolution: VERIFY_RESOLUTION,
             always_colliding_disabled: loaded.always_colliding.clone(),
             never_colliding_disabled: loaded.never_colliding.clone(),
@@ -573,14 +650,16 @@ fn summarize(name: &str, results: &[&ProblemResult]) -> Summary {
     let solved: Vec<&&ProblemResult> = results.iter().filter(|r| r.solved).collect();
     let mut times: Vec<f64> = solved.iter().filter_map(|r| r.planning_us).collect();
     times.sort_by(f64::total_cmp);
-    let lengths: Vec<f64> = solved.iter().filter_map(|r| r.path_length).collect();
+    let mut lengths: Vec<f64> = solved.iter().filter_map(|r| r.path_length).collect();
+    lengths.sort_by(f64::total_cmp);
     let mean = |v: &[f64]| if v.is_empty() { None } else { Some(v.iter().sum::<f64>() / v.len() as f64) };
     let invalid = results.iter().filter(|r| r.status.is_invalid()).count();
     let verification_failures = results.iter().filter(|r| r.verified == Some(false)).count();
+    let valid = results.len() - invalid;
     Summary {
         name: name.to_string(),
         total: results.len(),
-        valid: results.len() - invalid,
+        valid,
         invalid,
         solved: solved.len(),
         out_of_time: results.iter().filter(|r| r.status == ProblemStatus::OutOfTime).count(),
@@ -589,6 +668,8 @@ fn summarize(name: &str, results: &[&ProblemResult]) -> Summary {
         p95_us: percentile(&times, 0.95),
         max_us: times.last().copied(),
         mean_us: mean(&times),
+        within_1ms: (valid > 0).then(|| times.iter().filter(|&&t| t <= 1000.0).count() as f64 / valid as f64),
+        median_path_length: percentile(&lengths, 0.5),
         mean_path_length: mean(&lengths),
         verification_failures,
         all_paths_valid: verification_failures == 0,
@@ -598,6 +679,7 @@ fn summarize(name: &str, results: &[&ProblemResult]) -> Summary {
 /// The `--out` file: every problem with its joint names and path, for an independent checker.
 #[derive(Debug, Clone, Serialize)]
 pub struct PathsFile<'a> {
+    /// Every problem's outcome.
     pub problems: &'a [ProblemResult],
 }
 
@@ -619,8 +701,19 @@ fn fmt_us(v: Option<f64>) -> String {
 
 /// A plain-text table for the terminal: one row per family and one for all.
 pub fn render_table(report: &MbmReport) -> String {
-    let header =
-        ["family", "solved", "invalid", "timeout", "failed", "p50 us", "p95 us", "max us", "path len", "bad paths"];
+    let header = [
+        "family",
+        "solved",
+        "invalid",
+        "timeout",
+        "failed",
+        "p50 us",
+        "p95 us",
+        "max us",
+        "<=1 ms",
+        "path len",
+        "bad paths",
+    ];
     let row = |s: &Summary| -> Vec<String> {
         vec![
             s.name.clone(),
@@ -631,7 +724,8 @@ pub fn render_table(report: &MbmReport) -> String {
             fmt_us(s.p50_us),
             fmt_us(s.p95_us),
             fmt_us(s.max_us),
-            s.mean_path_length.map_or("-".to_string(), |l| format!("{l:.2}")),
+            s.within_1ms.map_or("-".to_string(), |w| format!("{:.1}%", 100.0 * w)),
+            s.median_path_length.map_or("-".to_string(), |l| format!("{l:.2}")),
             s.verification_failures.to_string(),
         ]
     };
@@ -659,8 +753,13 @@ pub fn render_table(report: &MbmReport) -> String {
         EdgeCheck::Sampled => format!("edges sampled at {} rad", report.settings.resolution),
     };
     let mut out = format!(
-        "MotionBenchMaker: deadline {} ms, seed {}, {edges}, paths re-checked at {} rad\n",
-        report.settings.deadline_ms, report.settings.seed, report.settings.verify_resolution
+        "MotionBenchMaker: deadline {} ms, seed {}, {edges}, paths re-checked at {} rad, {} ({} thread{})\n",
+        report.settings.deadline_ms,
+        report.settings.seed,
+        report.settings.verify_resolution,
+        report.settings.algorithm,
+        report.settings.threads,
+        if report.settings.threads == 1 { "" } else { "s" },
     );
     out.push_str(&line(&header.iter().map(|h| h.to_string()).collect::<Vec<_>>()));
     for (i, r) in rows.iter().enumerate() {
@@ -670,7 +769,10 @@ pub fn render_table(report: &MbmReport) -> String {
         }
         out.push_str(&line(r));
     }
-    out.push_str("solved = solved/valid problems; times are wall-clock plan_motion calls of solved problems\n");
+    out.push_str(
+        "solved = solved/valid problems; times are wall-clock plan_motion calls of solved problems; \
+         <=1 ms = share of valid problems solved within 1 ms; path len = median\n",
+    );
     let unsolved: Vec<String> = report
         .problems
         .iter()

@@ -22,19 +22,28 @@ use crate::scenario::{GoalSpec, Scenario};
 pub const PLAN_FORMAT: &str = "embodied-plan/1";
 
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+/// A name and the SHA-256 of what it names (a robot's kinematic description, a scenario).
 pub struct NamedHash {
+    /// The name.
     pub name: String,
+    /// The SHA-256, hex.
     pub hash: String,
 }
 
 /// One agent's plan.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct AgentPlan {
+    /// The agent's name.
     pub agent: String,
+    /// The agent's robot and the hash of its kinematic description.
     pub robot: NamedHash,
+    /// Names of the degrees of freedom, in the order of the values in `path`.
     pub joint_names: Vec<String>,
+    /// The planned waypoints (rad or m).
     pub path: Vec<Vec<f64>>,
+    /// The timed trajectory along `path`.
     pub trajectory: Trajectory,
+    /// What planning cost (the planner's statistics, as JSON).
     pub stats: serde_json::Value,
     /// Spans where two end effectors hold one object (two-arm plans); empty otherwise.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
@@ -44,8 +53,14 @@ pub struct AgentPlan {
 /// A plan file.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct PlanFile {
+    /// Format tag ([`PLAN_FORMAT`]).
     pub format: String,
+    /// The program (version and commit) that made the file.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub generator: Option<String>,
+    /// The scenario planned for, with its hash.
     pub scenario: NamedHash,
+    /// One plan per planned agent.
     pub plans: Vec<AgentPlan>,
     /// Groups of agents (by name) whose plans run at the same time, all from `t = 0`; plans
     /// not in a group run one after another in file order. Absent: every plan runs alone.
@@ -211,6 +226,7 @@ pub fn plan_scenario(scenario: &Scenario, deadline_ms: Option<f64>) -> Result<Pl
     }
     Ok(PlanFile {
         format: PLAN_FORMAT.to_string(),
+        generator: Some(crate::generator()),
         scenario: NamedHash { name: scenario.name.clone(), hash: scenario.hash.clone() },
         plans,
         together: Vec::new(),
@@ -219,7 +235,7 @@ pub fn plan_scenario(scenario: &Scenario, deadline_ms: Option<f64>) -> Result<Pl
 
 /// Read a plan file back, checking its format tag.
 pub fn read_plan(path: &std::path::Path) -> Result<PlanFile, SystemError> {
-    let text = std::fs::read_to_string(path).map_err(|e| SystemError::io(path, e))?;
+    let text = crate::error::read_input(path)?;
     parse_plan(&text, path)
 }
 

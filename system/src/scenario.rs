@@ -634,6 +634,10 @@ pub fn load_scenario(arg: &str) -> Result<Scenario, SystemError> {
         return parse_scenario(text, Path::new(&format!("<built-in>/{arg}.toml")), Path::new("."));
     }
     let path = PathBuf::from(arg);
+    if arg == "-" {
+        let text = crate::error::read_input(&path)?;
+        return parse_scenario(&text, Path::new("<stdin>"), Path::new("."));
+    }
     if !path.exists() {
         let names: Vec<&str> = BUILTIN_SCENARIOS.iter().map(|(n, _)| *n).collect();
         return Err(SystemError::Usage(format!(

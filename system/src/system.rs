@@ -38,7 +38,7 @@ use embodied_planner::deadline::Deadline;
 use serde::Serialize;
 
 use crate::SystemError;
-use crate::log::{LOG_FORMAT, LogHeader, LogStep, LoggedAgent, RunLog, plot_joints};
+use crate::log::{LOG_FORMAT, LogHeader, LogStep, LoggedAgent, RunLog};
 use crate::plan::{agent_problem, bodies_as_obstacles, goal_of, motion_settings};
 use crate::scenario::{ClockSpec, Coordination, GoalSpec, Scenario, load_scenario};
 
@@ -382,6 +382,9 @@ pub struct RunSummary {
     /// Simulated / wall time (not in the log).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub real_time_factor: Option<f64>,
+    /// Wall-clock time the carry's planning took before the run, ms (not in the log).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub carry_wall_planning_ms: Option<f64>,
     /// Per agent.
     pub agents: Vec<AgentSummary>,
     /// (time, agent, event) in order.
@@ -404,6 +407,7 @@ impl RunSummary {
         let mut s = self.clone();
         s.wall_s = None;
         s.real_time_factor = None;
+        s.carry_wall_planning_ms = None;
         if let Some(c) = &mut s.closed_chain {
             c.qp_p50_us = 0.0;
             c.qp_p99_us = 0.0;
@@ -414,7 +418,7 @@ impl RunSummary {
     }
 }
 
-/// Per-step bookkeeping of a run: summaries, events, behaviour switches, plot series.
+/// Per-step bookkeeping of a run: summaries, events, behaviour switches.
 struct Observer {
     summaries: Vec<AgentSummary>,
     pending: Vec<bool>,
@@ -422,17 +426,10 @@ struct Observer {
     switches: Vec<(f64, String, String)>,
     last_behaviour: Vec<String>,
     limits: Vec<Vec<embodied_models::JointLimits>>,
-    series: Vec<(String, Vec<(f64, f64)>)>,
 }
 
 impl Observer {
     fn new(scenario: &Scenario, agents: usize) -> Self {
-        let mut series = Vec::new();
-        for agent in &scenario.agents {
-            for name in agent.robot.joint_names() {
-                series.push((format!("{}/{name}", agent.name), Vec::new()));
-            }
-        }
         Self {
             summaries: scenario
                 .agents
@@ -444,12 +441,10 @@ impl Observer {
             switches: Vec::new(),
             last_behaviour: vec![String::new(); agents],
             limits: scenario.agents.iter().map(|a| a.robot.limits()).collect(),
-            series,
         }
     }
 
     fn observe(&mut self, r: &StepRecord) {
-        let mut s = 0;
         for (k, a) in r.agents.iter().enumerate() {
             for e in &a.events {
                 self.events.push((r.time, a.agent.clone(), e.clone()));
@@ -462,13 +457,9 @@ impl Observer {
                 self.last_behaviour[k].clone_from(&a.behaviour);
             }
             if let Some(limits) = self.limits.get(k) {
-                for (j, (&q, &qd)) in a.q.iter().zip(&a.qd).enumerate() {
+                for (j, &qd) in a.qd.iter().enumerate() {
                     let ratio = qd.abs() / limits[j].max_velocity;
                     self.summaries[k].max_speed_ratio = self.summaries[k].max_speed_ratio.max(ratio);
-                    if r.step.is_multiple_of(10) {
-                        self.series[s].1.push((r.time, q));
-                    }
-                    s += 1;
                 }
             }
         }
@@ -515,7 +506,8 @@ pub struct System {
     clock: ClockSpec,
     duration: f64,
     coordinator: Option<AgentId>,
-    carry: Option<(Arc<Mutex<CarryRecord>>, serde_json::Value)>,
+    /// The carry's record, its log header and its wall-clock planning time, ms.
+    carry: Option<(Arc<Mutex<CarryRecord>>, serde_json::Value, f64)>,
     observer: Observer,
     started: Option<Instant>,
     wall: Duration,
@@ -570,9 +562,9 @@ impl System {
         for (k, agent) in scenario.agents.iter().enumerate() {
             let robot = Arc::new(agent.robot.clone());
             if let Some(spec) = scenario.carry.as_ref().filter(|c| c.agent == k) {
-                let (a, record, header) = carry_parts(scenario, spec, dt, clock, options)?;
+                let (a, record, header, wall_ms) = carry_parts(scenario, spec, dt, clock, options)?;
                 runtime.add_agent(a);
-                carry = Some((record, header));
+                carry = Some((record, header, wall_ms));
                 continue;
             }
             let Some(goal) = &agent.goal else {
@@ -712,6 +704,7 @@ impl System {
         let agents = self.scenario.agents.iter().map(|a| (a.name.clone(), LoggedAgent::of(&a.robot))).collect();
         LogHeader {
             format: LOG_FORMAT.to_string(),
+            generator: crate::generator(),
             scenario: self.scenario.name.clone(),
             scenario_hash: self.scenario.hash.clone(),
             seed: self.seed,
@@ -719,7 +712,7 @@ impl System {
             duration_s: self.duration,
             planning_clock: clock_name(self.clock),
             agents,
-            closed_chain: self.carry.as_ref().map(|(_, h)| h.clone()),
+            closed_chain: self.carry.as_ref().map(|(_, h, _)| h.clone()),
         }
     }
 
@@ -792,7 +785,7 @@ impl System {
 
     /// The carry's per-step measurements (QP timings, closure), when the scenario has a carry.
     pub fn carry_record(&self) -> Option<Arc<Mutex<CarryRecord>>> {
-        self.carry.as_ref().map(|(r, _)| r.clone())
+        self.carry.as_ref().map(|(r, _, _)| r.clone())
     }
 
     /// What the run did so far (wall-clock figures included; see [`RunSummary::replayable`]).
@@ -825,13 +818,9 @@ impl System {
             behaviour_switches: self.observer.switches.clone(),
             failure: self.runtime.failure().map(|e| e.to_string()),
             log_lines: 0,
-            closed_chain: self.carry.as_ref().and_then(|(r, _)| finish(r)),
+            closed_chain: self.carry.as_ref().and_then(|(r, _, _)| finish(r)),
+            carry_wall_planning_ms: self.carry.as_ref().map(|(_, _, ms)| *ms),
         }
-    }
-
-    /// The joint series (every 10th step) for a plot: `agent/joint` and (t, q) points.
-    pub fn joint_series(&self) -> &[(String, Vec<(f64, f64)>)] {
-        &self.observer.series
     }
 }
 
@@ -843,7 +832,7 @@ fn carry_parts(
     clock: ClockSpec,
     options: &RunOptions,
 ) -> Result<
-    (Agent<embodied_executor::closed_chain::carry::CarryAgent>, Arc<Mutex<CarryRecord>>, serde_json::Value),
+    (Agent<embodied_executor::closed_chain::carry::CarryAgent>, Arc<Mutex<CarryRecord>>, serde_json::Value, f64),
     SystemError,
 > {
     let agent = &scenario.agents[spec.agent];
@@ -857,6 +846,7 @@ fn carry_parts(
     })?;
     // Planning time as the run counts it: simulated from the collision checks (the log stays
     // byte-identical for a seed) or the wall clock.
+    let wall_ms = plan.stats.planning_ms;
     let planning_ms = match clock {
         ClockSpec::Wall => plan.stats.planning_ms,
         ClockSpec::Simulated { us_per_check } => plan.stats.collision_checks as f64 * us_per_check * 1e-3,
@@ -881,7 +871,7 @@ fn carry_parts(
     let (a, record) = carry_agent(setup).map_err(|e| {
         SystemError::Failed(format!("scenario `{}`: agent `{}`: carry: {e}", scenario.name, agent.name))
     })?;
-    Ok((a, record, header))
+    Ok((a, record, header, wall_ms))
 }
 
 /// What `embodied run` was asked to do.
@@ -893,12 +883,15 @@ pub struct RunArgs {
     pub options: RunOptions,
     /// Write the JSON Lines log here.
     pub log: Option<PathBuf>,
-    /// Write an SVG plot of the joints here.
+    /// Write an SVG plot of the run here (joints per agent and unit, limits, events, carry
+    /// closure error and clearance).
     pub plot: Option<PathBuf>,
+    /// Write the viewer page (`embodied view`) of the run here.
+    pub html: Option<PathBuf>,
 }
 
 /// Load and run a scenario, writing its log (complete up to the last step even on failure)
-/// and plot. The summary's `failure` says whether the run stopped early.
+/// plot and viewer page. The summary's `failure` says whether the run stopped early.
 pub fn run_scenario(args: &RunArgs) -> Result<(RunSummary, System), SystemError> {
     let scenario = load_scenario(&args.scenario)?;
     let mut system = System::new(&scenario, &args.options)?;
@@ -906,11 +899,19 @@ pub fn run_scenario(args: &RunArgs) -> Result<(RunSummary, System), SystemError>
     log.line(&serde_json::json!({ "header": system.header() }))?;
     let mut log_error = None;
     let until = system.duration();
+    // Frames for the plot and the page: every 5 ms, kept only when one is asked for.
+    let mut track = crate::view::Track::default();
+    let keep_frames = args.html.is_some() || args.plot.is_some();
+    let n = scenario.agents.len();
     let result = system.run_until(until, |r| {
         if log_error.is_none()
             && let Err(e) = log.line(&LogStep::of(r))
         {
             log_error = Some(e);
+        }
+        if keep_frames && r.step.is_multiple_of(5) {
+            let q = r.agents.iter().take(n).map(|a| Some(a.q.clone())).collect();
+            track.frames.push(crate::view::TrackFrame { t: r.time, q });
         }
     });
     if let Some(e) = log_error {
@@ -920,8 +921,12 @@ pub fn run_scenario(args: &RunArgs) -> Result<(RunSummary, System), SystemError>
     let mut summary = system.summary();
     log.line(&serde_json::json!({ "summary": summary.replayable() }))?;
     summary.log_lines = log.lines();
+    let track = crate::view::with_events(track, &summary.events);
     if let Some(path) = &args.plot {
-        plot_joints(path, &format!("{}: joint positions", scenario.name), system.joint_series(), "q [rad | m]")?;
+        crate::plot::plot_run(path, &scenario, &track)?;
+    }
+    if let Some(path) = &args.html {
+        crate::view::write_run_view(path, &scenario, &track)?;
     }
     Ok((summary, system))
 }
@@ -963,9 +968,10 @@ pub fn render_summary(s: &RunSummary) -> String {
     if let Some(c) = &s.closed_chain {
         let _ = writeln!(
             out,
-            "  closed chain ({}): plan {:.1} ms, {:.2} s of motion; held {} steps; QP p50 {:.1} us, p99 {:.1} us, max {:.1} us ({} late, {} fallbacks, {} slacked); largest closure error {:.2e} m / {:.2e} rad (residual {:.1e}); object tracking {:.2e} m; nearest obstacle {:.3} m ({} damped steps); halts {}{}; object put down {} from its goal",
+            "  closed chain ({}): plan {:.1} ms{}, {:.2} s of motion; held {} steps; QP p50 {:.1} us, p99 {:.1} us, max {:.1} us ({} late, {} fallbacks, {} slacked); largest closure error {:.2e} m / {:.2e} rad (residual {:.1e}); object tracking {:.2e} m; nearest obstacle {:.3} m ({} damped steps); halts {}{}; object put down {} from its goal",
             c.agent,
             c.planning_ms,
+            s.carry_wall_planning_ms.map_or(String::new(), |ms| format!(" ({ms:.1} ms wall)")),
             c.plan_duration_s,
             c.qp_steps,
             c.qp_p50_us,

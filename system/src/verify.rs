@@ -55,28 +55,42 @@ pub const EXIT_NOT_CERTIFIED: u8 = 1;
 /// One agent's plan, checked.
 #[derive(Debug, Clone, Serialize)]
 pub struct AgentVerification {
+    /// The agent's name.
     pub agent: String,
+    /// The agent's robot.
     pub robot: String,
     /// Where the other agents stood while this one moved.
     pub others: Vec<String>,
+    /// Whether the trajectory is certified and timing and endpoints are fine.
     pub certified: bool,
     /// Timing and endpoints: problems found (empty: fine).
     pub timing: Vec<String>,
-    #[serde(flatten)]
+    /// The certified check of the trajectory (its own `certified` says whether the trajectory
+    /// alone passed; the agent's `certified` above adds timing and endpoints).
+    #[serde(rename = "trajectory")]
     pub report: TrajectoryReport,
 }
 
 /// A plan file checked against a scenario.
 #[derive(Debug, Clone, Serialize)]
 pub struct PlanVerification {
+    /// The program (version and commit) that made the report.
+    pub generator: String,
+    /// The plan file checked.
     pub plan_file: PathBuf,
+    /// The scenario checked against.
     pub scenario: String,
+    /// Whether every agent's plan is certified.
     pub certified: bool,
+    /// Problems with the input that did not stop the check.
     pub warnings: Vec<String>,
+    /// One result per agent.
     pub agents: Vec<AgentVerification>,
     /// Plans that run together, certified against each other in time.
     pub together: Vec<MotionCheck>,
+    /// The settings of the certified check.
     pub settings: CheckSettings,
+    /// Wall-clock time of the check, s.
     pub time_s: f64,
 }
 
@@ -294,6 +308,7 @@ pub fn verify_plan(
         }
     }
     Ok(PlanVerification {
+        generator: crate::generator(),
         plan_file: file.to_path_buf(),
         scenario: scenario.name.clone(),
         certified: agents.iter().all(|a| a.certified) && together.iter().all(|c| c.ok),
@@ -380,34 +395,51 @@ pub fn render_plan(v: &PlanVerification) -> String {
 /// The closed-chain declaration of a log header.
 #[derive(Debug, Clone, Serialize, serde::Deserialize)]
 pub struct LogClosedChain {
+    /// The holding agent's name.
     pub agent: String,
+    /// The two end effectors that hold the object.
     pub end_effectors: [String; 2],
+    /// Largest allowed drift of the relative tool position, m.
     pub tolerance_m: f64,
+    /// Largest allowed drift of the relative tool rotation angle, rad.
     pub tolerance_rad: f64,
 }
 
 /// Closure between grasp and release events of one agent.
 #[derive(Debug, Clone, Serialize)]
 pub struct LogClosure {
+    /// Whether the relative tool pose stayed within the tolerances while held.
     pub ok: bool,
+    /// The first drift beyond the tolerances, if any.
     pub violation: Option<Finding>,
+    /// Grasp events seen.
     pub grasps: usize,
     /// Steps checked while holding.
     pub samples: usize,
+    /// Largest drift of the relative tool position while held, m.
     pub max_position_error_m: f64,
+    /// Largest drift of the relative tool rotation angle while held, rad.
     pub max_angle_error_rad: f64,
 }
 
 /// One agent of a run log, checked.
 #[derive(Debug, Clone, Serialize)]
 pub struct LogAgent {
+    /// The agent's name.
     pub agent: String,
+    /// Whether its logged motion stayed within the limits (and the closure, if any, held).
     pub certified: bool,
+    /// Logged steps of this agent.
     pub steps: usize,
+    /// The first limit violation, if any.
     pub violation: Option<Finding>,
+    /// Limit violations found.
     pub violations: usize,
+    /// Largest |velocity| / limit over the log.
     pub max_velocity_ratio: f64,
+    /// Largest |acceleration| / limit over the log.
     pub max_acceleration_ratio: f64,
+    /// The closed-chain check, for an agent that holds an object with two end effectors.
     pub closure: Option<LogClosure>,
     /// Its motion certified free of the obstacles and of itself, step to step.
     pub collision: Option<MotionCheck>,
@@ -416,18 +448,29 @@ pub struct LogAgent {
 /// A run log checked against a scenario.
 #[derive(Debug, Clone, Serialize)]
 pub struct LogVerification {
+    /// The program (version and commit) that made the report.
+    pub generator: String,
+    /// The run log checked.
     pub log_file: PathBuf,
+    /// The scenario checked against.
     pub scenario: String,
+    /// Whether every agent is certified.
     pub certified: bool,
     /// Whether the log ends with its summary line; `note` says where a truncated log stops.
     pub complete: bool,
+    /// Where a truncated log stops (see `complete`).
     pub note: Option<String>,
+    /// Steps in the log.
     pub steps: usize,
+    /// Control period from the log header, s.
     pub step_s: f64,
+    /// Problems with the input that did not stop the check.
     pub warnings: Vec<String>,
+    /// One result per agent.
     pub agents: Vec<LogAgent>,
     /// Every two robots certified apart, step to step.
     pub robot_robot: Vec<MotionCheck>,
+    /// Wall-clock time of the check, s.
     pub time_s: f64,
 }
 
@@ -458,8 +501,7 @@ fn parse_err(file: &Path, line: usize, column: usize, message: String) -> System
 /// Check a run log against `scenario` (see the module documentation).
 pub fn verify_log(scenario: &Scenario, file: &Path, settings: &CheckSettings) -> Result<LogVerification, SystemError> {
     let start = Instant::now();
-    let bytes = std::fs::read(file).map_err(|e| SystemError::io(file, e))?;
-    let text = String::from_utf8_lossy(&bytes);
+    let text = crate::error::read_input(file)?;
     let lines: Vec<&str> = text.split('\n').collect();
     let last_nonempty = lines.iter().rposition(|l| !l.trim().is_empty());
     let header_line = lines.first().copied().unwrap_or("");
@@ -728,6 +770,7 @@ pub fn verify_log(scenario: &Scenario, file: &Path, settings: &CheckSettings) ->
         })
         .collect();
     Ok(LogVerification {
+        generator: crate::generator(),
         log_file: file.to_path_buf(),
         scenario: scenario.name.clone(),
         certified: agents.iter().all(|a| a.certified) && robot_robot.iter().all(|c| c.ok),
@@ -809,39 +852,58 @@ fn render_motion_check(s: &mut String, c: &MotionCheck) {
     }
 }
 
-/// `embodied verify SCENARIO [PLAN.json] [--log FILE.jsonl] [--json]`: prints the reports and
-/// returns whether everything is certified.
-pub fn verify_cli(scenario: &str, plan: Option<&Path>, log: Option<&Path>, json: bool) -> Result<bool, SystemError> {
+/// What `embodied verify SCENARIO [PLAN.json] [--log FILE.jsonl]` found.
+#[derive(Debug, Clone, Serialize)]
+pub struct Verification {
+    /// Everything checked is certified.
+    pub certified: bool,
+    /// The plan file's report, when a plan was given.
+    pub plan: Option<PlanVerification>,
+    /// The run log's report, when a log was given.
+    pub log: Option<LogVerification>,
+}
+
+impl Verification {
+    /// The report as one JSON object: the plan's or the log's report alone when only one was
+    /// checked, else both under `plan` and `log` with `certified` for all.
+    pub fn to_json(&self) -> Result<String, SystemError> {
+        match (&self.plan, &self.log) {
+            (Some(p), None) => json_of(p),
+            (None, Some(l)) => json_of(l),
+            _ => json_of(self),
+        }
+    }
+
+    /// The report as text for the terminal.
+    pub fn render(&self) -> String {
+        let mut out = String::new();
+        if let Some(p) = &self.plan {
+            out.push_str(&render_plan(p));
+        }
+        if let Some(l) = &self.log {
+            out.push_str(&render_log(l));
+        }
+        out
+    }
+}
+
+/// Check a plan file and/or a run log against a scenario (a built-in name or a file).
+pub fn verify_files(scenario: &str, plan: Option<&Path>, log: Option<&Path>) -> Result<Verification, SystemError> {
     if plan.is_none() && log.is_none() {
         return Err(SystemError::Usage("verify: give a plan file, --log FILE.jsonl, or both".into()));
     }
     let scenario = load_scenario(scenario)?;
     let settings = CheckSettings::default();
-    let plan_report = match plan {
+    let plan = match plan {
         Some(p) => Some(verify_plan(&scenario, &read_plan(p)?, p, &settings)?),
         None => None,
     };
-    let log_report = match log {
+    let log = match log {
         Some(l) => Some(verify_log(&scenario, l, &settings)?),
         None => None,
     };
-    let certified = plan_report.as_ref().is_none_or(|r| r.certified) && log_report.as_ref().is_none_or(|r| r.certified);
-    if json {
-        let text = match (&plan_report, &log_report) {
-            (Some(p), None) => json_of(p)?,
-            (None, Some(l)) => json_of(l)?,
-            _ => json_of(&serde_json::json!({"certified": certified, "plan": plan_report, "log": log_report}))?,
-        };
-        println!("{text}");
-    } else {
-        if let Some(p) = &plan_report {
-            print!("{}", render_plan(p));
-        }
-        if let Some(l) = &log_report {
-            print!("{}", render_log(l));
-        }
-    }
-    Ok(certified)
+    let certified = plan.as_ref().is_none_or(|r| r.certified) && log.as_ref().is_none_or(|r| r.certified);
+    Ok(Verification { certified, plan, log })
 }
 
 fn json_of<T: Serialize>(value: &T) -> Result<String, SystemError> {

@@ -42,46 +42,69 @@ const POSTURE_GAIN: f64 = 5.0;
 /// What the closed-chain steps of a run measured.
 #[derive(Debug, Clone, Default, Serialize)]
 pub struct ClosedChainSummary {
+    /// The carrying agent's name.
     pub agent: String,
+    /// Wall-clock time the carry plan took, ms.
     pub planning_ms: f64,
+    /// Duration of the planned trajectory, s.
     pub plan_duration_s: f64,
+    /// Time the object was grasped (both tools holding it), s from the start; `None` if never.
     pub grasp_s: Option<f64>,
+    /// Time the object was released, s from the start; `None` if never.
     pub release_s: Option<f64>,
+    /// Control steps that solved the closed-chain QP.
     pub qp_steps: usize,
+    /// Median controller step time (assembly and solve), µs.
     pub qp_p50_us: f64,
+    /// 99th percentile controller step time, µs.
     pub qp_p99_us: f64,
+    /// Largest controller step time, µs.
     pub qp_max_us: f64,
     /// Steps whose QP alone took longer than the control step.
     pub qp_late_steps: usize,
+    /// Steps where the dense QP solver failed and clarabel answered instead.
     pub qp_fallbacks: usize,
+    /// Steps where the closure equality was infeasible and became a cost term ([`ClosureMode::Slacked`]).
     pub slacked_steps: usize,
+    /// Largest closure residual `||J_R qd + k_r e_r||` of any step.
     pub max_closure_residual: f64,
     /// Largest drift of the relative pose of the two tools from its value at the grasp.
     pub max_closure_error_m: f64,
+    /// Largest drift of the relative tool rotation from its value at the grasp, rad.
     pub max_closure_error_rad: f64,
     /// Largest distance of the object from its planned pose while held.
     pub max_tracking_error_m: f64,
+    /// Smallest distance of the held robot to an obstacle or of one arm to the other over the held
+    /// steps, m (0 when none was measured).
     pub closest_obstacle_m: f64,
+    /// Steps with at least one collision velocity damper row.
     pub damper_steps: usize,
     /// Steps where a damper asked for more deceleration than the limits allow in one step.
     pub damper_relaxed_steps: usize,
+    /// Safe halts begun.
     pub halts: usize,
+    /// Why the last safe halt began, if one did.
     pub halt_reason: Option<String>,
     /// Where the object was put down, against the scenario's goal, m.
     pub object_goal_error_m: Option<f64>,
+    /// Whether the planned trajectory ran to its end.
     pub completed: bool,
 }
 
 /// Measurements shared between the agent and the run.
 #[derive(Debug, Default)]
 pub struct CarryRecord {
+    /// The measurements reported at the end.
     pub summary: ClosedChainSummary,
     /// Per held step: the whole controller step (assembly and solve), ns.
     pub qp_ns: Vec<u64>,
     /// With `compare`: each step's QP solved by the fast dense solver and by clarabel, ns.
     pub fast_ns: Vec<u64>,
+    /// With `compare`: each step's QP solve time with clarabel, ns (see `fast_ns`).
     pub reference_ns: Vec<u64>,
+    /// With `compare`: largest `||qd_fast - qd_ref||∞ / max(1, ||qd_ref||∞)` over the steps.
     pub max_qd_difference: f64,
+    /// With `compare`: largest relative objective difference `|f_fast - f_ref| / max(1, |f_ref|)` over the steps.
     pub max_objective_difference: f64,
 }
 

@@ -90,11 +90,14 @@ impl Default for DamperParams {
 /// One inequality row `aᵀ qd <= b` (a collision velocity damper).
 #[derive(Debug, Clone, PartialEq)]
 pub struct VelocityDamper {
+    /// Row coefficients `a` (one per joint).
     pub a: DVector<f64>,
+    /// Right-hand side `b`.
     pub b: f64,
 }
 
 impl VelocityDamper {
+    /// The row `aᵀ qd <= b`.
     pub fn new(a: DVector<f64>, b: f64) -> Self {
         Self { a, b }
     }
@@ -146,6 +149,7 @@ pub struct ClosedChainSolution {
     /// Joint velocities to command; within the step's bounds (see
     /// [`ClosedChainController::bounds`]).
     pub qd: DVector<f64>,
+    /// Whether the closure held as an equality or was slacked.
     pub closure: ClosureMode,
     /// `||J_R qd + k_r e_r||` (about zero when [`ClosureMode::Hard`]).
     pub closure_residual: f64,
@@ -168,7 +172,9 @@ pub struct ClosedChainSolution {
 /// Both solvers on the same step, for checking.
 #[derive(Debug, Clone, PartialEq)]
 pub struct QpComparison {
+    /// The fast dense solver's solution.
     pub fast: ClosedChainSolution,
+    /// Clarabel's solution of the same QP.
     pub reference: ClosedChainSolution,
     /// `||qd_fast - qd_ref||∞ / max(1, ||qd_ref||∞)`.
     pub qd_difference: f64,
@@ -324,6 +330,7 @@ impl ClosedChainController {
         self.limits.len()
     }
 
+    /// The parameters fixed at creation.
     pub fn config(&self) -> &ClosedChainConfig {
         &self.config
     }

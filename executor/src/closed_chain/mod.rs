@@ -101,7 +101,9 @@ pub struct ClosedChainQp {
     pub j_r: DMatrix<f64>,
     /// Damping `lambda`.
     pub lambda: f64,
+    /// Lower bounds of `qd` (rad/s or m/s), one per joint.
     pub lower: DVector<f64>,
+    /// Upper bounds of `qd` (rad/s or m/s), one per joint.
     pub upper: DVector<f64>,
 }
 
@@ -219,6 +221,7 @@ pub struct ChainKinematics {
     pub j_r: DMatrix<f64>,
     /// Tool poses of end effectors 0 and 1.
     pub tool1: Isometry3<f64>,
+    /// Tool pose of end effector 1 (world frame); see `tool1`.
     pub tool2: Isometry3<f64>,
 }
 

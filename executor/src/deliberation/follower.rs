@@ -27,7 +27,9 @@ use super::worker::{
 /// Settings of a deliberative agent.
 #[derive(Clone)]
 pub struct DeliberationSettings {
+    /// How planning time is counted (wall clock or simulated from work).
     pub clock: PlanClock,
+    /// Deadline (steps, wall clock) and work budget of each plan request.
     pub budget: PlanBudget,
     /// Settings of [`embodied_planner::motion::plan_motion`] (used when `planner` is `None`;
     /// its deadline is replaced by each request's).
@@ -133,7 +135,9 @@ struct SensedObstacle {
 
 /// `c_c` of a deliberative agent: the deliberator, the goal, the world model and the plan.
 pub struct DeliberativeState {
+    /// Issues plan requests and receives their deliveries.
     pub deliberator: Deliberator,
+    /// The goal the agent plans towards.
     pub goal: Goal,
     settings: DeliberationSettings,
     robot: Arc<Robot>,
@@ -289,6 +293,7 @@ impl DeliberativeState {
 /// Something a deliberative `c_c` type contains, so that [`PlanFollower`] can run inside a
 /// larger program with its own `c_c`.
 pub trait AsDeliberation {
+    /// The deliberative part of `c_c`.
     fn deliberation(&mut self) -> &mut DeliberativeState;
 }
 
@@ -307,6 +312,7 @@ pub struct PlanFollower {
 }
 
 impl PlanFollower {
+    /// A plan follower named `name`.
     pub fn new(name: impl Into<String>) -> Self {
         Self { name: name.into(), phase: "waiting", suspended: false }
     }

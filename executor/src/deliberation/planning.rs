@@ -19,11 +19,14 @@ use embodied_planner::request::{MotionPlanner, PlanFailure, PlanRequest, Planned
 /// run is still reproducible.
 #[derive(Clone)]
 pub struct PlanMotion {
+    /// The robot and the environment it plans in (used when the request brings none).
     pub model: CollisionModel,
+    /// Motion planning settings; the deadline and the seed come from each request.
     pub settings: MotionSettings,
 }
 
 impl PlanMotion {
+    /// A planner over `model` with `settings` (see the type's documentation).
     pub fn new(model: CollisionModel, settings: MotionSettings) -> Self {
         Self { model, settings }
     }

@@ -14,6 +14,7 @@ use crate::world::ReceptorReadings;
 /// space they will sweep are on its map).
 #[derive(Debug, Clone, Default)]
 pub struct UnmappedObstacle {
+    /// World obstacle ids the agent already plans around (not reported).
     pub mapped: Vec<usize>,
     /// Report other agents' bodies as unmapped obstacles too.
     pub bodies: bool,

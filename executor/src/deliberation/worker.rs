@@ -31,7 +31,12 @@ pub enum PlanClock {
     /// plan lands `fixed_steps + ceil(work * steps_per_unit)` control steps after the request
     /// (at least one). The control step waits for the worker's result (only in this mode) to
     /// learn the work count.
-    Simulated { steps_per_unit: f64, fixed_steps: u64 },
+    Simulated {
+        /// Control steps per unit of work the planner reports.
+        steps_per_unit: f64,
+        /// Control steps added to every request.
+        fixed_steps: u64,
+    },
 }
 
 /// What came back for a request.
@@ -50,13 +55,19 @@ pub enum PlanOutcome {
 /// A plan delivered into `c_c`, with the stamps of its request.
 #[derive(Debug, Clone)]
 pub struct PlanDelivery {
+    /// The request's id.
     pub id: u64,
+    /// Version of the agent's world model when the request was made.
     pub world_version: u64,
+    /// The start configuration of the request.
     pub start: Vec<f64>,
+    /// Step at which the request was made.
     pub requested_at: u64,
     /// Step at which the plan was needed (request step + budget steps).
     pub needed_at: u64,
+    /// What came back.
     pub outcome: PlanOutcome,
+    /// Work units the planner reported.
     pub work: u64,
     /// Step at which the delivery landed in `c_c`.
     pub landed_at: u64,
@@ -113,10 +124,12 @@ pub struct Deliberator {
 }
 
 impl Deliberator {
+    /// A deliberator that runs `planner`, checks every plan with `verifier` and counts time by `clock`.
     pub fn new(planner: Arc<dyn MotionPlanner>, verifier: PlanVerifier, clock: PlanClock) -> Self {
         Self { planner, verifier: Arc::new(verifier), clock, next_id: 1, job: None, lose: 0 }
     }
 
+    /// How planning time is counted.
     pub fn clock(&self) -> PlanClock {
         self.clock
     }

@@ -8,12 +8,16 @@ use crate::geometry::Shape;
 /// `table`") and for moving it ([`Environment::set_pose`]).
 #[derive(Debug, Clone)]
 pub struct Obstacle {
+    /// Name used in messages and by the name-based methods of [`Environment`].
     pub name: String,
+    /// Pose of the shape's frame in the world frame.
     pub pose: Isometry3<f64>,
+    /// The shape, in its own frame.
     pub shape: Shape,
 }
 
 impl Obstacle {
+    /// An obstacle named `name` with `shape` placed at `pose` in the world frame.
     pub fn new(name: impl Into<String>, pose: Isometry3<f64>, shape: Shape) -> Self {
         Self { name: name.into(), pose, shape }
     }
@@ -27,9 +31,11 @@ pub struct Environment {
 }
 
 impl Environment {
+    /// An empty environment.
     pub fn new() -> Self {
         Self::default()
     }
+    /// Add an obstacle.
     pub fn add(&mut self, o: Obstacle) {
         self.obstacles.push(o);
     }
@@ -38,6 +44,7 @@ impl Environment {
         self.add(o);
         self
     }
+    /// Every obstacle, in the order added.
     pub fn obstacles(&self) -> &[Obstacle] {
         &self.obstacles
     }
@@ -60,9 +67,11 @@ impl Environment {
         self.obstacles.retain(|o| o.name != name);
         self.obstacles.len() != before
     }
+    /// Number of obstacles.
     pub fn len(&self) -> usize {
         self.obstacles.len()
     }
+    /// Whether there are no obstacles.
     pub fn is_empty(&self) -> bool {
         self.obstacles.is_empty()
     }

@@ -49,7 +49,9 @@ pub type MoveitError = YamlError;
 /// A `sensor_msgs/JointState` (names and positions only).
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct JointState {
+    /// Joint names.
     pub names: Vec<String>,
+    /// Joint positions (rad or m), in the order of `names`.
     pub positions: Vec<f64>,
     /// Where each name stands in the file (same order as `names`).
     pub locations: Vec<Location>,
@@ -67,15 +69,18 @@ impl JointState {
 pub struct Primitive {
     /// `object pose * primitive pose`.
     pub pose: Isometry3<f64>,
+    /// The primitive's shape, in its own frame.
     pub shape: Shape,
 }
 
 /// A `moveit_msgs/CollisionObject` with its primitives.
 #[derive(Debug, Clone)]
 pub struct CollisionObject {
+    /// The object's `id`.
     pub id: String,
     /// `header.frame_id` (empty when absent).
     pub frame_id: String,
+    /// The object's solid primitives.
     pub primitives: Vec<Primitive>,
     /// Where the object starts in the file.
     pub location: Location,
@@ -84,9 +89,13 @@ pub struct CollisionObject {
 /// A `moveit_msgs/PlanningScene`: the world's collision objects and the robot state, if given.
 #[derive(Debug, Clone)]
 pub struct PlanningScene {
+    /// The file the scene was read from.
     pub file: PathBuf,
+    /// The scene's `name` (empty when absent).
     pub name: String,
+    /// The world's collision objects.
     pub objects: Vec<CollisionObject>,
+    /// The robot state's joint positions, if the scene gives one.
     pub robot_state: Option<JointState>,
     /// Pairs of links the scene's `allowed_collision_matrix` lets touch (its `entry_values` true
     /// in either direction), each pair once, in matrix order. The `default_entry_*` fields are
@@ -97,23 +106,34 @@ pub struct PlanningScene {
 /// A joint-space goal on one joint.
 #[derive(Debug, Clone, PartialEq)]
 pub struct JointGoal {
+    /// The joint's name.
     pub joint: String,
+    /// Goal position (rad or m).
     pub position: f64,
+    /// Allowed excess above `position` (rad or m).
     pub tolerance_above: f64,
+    /// Allowed shortfall below `position` (rad or m).
     pub tolerance_below: f64,
+    /// Where the constraint stands in the file.
     pub location: Location,
 }
 
 /// A `moveit_msgs/MotionPlanRequest` with a joint-space goal.
 #[derive(Debug, Clone)]
 pub struct MotionRequest {
+    /// The file the request was read from.
     pub file: PathBuf,
+    /// The planning group (`group_name`).
     pub group_name: String,
+    /// Where `group_name` stands in the file.
     pub group_location: Location,
+    /// The start state (`start_state.joint_state`).
     pub start: JointState,
     /// `goal_constraints[0].joint_constraints`, in file order.
     pub goal: Vec<JointGoal>,
+    /// The requested planner (`planner_id`), if given.
     pub planner_id: Option<String>,
+    /// The requested planning time budget (s), if given.
     pub allowed_planning_time: Option<f64>,
 }
 

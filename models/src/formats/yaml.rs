@@ -15,12 +15,23 @@ use crate::error::ModelError;
 pub enum YamlError {
     /// Malformed YAML or content that is not what a scene/request holds; 1-based line and column.
     #[error("{}:{line}:{column}: {message}", file.display())]
-    Parse { file: PathBuf, line: usize, column: usize, message: String },
+    Parse {
+        /// The file that is malformed.
+        file: PathBuf,
+        /// 1-based line.
+        line: usize,
+        /// 1-based column.
+        column: usize,
+        /// What is wrong and what was expected.
+        message: String,
+    },
     /// A file that could not be read.
     #[error("cannot read {}: {source}", file.display())]
     Io {
+        /// The file that could not be read.
         file: PathBuf,
         #[source]
+        /// The underlying I/O error.
         source: std::io::Error,
     },
     /// The robot model refused something (unknown group, joint that cannot be frozen, ...).

@@ -24,6 +24,23 @@ use std::f64::consts::{FRAC_PI_2, TAU};
 
 use nalgebra::Isometry3;
 
+use crate::joint::Dh;
+
+/// The standard DH table of the IRp-6 arm's six revolute joints (shared/robots/README.md 1.3.1,
+/// derived from MRROC++): the built-in IRp-6 robots are made from it and the closed form below
+/// solves it.
+pub(crate) const IRP6_DH: [Dh; 6] = [
+    Dh::new(0.0, 0.0, 0.0, -FRAC_PI_2),
+    Dh::new(0.0, 0.0, 0.455, 0.0),
+    Dh::new(FRAC_PI_2, 0.0, 0.67, 0.0),
+    Dh::new(-FRAC_PI_2, 0.0, 0.0, -FRAC_PI_2),
+    Dh::new(0.0, 0.19, 0.0, FRAC_PI_2),
+    Dh::new(0.0, 0.0, 0.0, 0.0),
+];
+
+/// The lengths of [`IRP6_DH`] that the IRp-6's closed-form inverse kinematics needs.
+pub(crate) const IRP6_LENGTHS: Irp6Lengths = Irp6Lengths { a2: IRP6_DH[1].a, a3: IRP6_DH[2].a, d5: IRP6_DH[4].d };
+
 /// Below this a quantity is treated as zero (a singular direction).
 const SINGULAR: f64 = 1e-10;
 

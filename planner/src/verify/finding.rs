@@ -17,40 +17,118 @@ use serde::Serialize;
 pub enum Finding {
     /// The trajectory itself is not well formed (lengths, DOF, non-finite values, time order,
     /// unknown end effectors).
-    Malformed { message: String },
+    Malformed {
+        /// What is malformed.
+        message: String,
+    },
     /// A joint outside its position limits.
-    Position { t: f64, joint: String, value: f64, lower: f64, upper: f64, excess: f64 },
+    Position {
+        /// When, s (the path parameter for a path).
+        t: f64,
+        /// The joint's name.
+        joint: String,
+        /// Its position, rad or m.
+        value: f64,
+        /// Lower position limit.
+        lower: f64,
+        /// Upper position limit.
+        upper: f64,
+        /// How far outside the limits it is.
+        excess: f64,
+    },
     /// A joint faster than its velocity limit; `source`: `qd` (the stated velocity) or
     /// `finite difference of q`.
-    Velocity { t: f64, joint: String, value: f64, limit: f64, excess: f64, source: String },
+    Velocity {
+        /// When, s (the path parameter for a path).
+        t: f64,
+        /// The joint's name.
+        joint: String,
+        /// Its velocity, rad/s or m/s.
+        value: f64,
+        /// Its velocity limit.
+        limit: f64,
+        /// By how much `|value|` exceeds the limit.
+        excess: f64,
+        /// Where the velocity comes from: `qd` or `finite difference of q`.
+        source: String,
+    },
     /// A joint accelerating harder than its limit (finite difference of the stated `qd`).
-    Acceleration { t: f64, joint: String, value: f64, limit: f64, excess: f64 },
+    Acceleration {
+        /// When, s.
+        t: f64,
+        /// The joint's name.
+        joint: String,
+        /// Its acceleration, rad/s^2 or m/s^2.
+        value: f64,
+        /// Its acceleration limit.
+        limit: f64,
+        /// By how much `|value|` exceeds the limit.
+        excess: f64,
+    },
     /// A configuration on the path in collision: the pair and how deep (m, >= 0).
-    Collision { t: f64, q: Vec<f64>, a: String, b: String, penetration_m: f64 },
+    Collision {
+        /// When, s (the path parameter for a path).
+        t: f64,
+        /// The configuration in collision.
+        q: Vec<f64>,
+        /// One body of the pair ("link `x`").
+        a: String,
+        /// The other body ("obstacle `y`" or another link).
+        b: String,
+        /// Penetration depth, m (>= 0).
+        penetration_m: f64,
+    },
     /// A configuration on the path that is free but closer than the clearance the check
     /// requires ([`super::Mode::Certified`]'s `tolerance`): the pair, its distance and the
     /// required clearance (m).
-    TooClose { t: f64, q: Vec<f64>, a: String, b: String, distance_m: f64, required_m: f64 },
+    TooClose {
+        /// When, s (the path parameter for a path).
+        t: f64,
+        /// The configuration that is too close.
+        q: Vec<f64>,
+        /// One body of the pair ("link `x`").
+        a: String,
+        /// The other body ("obstacle `y`" or another link).
+        b: String,
+        /// Their distance, m.
+        distance_m: f64,
+        /// The clearance required, m.
+        required_m: f64,
+    },
     /// A piece of the path that the certificate could neither prove free nor show in collision
     /// within the caps: the piece, and the pair closest at its ends.
     NotCertified {
+        /// Start of the piece, s (the path parameter for a path).
         t_from: f64,
+        /// End of the piece, s (the path parameter for a path).
         t_to: f64,
+        /// Configuration at the start of the piece.
         q_from: Vec<f64>,
+        /// Configuration at the end of the piece.
         q_to: Vec<f64>,
+        /// One body of the closest pair (empty when no pair was evaluated).
         a: String,
+        /// The other body of the closest pair (empty when no pair was evaluated).
         b: String,
+        /// The smallest clearance bound over the piece, m (NaN when not evaluated).
         clearance_m: f64,
+        /// Why the piece could not be certified.
         reason: String,
     },
     /// The pose of the second tool frame relative to the first drifted from its value at the
     /// start of the closed-chain span.
     ClosureDrift {
+        /// When, s.
         t: f64,
+        /// Index of the closed-chain span.
         span: usize,
+        /// Drift of the relative tool position, m.
         position_error_m: f64,
+        /// Drift of the relative tool rotation angle, rad.
         angle_error_rad: f64,
+        /// Allowed position drift, m.
         tolerance_m: f64,
+        /// Allowed angle drift, rad.
         tolerance_rad: f64,
     },
 }
