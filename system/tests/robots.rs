@@ -103,6 +103,7 @@ fn plan_file(scenario: &Scenario, paths: &[Vec<Vec<f64>>; 2], together: bool) ->
         .collect();
     PlanFile {
         format: PLAN_FORMAT.into(),
+        generator: None,
         scenario: NamedHash { name: scenario.name.clone(), hash: scenario.hash.clone() },
         plans,
         together: if together { vec![vec!["left".into(), "right".into()]] } else { Vec::new() },
