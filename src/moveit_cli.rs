@@ -126,6 +126,7 @@ pub fn plan_moveit(
                     stats: serde_json::to_value(&plan.stats).map_err(|e| AppError::Failed(e.to_string()))?,
                     closed_chain: Vec::new(),
                 }],
+                together: Vec::new(),
             };
             serde_json::to_string_pretty(&file).map_err(|e| AppError::Failed(e.to_string()))?
         }

@@ -77,7 +77,7 @@ impl<C: Send + 'static> Agent<C> {
             effector: None,
             sensors: Vec::new(),
             countdown: Vec::new(),
-            receptors: Receptors { spec: ReceptorSpec::default(), robot: None, rng: Rng::new(0) },
+            receptors: Receptors { spec: ReceptorSpec::default(), robot: None, rng: Rng::new(0), own: None },
             readings: ReceptorReadings::default(),
             behaviour: Box::new(behaviour),
             halting: false,
@@ -274,6 +274,7 @@ impl<C: Send> Steppable for Agent<C> {
         self.countdown = vec![1; n];
         self.control.outputs = OutputImages::new(id, dof, n);
         self.receptors.rng = Rng::new(seed);
+        self.receptors.own = Some(id.0);
         self.halt_command = JointCommand::hold(&vec![0.0; dof]);
         if let Some(e) = &self.effector {
             self.control.inputs.q.copy_from_slice(e.q());

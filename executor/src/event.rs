@@ -186,6 +186,28 @@ pub enum Event {
         /// Why.
         reason: ReplanReason,
     },
+    /// The agent asks for a new plan while it keeps moving: the new plan starts where the
+    /// current path, braked from the deadline on, comes to rest, and is joined there.
+    ReplanInMotion {
+        /// The plan being followed.
+        plan: u64,
+        /// Id of the request.
+        id: u64,
+        /// Time from now until the braking begins (the deadline), s.
+        join_after_s: f64,
+        /// Largest joint speed at the deadline on the current path, rad/s or m/s.
+        speed: f64,
+    },
+    /// A plan asked for in motion landed in time and was joined to the path being followed
+    /// (no halt).
+    PlanJoined {
+        /// The new plan's id.
+        id: u64,
+        /// The plan it continues.
+        plan: u64,
+        /// Time until the new plan's start, s.
+        join_in_s: f64,
+    },
     /// A plan landed after a halt: the agent moves again.
     Resumed {
         /// Plan id.
@@ -379,6 +401,8 @@ impl Event {
             Event::PlanRevalidated { .. } => "plan_revalidated",
             Event::Replan { .. } => "replan",
             Event::Resumed { .. } => "resumed",
+            Event::ReplanInMotion { .. } => "replan_in_motion",
+            Event::PlanJoined { .. } => "plan_joined",
             Event::HaltStarted { .. } => "halt_started",
             Event::HaltFinished { .. } => "halt_finished",
             Event::WorldChanged { .. } => "world_changed",
@@ -470,6 +494,12 @@ impl fmt::Display for Event {
             Event::PlanRevalidated { id, world } => write!(f, "{kind} id={id} world={world}"),
             Event::Replan { reason } => write!(f, "{kind} reason={}", reason.as_str()),
             Event::Resumed { id, after_s } => write!(f, "{kind} id={id} after_s={after_s:.3}"),
+            Event::ReplanInMotion { plan, id, join_after_s, speed } => {
+                write!(f, "{kind} plan={plan} id={id} join_after_s={join_after_s:.3} speed={speed:.6}")
+            }
+            Event::PlanJoined { id, plan, join_in_s } => {
+                write!(f, "{kind} id={id} plan={plan} join_in_s={join_in_s:.3}")
+            }
             Event::HaltStarted { reason, speed, detail } => {
                 write!(f, "{kind} reason={} speed={speed:.6}", reason.as_str())?;
                 if let Some(d) = detail {

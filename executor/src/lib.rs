@@ -104,8 +104,8 @@ pub use image::{
     SensorImage, WORDS,
 };
 pub use motion::{Move, Wait};
-pub use runtime::{Parallelism, Runtime, RuntimeConfig, StepRecord};
+pub use runtime::{Clearance, Parallelism, Runtime, RuntimeConfig, StepMonitor, StepRecord};
 pub use sensor::{Contact, JointState, NearestObstacle, VirtualSensor};
 pub use transition::{Predicate, TransitionFunction, idle};
 pub use transmitter::{ChannelStats, Link, Transmitter};
-pub use world::{Obstacle, ObstacleEcho, ReceptorReadings, ReceptorSpec, World, receptor_noise};
+pub use world::{Body, Obstacle, ObstacleEcho, ReceptorReadings, ReceptorSpec, World, receptor_noise};

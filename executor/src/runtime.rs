@@ -76,6 +76,31 @@ pub struct StepRecord {
     pub time: f64,
     /// One record per agent.
     pub agents: Vec<AgentRecord>,
+    /// The step's smallest distances between robots and from robots to the environment,
+    /// when the runtime has a [`StepMonitor`].
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub clearance: Option<Clearance>,
+}
+
+/// The smallest distances of one step (m, signed: negative is penetration), measured after
+/// the step: between the shapes of any two robots, and between any robot's shapes and the
+/// obstacles present. `None` where there is no such pair.
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Clearance {
+    /// Smallest distance between two agents' bodies.
+    pub robot_robot_m: Option<f64>,
+    /// Smallest distance between an agent's body and an obstacle.
+    pub robot_environment_m: Option<f64>,
+}
+
+/// What the runtime consults after every step about the agents' bodies (it knows their
+/// geometry, the runtime does not): where the bodies are, for the other agents' receptors, and
+/// the step's [`Clearance`].
+pub trait StepMonitor: Send {
+    /// The agents' bodies at their joints after the step (`agents`: this step's records).
+    fn bodies(&mut self, agents: &[AgentRecord], out: &mut Vec<crate::world::Body>);
+    /// The step's clearance; `world` is at the step's end.
+    fn clearance(&mut self, world: &World, agents: &[AgentRecord]) -> Clearance;
 }
 
 /// Bound on halting steps after a failure in [`Runtime::run`].
@@ -92,6 +117,7 @@ pub struct Runtime {
     failure: Option<ExecutorError>,
     /// Agents whose inbox received messages in the last delivery (cleared at the next one).
     filled_inboxes: Vec<usize>,
+    monitor: Option<Box<dyn StepMonitor>>,
 }
 
 impl Runtime {
@@ -107,7 +133,14 @@ impl Runtime {
             record: StepRecord::default(),
             failure: None,
             filled_inboxes: Vec::new(),
+            monitor: None,
         }
+    }
+
+    /// Let `monitor` place the agents' bodies in the world and measure every step's
+    /// [`Clearance`] (needs [`RuntimeConfig::record`]: it reads the step's records).
+    pub fn set_monitor(&mut self, monitor: Box<dyn StepMonitor>) {
+        self.monitor = Some(monitor);
     }
 
     /// Add an agent; ids are given in order of addition, starting at 0.
@@ -302,6 +335,10 @@ impl Runtime {
                 for (a, rec) in self.agents.iter().zip(&mut self.record.agents) {
                     a.record(rec);
                 }
+            }
+            if let Some(m) = self.monitor.as_mut() {
+                m.bodies(&self.record.agents, self.world.bodies_mut());
+                self.record.clearance = Some(m.clearance(&self.world, &self.record.agents));
             }
         }
         self.step += 1;

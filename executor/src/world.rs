@@ -34,10 +34,23 @@ impl Obstacle {
     }
 }
 
-/// Everything outside the agents.
+/// An agent's body in the world, as other agents' receptors see it: the bounding spheres of
+/// its shapes where its joints stood after the last step.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct Body {
+    /// Index of the agent in the runtime.
+    pub agent: usize,
+    /// Its name.
+    pub name: String,
+    /// Centre (m) and radius (m) of each shape's bounding sphere.
+    pub spheres: Vec<([f64; 3], f64)>,
+}
+
+/// Everything outside the agents' control subsystems: the obstacles and the agents' bodies.
 #[derive(Debug, Clone, Default)]
 pub struct World {
     obstacles: Vec<Obstacle>,
+    bodies: Vec<Body>,
     step: u64,
 }
 
@@ -54,6 +67,18 @@ impl World {
     /// All obstacles, present or not, at their current positions.
     pub fn obstacles(&self) -> &[Obstacle] {
         &self.obstacles
+    }
+    /// The agents' bodies (placed by the runtime's [`crate::runtime::StepMonitor`] after every
+    /// step; empty without one).
+    pub fn bodies(&self) -> &[Body] {
+        &self.bodies
+    }
+    /// Replace the agents' bodies.
+    pub fn set_bodies(&mut self, bodies: Vec<Body>) {
+        self.bodies = bodies;
+    }
+    pub(crate) fn bodies_mut(&mut self) -> &mut Vec<Body> {
+        &mut self.bodies
     }
     /// The current step.
     pub fn step(&self) -> u64 {
@@ -74,8 +99,11 @@ impl World {
 /// One obstacle as the detector saw it.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ObstacleEcho {
-    /// Index in [`World::obstacles`].
+    /// Index in [`World::obstacles`]; for a shape of another agent's body (see `agent`), the
+    /// number of obstacles plus the index of the shape among all bodies' shapes.
     pub id: usize,
+    /// The agent whose body this is, when it is one.
+    pub agent: Option<usize>,
     /// Measured centre (with noise).
     pub position: [f64; 3],
     /// Distance from the sensing point to the obstacle surface (negative = penetration).
@@ -159,6 +187,8 @@ pub(crate) struct Receptors {
     pub(crate) spec: ReceptorSpec,
     pub(crate) robot: Option<(Arc<Robot>, usize)>,
     pub(crate) rng: Rng,
+    /// The agent's own index (its own body is not an obstacle to it).
+    pub(crate) own: Option<usize>,
 }
 
 impl Receptors {
@@ -186,14 +216,14 @@ impl Receptors {
             _ => [0.0; 3],
         };
         let p = out.sensing_point;
-        for (id, o) in world.obstacles().iter().enumerate() {
-            if !o.present_at(world.step) {
-                continue;
-            }
-            let d = [p[0] - o.position[0], p[1] - o.position[1], p[2] - o.position[2]];
+        let rng = &mut self.rng;
+        let mut sense = |id: usize, agent: Option<usize>, position: [f64; 3], radius: f64| {
+            let d = [p[0] - position[0], p[1] - position[1], p[2] - position[2]];
             let centre_dist = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
-            let distance = centre_dist - o.radius;
+            let distance = centre_dist - radius;
+            // The force sensor feels obstacles; another robot's body is seen, not felt.
             if let Some(k) = spec.force_stiffness
+                && agent.is_none()
                 && distance < 0.0
                 && centre_dist > 0.0
             {
@@ -204,13 +234,27 @@ impl Receptors {
             if let Some(range) = spec.detector_range
                 && distance <= range
             {
-                let mut position = o.position;
+                let mut position = position;
                 if spec.detector_noise > 0.0 {
                     for c in position.iter_mut() {
-                        *c += spec.detector_noise * noise(&mut self.rng);
+                        *c += spec.detector_noise * noise(rng);
                     }
                 }
-                out.obstacles.push(ObstacleEcho { id, position, distance });
+                out.obstacles.push(ObstacleEcho { id, agent, position, distance });
+            }
+        };
+        for (id, o) in world.obstacles().iter().enumerate() {
+            if o.present_at(world.step) {
+                sense(id, None, o.position, o.radius);
+            }
+        }
+        let mut id = world.obstacles().len();
+        for b in &world.bodies {
+            for &(position, radius) in &b.spheres {
+                if Some(b.agent) != self.own {
+                    sense(id, Some(b.agent), position, radius);
+                }
+                id += 1;
             }
         }
         if spec.force_stiffness.is_some() && spec.force_noise > 0.0 {
@@ -224,6 +268,27 @@ impl Receptors {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_detector_sees_other_agents_bodies_but_not_its_own_and_feels_only_obstacles() {
+        let mut world = World::new();
+        world.add_obstacle(Obstacle::fixed("ball", [0.5, 0.0, 0.0], 0.1));
+        world.set_bodies(vec![
+            Body { agent: 0, name: "me".into(), spheres: vec![([0.0, 0.0, 0.0], 0.2)] },
+            Body { agent: 1, name: "other".into(), spheres: vec![([0.0, 0.05, 0.0], 0.3), ([0.0, 2.0, 0.0], 0.1)] },
+        ]);
+        let spec = ReceptorSpec { detector_range: Some(1.0), force_stiffness: Some(100.0), ..ReceptorSpec::default() };
+        let mut r = Receptors { spec, robot: None, rng: Rng::new(1), own: Some(0) };
+        let mut out = ReceptorReadings::default();
+        r.sample(&world, &[], &[], &mut out);
+        // The sensing point is the origin (no robot): the ball, and the other agent's near
+        // shape (id: one obstacle, then the bodies' shapes in order: own 1, other 2 and 3).
+        let seen: Vec<(usize, Option<usize>)> = out.obstacles.iter().map(|e| (e.id, e.agent)).collect();
+        assert_eq!(seen, vec![(0, None), (2, Some(1))]);
+        assert!((out.obstacles[1].distance - (0.05 - 0.3)).abs() < 1e-12);
+        // Inside the other's body sphere, but a body is seen, not felt.
+        assert_eq!(out.force, [0.0; 3]);
+    }
 
     #[test]
     fn noise_scale_gives_unit_variance() {

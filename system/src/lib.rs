@@ -35,6 +35,7 @@
 #![forbid(unsafe_code)]
 
 pub mod bench_qp;
+pub mod clearance;
 pub mod deadlines;
 pub mod error;
 pub mod log;

@@ -1,5 +1,6 @@
 //! The run log: JSON Lines, one header line ([`LogHeader`]), one line per control step
-//! ([`LogStep`], with its typed [`Event`]s), one summary line.
+//! ([`LogStep`], with its typed [`Event`]s and its [`Clearance`]: the smallest robot-robot and
+//! robot-environment distance after the step), one summary line.
 //!
 //! Every line is written and flushed as soon as it exists, so a run that fails or is
 //! interrupted leaves a valid log up to its last step. The log holds only what the simulation
@@ -11,7 +12,7 @@ use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 
-use embodied_executor::{Event, StepRecord};
+use embodied_executor::{Clearance, Event, StepRecord};
 use serde::{Deserialize, Serialize};
 
 use crate::SystemError;
@@ -108,6 +109,12 @@ pub struct LogStep {
     pub t: f64,
     /// Every agent (the coordinator too), by name.
     pub agents: BTreeMap<String, LoggedAgentStep>,
+    /// Smallest distances after the step, m (signed: negative is penetration): between any two
+    /// robots' shapes (`robot_robot_m`, absent with one robot) and between any robot's shapes
+    /// and the obstacles present at that time (`robot_environment_m`, absent without
+    /// obstacles). Absent in logs written without a clearance monitor.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub clearance: Option<Clearance>,
 }
 
 impl LogStep {
@@ -126,7 +133,7 @@ impl LogStep {
                 (a.agent.clone(), step)
             })
             .collect();
-        Self { step: record.step, t: record.time, agents }
+        Self { step: record.step, t: record.time, agents, clearance: record.clearance }
     }
 }
 

@@ -62,6 +62,10 @@ pub struct PlanFile {
     pub scenario: NamedHash,
     /// One plan per planned agent.
     pub plans: Vec<AgentPlan>,
+    /// Groups of agents (by name) whose plans run at the same time, all from `t = 0`; plans
+    /// not in a group run one after another in file order. Absent: every plan runs alone.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub together: Vec<Vec<String>>,
 }
 
 /// SHA-256 of a robot's kinematic description (names, kinds, limits, frames, base).
@@ -225,6 +229,7 @@ pub fn plan_scenario(scenario: &Scenario, deadline_ms: Option<f64>) -> Result<Pl
         generator: Some(crate::generator()),
         scenario: NamedHash { name: scenario.name.clone(), hash: scenario.hash.clone() },
         plans,
+        together: Vec::new(),
     })
 }
 

@@ -302,6 +302,8 @@ pub fn deliberation_settings(scenario: &Scenario, clock: ClockSpec, dt: f64) -> 
         sensor_max_age: 50,
         move_tolerance: 0.02,
         halt_on_any_change: false,
+        replan_in_motion: true,
+        brake_fraction: 0.9,
     }
 }
 
@@ -627,7 +629,7 @@ impl System {
             let mut a = Agent::embodied(agent.name.clone(), robot, Some(&agent.start), state, program(force_limit))
                 .map_err(|e| failed(&agent.name, &e))?;
             if sensing {
-                a = a.with_sensor(UnmappedObstacle { mapped: mapped.clone() }, SensorConfig::default());
+                a = a.with_sensor(UnmappedObstacle { mapped: mapped.clone(), bodies: false }, SensorConfig::default());
             }
             if let Some(limit) = force_limit {
                 a = a.with_sensor(Contact, SensorConfig { threshold: limit, ..SensorConfig::default() });
@@ -672,6 +674,9 @@ impl System {
             }
             coordinator = Some(id);
         }
+        // Every agent's body is in the world: other agents' detectors see it, and every step
+        // records the smallest robot-robot and robot-environment distance.
+        runtime.set_monitor(Box::new(crate::clearance::ClearanceMeter::new(scenario, dt)));
         let observer = Observer::new(scenario, runtime.agent_count());
         Ok(Self {
             scenario: scenario.clone(),

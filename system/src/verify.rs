@@ -13,6 +13,10 @@
 //! **Other agents.** Plans in a file run one after another in file order (this is how
 //! `embodied plan` makes them): while agent `k` moves, every agent whose plan comes earlier in
 //! the file stands where its plan ends, every other agent stands at its start configuration.
+//! Plans the file's `together` groups name run at the same time, from `t = 0`: each pair of
+//! them is certified against each other in time (agent A at `t` against agent B at `t`, both
+//! sampled at the finer of their sample steps; a plan that has ended stands at its end), not one
+//! after another.
 //! Obstacles are those present at time zero (scripted obstacles that appear later are the run's
 //! business, not the plan's).
 //!
@@ -20,7 +24,11 @@
 //! scenario robot's limits, the logged `qd` against the velocity limits, the finite difference
 //! of the logged `qd` over the header's `step_s` against the acceleration limits, and when the
 //! header names a `closed_chain`, the relative tool pose between each `grasp` event of that
-//! agent and the next `release` (the release step itself is not checked). A log whose last line
+//! agent and the next `release` (the release step itself is not checked). Every logged motion
+//! is certified collision-free between consecutive steps by the certified
+//! [`embodied_planner::verify::Verifier`]: each robot against the scenario's obstacles at their
+//! times (scripted ones where and once they are there) and against itself, and every two robots
+//! against each other at the same steps (see [`crate::clearance`]). A log whose last line
 //! is incomplete, or that has no summary line, is checked up to its last complete line and the
 //! report says so (`complete: false`).
 
@@ -30,12 +38,14 @@ use std::time::Instant;
 use embodied_executor::Event;
 use embodied_models::Robot;
 use embodied_models::nalgebra::Isometry3;
+use embodied_planner::trajectory::Trajectory;
 use embodied_planner::verify::certified::pose_error;
 use embodied_planner::verify::{CheckSettings, Finding, LimitsChecker, TrajectoryReport, Verifier};
 use serde::Serialize;
 use serde_json::Value;
 
 use crate::SystemError;
+use crate::clearance::{LoggedMotion, MotionCheck, ObstacleTimeline, certify_environment, certify_pair};
 use crate::plan::{PlanFile, agent_problem, read_plan};
 use crate::scenario::{GoalSpec, Scenario, load_scenario};
 
@@ -76,6 +86,8 @@ pub struct PlanVerification {
     pub warnings: Vec<String>,
     /// One result per agent.
     pub agents: Vec<AgentVerification>,
+    /// Plans that run together, certified against each other in time.
+    pub together: Vec<MotionCheck>,
     /// The settings of the certified check.
     pub settings: CheckSettings,
     /// Wall-clock time of the check, s.
@@ -163,7 +175,37 @@ fn match_plan(scenario: &Scenario, plan: &PlanFile, file: &Path) -> Result<(Vec<
         }
         index.push(k);
     }
+    for (g, group) in plan.together.iter().enumerate() {
+        for (m, name) in group.iter().enumerate() {
+            if !plan.plans.iter().any(|p| p.agent == *name) {
+                return Err(usage(file, format!("together[{g}][{m}]: no plan for agent `{name}` in the file")));
+            }
+            let elsewhere = plan.together.iter().enumerate().any(|(h, other)| h != g && other.contains(name));
+            if elsewhere || group[..m].contains(name) {
+                return Err(usage(file, format!("together[{g}][{m}]: agent `{name}` is named twice")));
+            }
+        }
+    }
     Ok((warnings, index))
+}
+
+/// Group of plan `j`'s agent in `plan.together`, if any.
+fn group_of(plan: &PlanFile, j: usize) -> Option<usize> {
+    plan.together.iter().position(|g| g.contains(&plan.plans[j].agent))
+}
+
+/// Plans `a` and `b` sampled at the same times from `t = 0` (the finer sample step; a plan
+/// that has ended stands at its end).
+fn in_time(a: &Trajectory, b: &Trajectory) -> (Vec<f64>, Vec<Vec<f64>>, Vec<Vec<f64>>) {
+    let step = |t: &Trajectory| t.t.windows(2).map(|w| w[1] - w[0]).filter(|h| *h > 0.0).fold(f64::INFINITY, f64::min);
+    let h = step(a).min(step(b));
+    let end = a.duration().max(b.duration());
+    let h = if h.is_finite() && h > 0.0 { h.max(end / 1e6) } else { end.max(1e-3) };
+    let n = (end / h).ceil() as usize;
+    let times: Vec<f64> = (0..=n).map(|k| (k as f64 * h).min(end)).collect();
+    let qa = times.iter().map(|&t| a.sample(t).0).collect();
+    let qb = times.iter().map(|&t| b.sample(t).0).collect();
+    (times, qa, qb)
 }
 
 /// Start at t = 0 at rest at the scenario's start, end at rest (and at the goal, for
@@ -212,7 +254,14 @@ pub fn verify_plan(
     for (j, (p, &k)) in plan.plans.iter().zip(&index).enumerate() {
         let mut occupied = Vec::new();
         let mut others = Vec::new();
+        let group = group_of(plan, j);
         for (m, a) in scenario.agents.iter().enumerate() {
+            let moves_along = |jj: usize| index[jj] == m && group.is_some() && group_of(plan, jj) == group;
+            if m != k && (0..plan.plans.len()).any(moves_along) {
+                occupied.push(Vec::new());
+                others.push(format!("{}: moving at the same time (checked in time)", a.name));
+                continue;
+            }
             let earlier = plan.plans[..j].iter().zip(&index).find(|(_, mi)| **mi == m);
             match earlier.and_then(|(ep, _)| ep.trajectory.q.last()) {
                 Some(end) => {
@@ -242,13 +291,30 @@ pub fn verify_plan(
             report,
         });
     }
+    let verifier = Verifier::certified(0.0).with_settings(*settings);
+    let mut together = Vec::new();
+    for i in 0..plan.plans.len() {
+        for j in i + 1..plan.plans.len() {
+            if group_of(plan, i).is_none() || group_of(plan, i) != group_of(plan, j) {
+                continue;
+            }
+            let (pa, pb) = (&plan.plans[i], &plan.plans[j]);
+            let (ra, rb) = (&scenario.agents[index[i]].robot, &scenario.agents[index[j]].robot);
+            let (times, qa, qb) = in_time(&pa.trajectory, &pb.trajectory);
+            let steps: Vec<u64> = (0..times.len() as u64).collect();
+            let a = LoggedMotion { agent: &pa.agent, robot: ra, steps: &steps, t: &times, q: &qa };
+            let b = LoggedMotion { agent: &pb.agent, robot: rb, steps: &steps, t: &times, q: &qb };
+            together.push(certify_pair(&a, &b, &verifier));
+        }
+    }
     Ok(PlanVerification {
         generator: crate::generator(),
         plan_file: file.to_path_buf(),
         scenario: scenario.name.clone(),
-        certified: agents.iter().all(|a| a.certified),
+        certified: agents.iter().all(|a| a.certified) && together.iter().all(|c| c.ok),
         warnings,
         agents,
+        together,
         settings: *settings,
         time_s: start.elapsed().as_secs_f64(),
     })
@@ -316,6 +382,9 @@ pub fn render_plan(v: &PlanVerification) -> String {
         }
         s.push_str(&format!("  others: {}\n", a.others.join("; ")));
     }
+    for c in &v.together {
+        render_motion_check(&mut s, c);
+    }
     s.push_str(&format!("certified: {} [{:.1} ms]\n", if v.certified { "yes" } else { "no" }, v.time_s * 1e3));
     s
 }
@@ -372,6 +441,8 @@ pub struct LogAgent {
     pub max_acceleration_ratio: f64,
     /// The closed-chain check, for an agent that holds an object with two end effectors.
     pub closure: Option<LogClosure>,
+    /// Its motion certified free of the obstacles and of itself, step to step.
+    pub collision: Option<MotionCheck>,
 }
 
 /// A run log checked against a scenario.
@@ -397,8 +468,15 @@ pub struct LogVerification {
     pub warnings: Vec<String>,
     /// One result per agent.
     pub agents: Vec<LogAgent>,
+    /// Every two robots certified apart, step to step.
+    pub robot_robot: Vec<MotionCheck>,
     /// Wall-clock time of the check, s.
     pub time_s: f64,
+}
+
+/// The logged motion of an agent, for the collision certificate.
+fn motion<'b>(st: &'b AgentState<'_>) -> LoggedMotion<'b> {
+    LoggedMotion { agent: &st.name, robot: st.robot, steps: &st.steps, t: &st.times, q: &st.qs }
 }
 
 struct AgentState<'a> {
@@ -410,6 +488,10 @@ struct AgentState<'a> {
     out: LogAgent,
     closure: Option<(usize, usize)>,
     holding: Option<Isometry3<f64>>,
+    /// Logged steps, times and joints, for the collision certificate.
+    steps: Vec<u64>,
+    times: Vec<f64>,
+    qs: Vec<Vec<f64>>,
 }
 
 fn parse_err(file: &Path, line: usize, column: usize, message: String) -> SystemError {
@@ -503,9 +585,13 @@ pub fn verify_log(scenario: &Scenario, file: &Path, settings: &CheckSettings) ->
                 max_velocity_ratio: 0.0,
                 max_acceleration_ratio: 0.0,
                 closure: None,
+                collision: None,
             },
             closure: None,
             holding: None,
+            steps: Vec::new(),
+            times: Vec::new(),
+            qs: Vec::new(),
         });
     }
     let chain: Option<LogClosedChain> = match header.get("closed_chain") {
@@ -604,6 +690,9 @@ pub fn verify_log(scenario: &Scenario, file: &Path, settings: &CheckSettings) ->
             let h = st.prev_step.map_or(f64::NAN, |p| step.saturating_sub(p).max(1) as f64 * step_s);
             st.limits.push_with_interval(t, h, &q, &qd);
             st.prev_step = Some(step);
+            st.steps.push(step);
+            st.times.push(t);
+            st.qs.push(q.clone());
             let events: Vec<Event> = match a.get("events") {
                 None => Vec::new(),
                 Some(v) => serde_json::from_value(v.clone()).map_err(|e| {
@@ -645,15 +734,38 @@ pub fn verify_log(scenario: &Scenario, file: &Path, settings: &CheckSettings) ->
     if !complete && note.is_none() {
         note = Some(format!("no summary line: the run did not finish; checked its {steps} steps"));
     }
+    // Collisions: every robot against the obstacles at their times, every two robots at the
+    // same steps.
+    let verifier = Verifier::certified(0.0).with_settings(*settings);
+    let timeline = ObstacleTimeline::new(scenario, step_s);
+    let mut robot_robot = Vec::new();
+    for (i, a) in agents.iter().enumerate() {
+        for b in &agents[i + 1..] {
+            if a.steps == b.steps {
+                robot_robot.push(certify_pair(&motion(a), &motion(b), &verifier));
+            } else {
+                warnings.push(format!(
+                    "agents {} and {} are not logged at the same steps: not checked against each other",
+                    a.name, b.name
+                ));
+            }
+        }
+    }
+    let collisions: Vec<MotionCheck> =
+        agents.iter().map(|st| certify_environment(&motion(st), &timeline, &verifier)).collect();
     let agents: Vec<LogAgent> = agents
         .into_iter()
-        .map(|st| {
+        .zip(collisions)
+        .map(|(st, collision)| {
             let mut a = st.out;
+            a.collision = Some(collision);
             a.violation = st.limits.first().cloned();
             a.violations = st.limits.violations();
             a.max_velocity_ratio = st.limits.max_velocity_ratio();
             a.max_acceleration_ratio = st.limits.max_acceleration_ratio();
-            a.certified = a.violation.is_none() && a.closure.as_ref().is_none_or(|c| c.ok);
+            a.certified = a.violation.is_none()
+                && a.closure.as_ref().is_none_or(|c| c.ok)
+                && a.collision.as_ref().is_none_or(|c| c.ok);
             a
         })
         .collect();
@@ -661,13 +773,14 @@ pub fn verify_log(scenario: &Scenario, file: &Path, settings: &CheckSettings) ->
         generator: crate::generator(),
         log_file: file.to_path_buf(),
         scenario: scenario.name.clone(),
-        certified: agents.iter().all(|a| a.certified),
+        certified: agents.iter().all(|a| a.certified) && robot_robot.iter().all(|c| c.ok),
         complete,
         note,
         steps,
         step_s,
         warnings,
         agents,
+        robot_robot,
         time_s: start.elapsed().as_secs_f64(),
     })
 }
@@ -715,9 +828,28 @@ pub fn render_log(v: &LogVerification) -> String {
                 s.push_str(&format!("  first violation: {f}\n"));
             }
         }
+        if let Some(c) = &a.collision {
+            render_motion_check(&mut s, c);
+        }
+    }
+    for c in &v.robot_robot {
+        render_motion_check(&mut s, c);
     }
     s.push_str(&format!("certified: {} [{:.1} ms]\n", if v.certified { "yes" } else { "no" }, v.time_s * 1e3));
     s
+}
+
+fn render_motion_check(s: &mut String, c: &MotionCheck) {
+    s.push_str(&format!(
+        "  collision ({}): {} ({} step-to-step motions certified, smallest distance measured {:.4} m)\n",
+        c.what,
+        ok_word(c.ok),
+        c.segments,
+        c.min_clearance_m
+    ));
+    if let Some(f) = &c.violation {
+        s.push_str(&format!("  first violation: {f}\n"));
+    }
 }
 
 /// What `embodied verify SCENARIO [PLAN.json] [--log FILE.jsonl]` found.

@@ -58,6 +58,13 @@ pub struct DeliberationSettings {
     pub move_tolerance: f64,
     /// Halt and replan on every change of the world, not only when the plan is hit.
     pub halt_on_any_change: bool,
+    /// When the path being followed is hit, ask for a new plan while moving (from where the
+    /// path, braked from the deadline on, comes to rest) instead of halting first; the agent
+    /// halts only if that plan is late.
+    pub replan_in_motion: bool,
+    /// Fraction of each joint's acceleration limit used to brake on the path before a plan
+    /// asked for in motion (below 1 leaves room for the effector's rounding).
+    pub brake_fraction: f64,
 }
 
 impl Default for DeliberationSettings {
@@ -77,6 +84,8 @@ impl Default for DeliberationSettings {
             sensor_max_age: 50,
             move_tolerance: 0.02,
             halt_on_any_change: false,
+            replan_in_motion: true,
+            brake_fraction: 0.9,
         }
     }
 }
@@ -90,6 +99,24 @@ struct ActivePlan {
 struct Halt {
     started_at: u64,
     q0: Vec<f64>,
+}
+
+/// A plan asked for while moving: where and when it joins the plan being followed.
+struct Join {
+    /// The request.
+    id: u64,
+    /// The plan being followed.
+    plan: u64,
+    /// Last step at which the new plan is in time.
+    needed_at: u64,
+    /// Time along the followed trajectory at which the braking begins, s.
+    t_brake: f64,
+    /// Largest joint speed there, rad/s or m/s.
+    speed: f64,
+    /// The braking samples after `t_brake` (every control step; the last one at rest): the
+    /// current path brought to rest within the acceleration limits.
+    brake_q: Vec<Vec<f64>>,
+    brake_qd: Vec<Vec<f64>>,
 }
 
 /// Distance (largest joint travel) and duration (s) of a halt.
@@ -121,6 +148,10 @@ pub struct DeliberativeState {
     sensed: Vec<SensedObstacle>,
     world_version: u64,
     plan: Option<ActivePlan>,
+    /// A plan asked for in motion, to be joined to `plan`.
+    join: Option<Join>,
+    /// Why the next halt from speed starts, when it is not the default.
+    halt_reason: Option<HaltReason>,
     halt: Option<Halt>,
     fault: Option<String>,
     attempts: u32,
@@ -159,6 +190,8 @@ impl DeliberativeState {
             sensed: Vec::new(),
             world_version: 0,
             plan: None,
+            join: None,
+            halt_reason: None,
             halt: None,
             fault: None,
             attempts: 0,
@@ -195,6 +228,7 @@ impl DeliberativeState {
     /// decided the task cannot go on). The behaviour halts from then on.
     pub fn abandon(&mut self) {
         self.plan = None;
+        self.join = None;
         self.deliberator.cancel();
         self.abandoned = true;
     }
@@ -224,11 +258,16 @@ impl DeliberativeState {
         let k = sample_at(&plan.trajectory, step.saturating_sub(plan.started_at) as f64 * dt);
         if remaining_collides(&self.collision, &plan.trajectory, k, self.settings.verify_resolution) {
             self.plan = None;
+            self.join = None;
             self.goal_reached = false;
             self.attempts = 0;
             self.next_request_at = step;
             true
         } else {
+            if self.join.take().is_some() {
+                // The path is free again in the new world: the plan asked for is not needed.
+                self.deliberator.cancel();
+            }
             false
         }
     }
@@ -291,8 +330,14 @@ impl<C: AsDeliberation + Send> Behaviour<C> for PlanFollower {
     fn step(&mut self, cc: &mut C, inputs: &InputImages, outputs: &mut OutputImages) -> Result<Status, Violation> {
         let s = cc.deliberation();
         let step = inputs.step();
-        if std::mem::take(&mut self.suspended) && s.plan.take().is_some() {
-            outputs.event(Event::PlanSuspended);
+        if std::mem::take(&mut self.suspended) {
+            if s.join.take().is_some() {
+                // The plan asked for in motion would join a plan that is no longer followed.
+                s.deliberator.cancel();
+            }
+            if s.plan.take().is_some() {
+                outputs.event(Event::PlanSuspended);
+            }
         }
         sense(s, inputs, outputs);
         if let Some(d) = s.deliberator.poll(step) {
@@ -310,7 +355,19 @@ impl<C: AsDeliberation + Send> Behaviour<C> for PlanFollower {
         }
         if s.fault.is_some() {
             s.plan = None;
+            s.join = None;
             s.deliberator.cancel();
+        }
+        if let Some(j) = s.join.as_ref().filter(|j| step > j.needed_at) {
+            // The plan asked for in motion is late: c^{i+1} is computed without it and halts the
+            // effector from speed; the agent resumes from wherever it stops.
+            let id = j.id;
+            s.join = None;
+            s.plan = None;
+            s.late_reported = true;
+            s.halt_reason = Some(HaltReason::PlanLate);
+            s.halted_since.get_or_insert(step);
+            outputs.event(Event::PlanLate { id });
         }
         if let Some(plan) = &s.plan {
             let k = step.saturating_sub(plan.started_at) + 1;
@@ -413,8 +470,16 @@ fn halt(s: &mut DeliberativeState, inputs: &InputImages, outputs: &mut OutputIma
         s.halt = Some(Halt { started_at: inputs.step(), q0: q.to_vec() });
         s.halted_since = Some(inputs.step());
         let speed = qd.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
-        let reason = if s.fault.is_some() { HaltReason::Fault } else { HaltReason::NoValidPlan };
+        let reason = match s.halt_reason.take() {
+            _ if s.fault.is_some() => HaltReason::Fault,
+            Some(r) => r,
+            None => HaltReason::NoValidPlan,
+        };
         outputs.event(Event::HaltStarted { reason, speed, detail: None });
+    }
+    if at_rest(qd) && s.halt.is_none() {
+        // Nothing to stop: a reason set for this halt does not carry over to a later one.
+        s.halt_reason = None;
     }
     if at_rest(qd)
         && let Some(h) = s.halt.take()
@@ -445,6 +510,11 @@ fn deliver(s: &mut DeliberativeState, d: PlanDelivery, inputs: &InputImages, out
         s.attempts += 1;
         s.next_request_at = step + s.settings.retry_after_steps;
     };
+    let join = s.join.take_if(|j| j.id == id);
+    if let Some(j) = join {
+        deliver_join(s, j, d, in_time, planning_ms, wall, inputs, outputs);
+        return;
+    }
     match d.outcome {
         PlanOutcome::Ready(trajectory) => {
             let stale = if d.world_version != s.world_version {
@@ -571,16 +641,213 @@ fn sense(s: &mut DeliberativeState, inputs: &InputImages, outputs: &mut OutputIm
     let Some(plan) = &s.plan else { return };
     let k = sample_at(&plan.trajectory, step.saturating_sub(plan.started_at) as f64 * inputs.dt());
     let hit = remaining_collides(&s.collision, &plan.trajectory, k, s.settings.verify_resolution);
+    if hit
+        && s.settings.replan_in_motion
+        && !s.settings.halt_on_any_change
+        && replan_in_motion(s, step, inputs.dt(), outputs)
+    {
+        return;
+    }
+    let Some(plan) = &s.plan else { return };
     if hit || s.settings.halt_on_any_change {
         let reason = if hit { ReplanReason::ObstacleInPath } else { ReplanReason::WorldChanged };
         outputs.event(Event::PlanInvalidated { id: Some(plan.id), reason });
         outputs.event(Event::Replan { reason });
         s.plan = None;
+        s.join = None;
         s.attempts = 0;
         s.goal_reached = false;
         s.next_request_at = step;
     } else {
         outputs.event(Event::PlanRevalidated { id: plan.id, world: s.world_version });
+        if s.join.take().is_some() {
+            // The path is free again in the new world: the plan asked for is not needed.
+            s.deliberator.cancel();
+        }
+    }
+}
+
+/// Ask for a plan while following `s.plan`, whose remaining path the world now blocks: the
+/// new plan starts where the path comes to rest if it brakes (every joint at
+/// `brake_fraction` of its acceleration limit, on the path's straight segment) from the
+/// deadline on. `None` (and nothing asked) when that cannot work: no time before the
+/// deadline, the path ends first, the braking leaves the limits, or the path up to the stop
+/// is blocked too. Returns whether it asked.
+fn replan_in_motion(s: &mut DeliberativeState, step: u64, dt: f64, outputs: &mut OutputImages) -> bool {
+    let Some((join, start)) = prepare_join(s, step, dt) else { return false };
+    let request = PlanRequest {
+        id: 0,
+        world_version: s.world_version,
+        step,
+        start,
+        goal: s.goal.clone(),
+        dt,
+        environment: Some(s.environment()),
+        budget: s.settings.budget,
+    };
+    let id = s.deliberator.request(request);
+    s.next_request_at = step;
+    s.late_reported = false;
+    s.attempts = 0;
+    let t_now = s.plan.as_ref().map_or(0.0, |p| step.saturating_sub(p.started_at) as f64 * dt);
+    outputs.event(Event::Replan { reason: ReplanReason::ObstacleInPath });
+    outputs.event(Event::ReplanInMotion { plan: join.plan, id, join_after_s: join.t_brake - t_now, speed: join.speed });
+    outputs.event(Event::PlanRequested {
+        id,
+        world: s.world_version,
+        deadline_ms: s.settings.budget.steps as f64 * dt * 1e3,
+    });
+    s.join = Some(Join { id, ..join });
+    true
+}
+
+/// Where and when a plan asked for now would join `s.plan` (see [`replan_in_motion`]), and
+/// the new plan's start.
+fn prepare_join(s: &DeliberativeState, step: u64, dt: f64) -> Option<(Join, Vec<f64>)> {
+    let plan = s.plan.as_ref()?;
+    let budget = s.settings.budget.steps;
+    if budget == 0 || s.fault.is_some() || s.abandoned || step < plan.started_at {
+        return None;
+    }
+    let (traj, plan_id) = (plan.trajectory.clone(), plan.id);
+    let needed_at = step + budget;
+    let t_now = (step - plan.started_at) as f64 * dt;
+    // The follower commands the sample at (step - started_at + 1) dt: braking begins after the
+    // command of step `needed_at`.
+    let t_brake = (needed_at + 1 - plan.started_at) as f64 * dt;
+    if t_brake >= traj.duration() {
+        return None;
+    }
+    let (qb, qdb, _) = traj.sample(t_brake);
+    let limits = s.robot.limits();
+    if qb.len() != limits.len() {
+        return None;
+    }
+    let frac = s.settings.brake_fraction.clamp(0.05, 1.0);
+    let t_stop = qdb.iter().zip(&limits).map(|(v, l)| v.abs() / (frac * l.max_acceleration)).fold(0.0, f64::max);
+    if !t_stop.is_finite() {
+        return None;
+    }
+    let n = (t_stop / dt - 1e-9).ceil().max(0.0) as usize;
+    let total = n as f64 * dt;
+    let mut brake_q = Vec::with_capacity(n);
+    let mut brake_qd = Vec::with_capacity(n);
+    for k in 1..=n {
+        let tau = k as f64 * dt;
+        let (x, v) = (tau - tau * tau / (2.0 * total), 1.0 - tau / total);
+        brake_q.push(qb.iter().zip(&qdb).map(|(q, qd)| q + qd * x).collect::<Vec<f64>>());
+        brake_qd.push(qdb.iter().map(|qd| if k == n { 0.0 } else { qd * v }).collect::<Vec<f64>>());
+    }
+    let start = brake_q.last().cloned().unwrap_or_else(|| qb.clone());
+    if start.iter().zip(&limits).any(|(q, l)| *q < l.lower || *q > l.upper) {
+        return None;
+    }
+    let res = s.settings.verify_resolution;
+    let (k0, k1) = (sample_at(&traj, t_now), (sample_at(&traj, t_brake) + 1).min(traj.q.len().saturating_sub(1)));
+    if path_collides(&s.collision, &traj, k0, k1, res) || !s.collision.motion_is_free(&qb, &start, res) {
+        return None;
+    }
+    let speed = qdb.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
+    Some((Join { id: 0, plan: plan_id, needed_at, t_brake, speed, brake_q, brake_qd }, start))
+}
+
+/// The followed trajectory up to `j.t_brake`, the braking, then `new` (which starts at rest
+/// where the braking ends).
+fn splice(old: &Trajectory, j: &Join, new: &Trajectory, dt: f64) -> Trajectory {
+    let mut out = Trajectory { joint_names: old.joint_names.clone(), t: Vec::new(), q: Vec::new(), qd: Vec::new() };
+    for k in 0..old.t.len() {
+        if old.t[k] >= j.t_brake - 1e-9 {
+            break;
+        }
+        out.t.push(old.t[k]);
+        out.q.push(old.q[k].clone());
+        out.qd.push(old.qd[k].clone());
+    }
+    let (qb, qdb, _) = old.sample(j.t_brake);
+    out.t.push(j.t_brake);
+    out.q.push(qb);
+    out.qd.push(qdb);
+    for (k, (q, qd)) in j.brake_q.iter().zip(&j.brake_qd).enumerate() {
+        out.t.push(j.t_brake + (k + 1) as f64 * dt);
+        out.q.push(q.clone());
+        out.qd.push(qd.clone());
+    }
+    let t0 = out.t.last().copied().unwrap_or(0.0);
+    for k in 1..new.t.len() {
+        out.t.push(t0 + new.t[k] - new.t[0]);
+        out.q.push(new.q[k].clone());
+        out.qd.push(new.qd[k].clone());
+    }
+    out
+}
+
+/// A delivery of the plan asked for in motion: joined to the path being followed when it is in
+/// time, for this world and the plan still followed; discarded otherwise.
+#[allow(clippy::too_many_arguments)]
+fn deliver_join(
+    s: &mut DeliberativeState,
+    j: Join,
+    d: PlanDelivery,
+    in_time: bool,
+    planning_ms: f64,
+    wall: Option<WallTiming>,
+    inputs: &InputImages,
+    outputs: &mut OutputImages,
+) {
+    let (step, id) = (inputs.step(), d.id);
+    let following = s.plan.as_ref().filter(|p| p.id == j.plan).map(|p| (p.trajectory.clone(), p.started_at));
+    match d.outcome {
+        PlanOutcome::Ready(trajectory) => {
+            let stale = if d.world_version != s.world_version {
+                Some(format!("world {} != {}", d.world_version, s.world_version))
+            } else if !in_time || following.is_none() {
+                Some("start state moved".to_string())
+            } else if s.fault.is_some() {
+                Some("fault".to_string())
+            } else {
+                None
+            };
+            match (stale, following) {
+                (None, Some((old, started_at))) => {
+                    outputs.event(Event::PlanLanded {
+                        id,
+                        world: d.world_version,
+                        in_time,
+                        work: d.work,
+                        planning_ms,
+                        duration_s: trajectory.duration(),
+                        wall,
+                    });
+                    let joined = splice(&old, &j, &trajectory, inputs.dt());
+                    let now = step.saturating_sub(started_at) as f64 * inputs.dt();
+                    let join_in_s = (j.t_brake + j.brake_q.len() as f64 * inputs.dt() - now).max(0.0);
+                    outputs.event(Event::PlanJoined { id, plan: j.plan, join_in_s });
+                    s.attempts = 0;
+                    s.goal_reached = false;
+                    s.plan = Some(ActivePlan { trajectory: Arc::new(joined), id, started_at });
+                }
+                (why, _) => {
+                    let reason = why.unwrap_or_else(|| "the plan it joins is gone".into());
+                    outputs.event(Event::PlanDiscarded { id, reason });
+                    outputs.event(Event::Replan { reason: ReplanReason::StalePlan });
+                    s.next_request_at = step;
+                }
+            }
+        }
+        other => {
+            // No plan to join: the path ahead is blocked, so stop now.
+            match other {
+                PlanOutcome::Rejected(v) => outputs.event(Event::PlanRejected { id, reason: v.to_string() }),
+                PlanOutcome::Failed(f) => {
+                    outputs.event(Event::PlanFailed { id, in_time, reason: f.to_string(), planning_ms, wall })
+                }
+                PlanOutcome::Panicked(m) => outputs.event(Event::PlannerPanicked { id, message: m.to_string() }),
+                PlanOutcome::Ready(_) => {}
+            }
+            s.plan = None;
+            s.attempts += 1;
+            s.next_request_at = step + s.settings.retry_after_steps;
+        }
     }
 }
 
@@ -590,10 +857,15 @@ fn sample_at(traj: &Trajectory, t: f64) -> usize {
 }
 
 fn remaining_collides(model: &CollisionModel, traj: &Trajectory, from: usize, resolution: f64) -> bool {
+    path_collides(model, traj, from, traj.q.len().saturating_sub(1), resolution)
+}
+
+/// Whether the path through samples `from..=to` of `traj` collides.
+fn path_collides(model: &CollisionModel, traj: &Trajectory, from: usize, to: usize, resolution: f64) -> bool {
     let mut scratch = model.scratch();
     let stride = 4.0 * resolution.max(1e-4);
     let mut knot = from;
-    let n = traj.q.len();
+    let n = (to + 1).min(traj.q.len());
     for k in from + 1..n {
         let last = k + 1 == n;
         let next_far = !last && traj.q[k + 1].iter().zip(&traj.q[knot]).any(|(a, b)| (a - b).abs() > stride);

@@ -8,10 +8,16 @@ use crate::world::ReceptorReadings;
 /// it already plans around), as `[distance, x, y, z, id, radius]`; an empty fresh reading when
 /// there is none. The radius is the detector's: centre distance from the sensing point minus
 /// the surface distance.
+///
+/// Other agents' bodies (echoes with an `agent`) are skipped unless `bodies` is set: an agent
+/// normally knows where the others are from the coordination messages (their bodies or the
+/// space they will sweep are on its map).
 #[derive(Debug, Clone, Default)]
 pub struct UnmappedObstacle {
     /// World obstacle ids the agent already plans around (not reported).
     pub mapped: Vec<usize>,
+    /// Report other agents' bodies as unmapped obstacles too.
+    pub bodies: bool,
 }
 
 impl VirtualSensor for UnmappedObstacle {
@@ -19,7 +25,8 @@ impl VirtualSensor for UnmappedObstacle {
         let best = r
             .obstacles
             .iter()
-            .filter(|o| !self.mapped.contains(&o.id) && config.region.contains(&o.position))
+            .filter(|o| (o.agent.is_none() || self.bodies) && !self.mapped.contains(&o.id))
+            .filter(|o| config.region.contains(&o.position))
             .min_by(|a, b| a.distance.total_cmp(&b.distance));
         match best {
             Some(o) => {
