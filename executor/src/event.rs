@@ -10,6 +10,8 @@ use std::fmt;
 
 use serde::{Deserialize, Serialize};
 
+use crate::effector::StopMotion;
+
 /// Why an effector is being halted.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -203,6 +205,16 @@ pub enum Event {
         #[serde(default, skip_serializing_if = "Option::is_none")]
         detail: Option<String>,
     },
+    /// The stop along the path being followed would collide (an obstacle entered the stopping
+    /// path), checked before the stop was committed. `chosen` is the stop taken instead: the
+    /// quickest the limits allow along a collision-free direction when one exists (`free`), or,
+    /// when every stop within the limits would collide, the quickest stop (`free: false`).
+    StopPathBlocked {
+        /// The stop taken.
+        chosen: StopMotion,
+        /// Whether the stop taken is collision-free in the agent's world model.
+        free: bool,
+    },
     /// A controlled stop reached rest.
     HaltFinished {
         /// Largest joint travel from the start of the halt, rad or m.
@@ -303,6 +315,7 @@ impl Event {
             Event::Replan { .. } => "replan",
             Event::Resumed { .. } => "resumed",
             Event::HaltStarted { .. } => "halt_started",
+            Event::StopPathBlocked { .. } => "stop_path_blocked",
             Event::HaltFinished { .. } => "halt_finished",
             Event::WorldChanged { .. } => "world_changed",
             Event::SensorSilent { .. } => "sensor_silent",
@@ -394,6 +407,9 @@ impl fmt::Display for Event {
                 }
                 Ok(())
             }
+            Event::StopPathBlocked { chosen, free } => {
+                write!(f, "{kind}: stopping {} ({})", chosen.as_str(), if *free { "free" } else { "no free stop" })
+            }
             Event::HaltFinished { distance, time_s, steps } => {
                 write!(f, "{kind} distance={distance:.6} time_s={time_s:.3} steps={steps}")
             }
@@ -459,6 +475,7 @@ mod tests {
             Event::ObjectPlaced { error_m: 0.1 },
             Event::GoalReached { id: None },
             Event::SensorNonFinite,
+            Event::StopPathBlocked { chosen: StopMotion::JointBrake, free: true },
         ];
         for e in all {
             let v: serde_json::Value = serde_json::to_value(&e).expect("serialisable");
