@@ -10,4 +10,4 @@
 pub mod model_report;
 
 pub use embodied_system::SystemError as AppError;
-pub use embodied_system::{bench_qp, deadlines, log, mbm, plan, scenario, system, verify};
+pub use embodied_system::{bench_qp, campaign, deadlines, faults, log, mbm, plan, scenario, system, verify};

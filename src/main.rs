@@ -114,6 +114,26 @@ enum Command {
     /// Benchmarks: MotionBenchMaker problems, planning deadlines.
     #[command(subcommand)]
     Bench(BenchCommand),
+    /// The fault campaign: random scenarios (built-in robots and random URDF arms, obstacles
+    /// on the map, appearing and moving, random goals, deadlines and injected faults), each
+    /// run's log checked by the log verifier. Fails (exit status 2) if any run broke a promise.
+    Campaign {
+        /// Runs.
+        #[arg(long, default_value_t = 100)]
+        runs: usize,
+        /// Seed of the first run (run k has seed S + k).
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Run every N-th run twice and compare the logs' bytes (0: never).
+        #[arg(long, default_value_t = 20)]
+        determinism_every: usize,
+        /// Folder for the logs while they are checked (default: the system's temporary folder).
+        #[arg(long)]
+        dir: Option<PathBuf>,
+        /// Print one JSON object instead of the table.
+        #[arg(long)]
+        json: bool,
+    },
     /// List the built-in scenarios (name and one-line description).
     Scenarios {
         /// Print a JSON array of {"name", "description", "agents", "obstacles"}.
@@ -405,6 +425,33 @@ fn run(cli: Cli) -> Result<(), AppError> {
                 println!("{}", to_json(&report)?);
             } else {
                 print!("{}", embodied::deadlines::render_table(&report));
+            }
+            Ok(())
+        }
+        Command::Campaign { runs, seed, determinism_every, dir, json } => {
+            // Injected planner panics are caught and answered; only other panics are printed.
+            let default_hook = std::panic::take_hook();
+            std::panic::set_hook(Box::new(move |info| {
+                let injected = info.payload().downcast_ref::<&str>().is_some_and(|m| m.starts_with("injected fault"));
+                if !injected {
+                    default_hook(info);
+                }
+            }));
+            let dir =
+                dir.unwrap_or_else(|| std::env::temp_dir().join(format!("embodied-campaign-{}", std::process::id())));
+            let settings = embodied::campaign::CampaignSettings { runs, seed, determinism_every, dir: dir.clone() };
+            let report = embodied::campaign::campaign(&settings, |_| {})?;
+            let _ = std::fs::remove_dir(&dir);
+            if json {
+                println!("{}", to_json(&report)?);
+            } else {
+                print!("{}", embodied::campaign::render_campaign(&report));
+            }
+            if report.violating_runs > 0 {
+                return Err(AppError::Failed(format!(
+                    "{} of {} runs broke a promise",
+                    report.violating_runs, report.runs
+                )));
             }
             Ok(())
         }

@@ -236,6 +236,11 @@ pub enum Event {
     },
     /// A sensor gave a non-finite reading.
     SensorNonFinite,
+    /// A sensor gave a finite but implausible reading (beyond the agent's plausibility bound).
+    SensorImplausible {
+        /// The largest magnitude read.
+        value: f64,
+    },
     /// A faulty sensor reads well again.
     SensorRecovered,
     /// The plan's goal was reached.
@@ -320,6 +325,7 @@ impl Event {
             Event::WorldChanged { .. } => "world_changed",
             Event::SensorSilent { .. } => "sensor_silent",
             Event::SensorNonFinite => "sensor_non_finite",
+            Event::SensorImplausible { .. } => "sensor_implausible",
             Event::SensorRecovered => "sensor_recovered",
             Event::GoalReached { .. } => "goal_reached",
             Event::GrantReceived => "grant_received",
@@ -415,6 +421,7 @@ impl fmt::Display for Event {
             }
             Event::WorldChanged { version } => write!(f, "{kind} version={version}"),
             Event::SensorSilent { steps } => write!(f, "{kind}: no reading for {steps} steps"),
+            Event::SensorImplausible { value } => write!(f, "{kind}: read {value:e}"),
             Event::GoalReached { id } => match id {
                 Some(id) => write!(f, "{kind} id={id}"),
                 None => write!(f, "{kind}"),
@@ -476,6 +483,7 @@ mod tests {
             Event::GoalReached { id: None },
             Event::SensorNonFinite,
             Event::StopPathBlocked { chosen: StopMotion::JointBrake, free: true },
+            Event::SensorImplausible { value: 1e9 },
         ];
         for e in all {
             let v: serde_json::Value = serde_json::to_value(&e).expect("serialisable");

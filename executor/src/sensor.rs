@@ -11,6 +11,12 @@ use crate::world::ReceptorReadings;
 /// Any `FnMut(&SensorConfig, &ReceptorReadings) -> Reading + Send` is one.
 pub trait VirtualSensor: Send {
     fn aggregate(&mut self, config: &SensorConfig, receptors: &ReceptorReadings) -> Reading;
+    /// Whether the last [`VirtualSensor::aggregate`] gave no reading at all (a dropout): the
+    /// input image then keeps its previous reading, marked stale, as between two readings of a
+    /// slower sensor.
+    fn dropped_out(&self) -> bool {
+        false
+    }
 }
 
 impl<F> VirtualSensor for F

@@ -36,8 +36,10 @@
 #![warn(missing_docs)]
 
 pub mod bench_qp;
+pub mod campaign;
 pub mod deadlines;
 pub mod error;
+pub mod faults;
 pub mod log;
 pub mod mbm;
 pub mod plan;
@@ -46,6 +48,7 @@ pub mod system;
 pub mod verify;
 
 pub use error::SystemError;
+pub use faults::{FaultKind, FaultSpec, FaultTrigger};
 pub use scenario::{
     AgentSpec, CarrySpec, ClockSpec, Coordination, GoalSpec, ObstacleSpec, PlannerSpec, RunSpec, Scenario,
     ScenarioBuilder,

@@ -52,6 +52,8 @@ pub struct DeliberationSettings {
     pub obstacle_sensing: Option<f64>,
     /// Steps without a fresh obstacle reading after which the sensor counts as failed.
     pub sensor_max_age: u64,
+    /// Largest magnitude (m) an obstacle reading may have: a larger one is a sensor fault.
+    pub sensor_max_abs: f64,
     /// Movement of a sensed obstacle (m) that counts as a change of the world.
     pub move_tolerance: f64,
     /// Halt and replan on every change of the world, not only when the plan is hit.
@@ -73,6 +75,7 @@ impl Default for DeliberationSettings {
             plan_timeout_steps: 2000,
             obstacle_sensing: None,
             sensor_max_age: 50,
+            sensor_max_abs: 1e4,
             move_tolerance: 0.02,
             halt_on_any_change: false,
         }
@@ -620,6 +623,14 @@ fn sense(s: &mut DeliberativeState, inputs: &InputImages, outputs: &mut OutputIm
         if s.fault.is_none() {
             s.fault = Some("sensor NaN".into());
             outputs.event(Event::SensorNonFinite);
+        }
+        return;
+    }
+    let largest = r.as_slice().iter().fold(0.0_f64, |m, v| m.max(v.abs()));
+    if largest > s.settings.sensor_max_abs {
+        if s.fault.is_none() {
+            s.fault = Some("sensor implausible".into());
+            outputs.event(Event::SensorImplausible { value: largest });
         }
         return;
     }
