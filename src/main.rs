@@ -440,7 +440,17 @@ fn run(cli: Cli) -> Result<(), AppError> {
             let dir =
                 dir.unwrap_or_else(|| std::env::temp_dir().join(format!("embodied-campaign-{}", std::process::id())));
             let settings = embodied::campaign::CampaignSettings { runs, seed, determinism_every, dir: dir.clone() };
-            let report = embodied::campaign::campaign(&settings, |_| {})?;
+            // Progress on stderr every 100 runs: runs done, runs that broke a promise (seeds).
+            let (mut done, mut bad) = (0usize, Vec::new());
+            let report = embodied::campaign::campaign(&settings, |r| {
+                done += 1;
+                if r.violated() {
+                    bad.push(r.seed);
+                }
+                if done.is_multiple_of(100) {
+                    eprintln!("{done} runs, {} broke a promise {:?}", bad.len(), bad);
+                }
+            })?;
             let _ = std::fs::remove_dir(&dir);
             if json {
                 println!("{}", to_json(&report)?);

@@ -530,6 +530,13 @@ fn answer(
 /// compare the bytes.
 pub fn run_one(seed: u64, dir: &Path, twice: bool) -> Result<RunReport, SystemError> {
     let scenario = random_scenario(seed)?;
+    run_checked(&scenario, seed, dir, twice)
+}
+
+/// Run `scenario` (with its own seed; `seed` names the run), logging into `dir`, and check its
+/// log as the campaign does; `twice`: run it again and compare the bytes.
+pub fn run_checked(scenario: &Scenario, seed: u64, dir: &Path, twice: bool) -> Result<RunReport, SystemError> {
+    let scenario = scenario.clone();
     std::fs::create_dir_all(dir).map_err(|e| SystemError::write(dir.to_path_buf(), e))?;
     let path = dir.join(format!("campaign-{seed}-{}.jsonl", std::process::id()));
     let (system, result, bytes) = run_logged(&scenario, &path)?;

@@ -25,6 +25,7 @@ pub const BUILTIN_SCENARIOS: &[(&str, &str)] = &[
     ("irp6-late-plan", include_str!("../scenarios/irp6-late-plan.toml")),
     ("two-irp6-together", include_str!("../scenarios/two-irp6-together.toml")),
     ("two-irp6-carry", include_str!("../scenarios/two-irp6-carry.toml")),
+    ("rnt-faults", include_str!("../scenarios/rnt-faults.toml")),
 ];
 
 /// The scenario `embodied run` uses when given none.
