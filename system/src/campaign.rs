@@ -418,6 +418,7 @@ fn log_events(bytes: &[u8]) -> Vec<(u64, String, Event)> {
 /// How the log answered `inj` (see [`Answer`]).
 fn answer(
     inj: &Injection,
+    all: &[Injection],
     events: &[(u64, String, Event)],
     agent: &str,
     deadline_steps: u64,
@@ -498,6 +499,17 @@ fn answer(
             Answer::Unanswered
         }
         FaultKind::SensorNan | FaultKind::SensorWild | FaultKind::SensorDropout => {
+            // A reading during a dropout of the same sensor never reaches the agent.
+            let blind = all.iter().any(|d| {
+                d.kind == FaultKind::SensorDropout
+                    && d.agent == inj.agent
+                    && d != inj
+                    && d.step <= inj.step
+                    && inj.step < d.step + d.steps
+            });
+            if blind && inj.kind != FaultKind::SensorDropout {
+                return Answer::NotDue;
+            }
             let due = match inj.kind {
                 FaultKind::SensorDropout if inj.steps <= SENSOR_MAX_AGE => return Answer::NotDue,
                 FaultKind::SensorDropout => inj.step + SENSOR_MAX_AGE,
@@ -553,13 +565,13 @@ pub fn run_checked(scenario: &Scenario, seed: u64, dir: &Path, twice: bool) -> R
     let events = log_events(&bytes);
     let last_step = system.runtime().current_step().saturating_sub(1);
     let deadline_steps = (scenario.planner.deadline_ms / 1e3 / 0.001).ceil() as u64;
-    let faults: Vec<(Injection, Answer)> = system
-        .injections()
-        .into_iter()
+    let injections = system.injections();
+    let faults: Vec<(Injection, Answer)> = injections
+        .iter()
         .map(|inj| {
             let agent = &scenario.agents[inj.agent].name;
-            let a = answer(&inj, &events, agent, deadline_steps, last_step);
-            (inj, a)
+            let a = answer(inj, &injections, &events, agent, deadline_steps, last_step);
+            (inj.clone(), a)
         })
         .collect();
     let summary = system.summary();

@@ -3,15 +3,16 @@
 //!
 //! | kind | injected where | reaction (typed events) |
 //! |---|---|---|
-//! | `planner_late` | the planner's answer takes far longer than the deadline | `plan_late` for that request at its deadline step, with a halt (`halt_started reason=plan_late`); the plan never drives the effector late |
+//! | `planner_late` | the planner's answer (a plan or a failure) takes far longer than the deadline | `plan_late` for that request at its deadline step, with a halt (`halt_started reason=plan_late`); the plan never drives the effector late |
 //! | `planner_panic` | the planner panics | `planner_panicked` for that request the step its answer is due; the agent holds and retries |
-//! | `plan_over_limits` | the planner's trajectory is three times too fast (over velocity and acceleration limits) | `plan_rejected` for that request the step its answer is due: the verifier refuses it, it never drives the effector |
+//! | `plan_over_limits` | the planner's trajectory made at least three times faster, its fastest joint at 1.5 times its velocity limit at least | `plan_rejected` for that request the step its answer is due: the verifier refuses it, it never drives the effector |
 //! | `sensor_dropout` | the obstacle sensor gives no fresh reading for `duration` | `sensor_silent` once the sensor has been silent longer than the agent tolerates (`sensor_max_age` steps), then a halt (`reason=fault`) until `sensor_recovered` |
 //! | `sensor_nan` | the obstacle sensor reads NaN | `sensor_non_finite` the same step, a halt (`reason=fault`) |
 //! | `sensor_wild` | the obstacle sensor reads an absurd finite value (1e9 m) | `sensor_implausible` the same step, a halt (`reason=fault`) |
 //!
-//! A sensor fault while the sensor is already in fault needs no new reaction (the agent is
-//! already halting for it). Planner faults are drawn per request, sensor faults per step.
+//! A sensor fault while the sensor is already in fault, or during a dropout of the same sensor
+//! (the reading never reaches the agent), needs no new reaction (the agent is already halting
+//! for it). Planner faults are drawn per request, sensor faults per step.
 
 use std::sync::{Arc, Mutex};
 
@@ -224,25 +225,38 @@ impl MotionPlanner for FaultyPlanner {
         });
         match kind {
             FaultKind::PlannerPanic => panic!("injected fault: planner panic"),
-            FaultKind::PlannerLate => {
-                let mut planned = self.inner.plan(request, deadline)?;
-                planned.work = planned.work.saturating_add(LATE_WORK);
-                Ok(planned)
-            }
+            FaultKind::PlannerLate => match self.inner.plan(request, deadline) {
+                Ok(mut planned) => {
+                    planned.work = planned.work.saturating_add(LATE_WORK);
+                    Ok(planned)
+                }
+                // No plan: the failure comes late instead.
+                Err(e) => Err(PlanFailure::OutOfTime { work: LATE_WORK, reason: format!("late: {e}") }),
+            },
             FaultKind::PlanOverLimits => {
                 let mut planned = self.inner.plan(request, deadline)?;
+                // Compress time by `f` (velocities times f, accelerations times f^2) so that the
+                // fastest joint runs at 1.5 times its velocity limit at least (3 times faster
+                // than planned at least, even for a tiny motion).
+                let limits = self.inner.model.robot().limits();
                 let traj = &mut planned.trajectory;
+                let ratio = traj
+                    .qd
+                    .iter()
+                    .flat_map(|qd| qd.iter().zip(&limits).map(|(v, l)| v.abs() / l.max_velocity))
+                    .fold(0.0_f64, f64::max);
+                if !(ratio > 0.0 && traj.duration() > 0.0) {
+                    // A plan that does not move is within any limits.
+                    return Err(PlanFailure::Error("injected fault: no motion to speed up".into()));
+                }
+                let f = (1.5 / ratio).max(3.0);
                 for t in &mut traj.t {
-                    *t /= 3.0;
+                    *t /= f;
                 }
                 for qd in &mut traj.qd {
                     for v in qd {
-                        *v *= 3.0;
+                        *v *= f;
                     }
-                }
-                // A plan that does not move is within any limits: make it move too fast.
-                if traj.duration() == 0.0 {
-                    return Err(PlanFailure::Error("injected fault: no motion to speed up".into()));
                 }
                 Ok(planned)
             }
