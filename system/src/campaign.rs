@@ -373,8 +373,11 @@ pub fn random_scenario(seed: u64) -> Result<Scenario, SystemError> {
     builder.build()
 }
 
-/// Run `scenario` writing its log to `path`; the log's bytes.
-fn run_logged(scenario: &Scenario, path: &Path) -> Result<(System, Result<(), SystemError>, Vec<u8>), SystemError> {
+/// A run with its log: the system, how the run ended, the log's bytes.
+type LoggedRun = (System, Result<(), SystemError>, Vec<u8>);
+
+/// Run `scenario` writing its log to `path`.
+fn run_logged(scenario: &Scenario, path: &Path) -> Result<LoggedRun, SystemError> {
     let mut system = System::new(scenario, &RunOptions::default())?;
     let mut log = RunLog::create(Some(path))?;
     log.line(&serde_json::json!({ "header": system.header() }))?;

@@ -148,7 +148,7 @@ impl CarryAgent {
                 id: 0,
                 world: 0,
                 in_time: true,
-                work: self.plan.stats.collision_checks as u64,
+                work: self.plan.stats.collision_checks,
                 planning_ms: self.planning_ms,
                 duration_s: self.plan.trajectory.duration(),
                 wall: None,
