@@ -191,6 +191,26 @@ enum Command {
     },
     /// Print the manual page (roff; e.g. `embodied man > embodied.1 && man ./embodied.1`).
     Man,
+    /// The fault campaign: random scenarios (built-in robots and random URDF arms, obstacles
+    /// on the map, appearing and moving, random goals, deadlines and injected faults), each
+    /// run's log checked by the log verifier. Fails (exit status 2) if any run broke a promise.
+    Campaign {
+        /// Runs.
+        #[arg(long, default_value_t = 100)]
+        runs: usize,
+        /// Seed of the first run (run k has seed S + k).
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Run every N-th run twice and compare the logs' bytes (0: never).
+        #[arg(long, default_value_t = 20)]
+        determinism_every: usize,
+        /// Folder for the logs while they are checked (default: the system's temporary folder).
+        #[arg(long)]
+        dir: Option<PathBuf>,
+        /// Print one JSON object instead of the table.
+        #[arg(long)]
+        json: bool,
+    },
     /// List the built-in scenarios (name and one-line description).
     Scenarios {
         /// Print a JSON array of {"name", "description", "agents", "obstacles"}.
@@ -646,6 +666,43 @@ fn run(cli: Cli) -> Result<(), AppError> {
                 .render(&mut page)
                 .map_err(|e| AppError::Failed(format!("man page: {e}")))?;
             out!("{}", String::from_utf8_lossy(&page));
+            Ok(())
+        }
+        Command::Campaign { runs, seed, determinism_every, dir, json } => {
+            // Injected planner panics are caught and answered; only other panics are printed.
+            let default_hook = std::panic::take_hook();
+            std::panic::set_hook(Box::new(move |info| {
+                let injected = info.payload().downcast_ref::<&str>().is_some_and(|m| m.starts_with("injected fault"));
+                if !injected {
+                    default_hook(info);
+                }
+            }));
+            let dir =
+                dir.unwrap_or_else(|| std::env::temp_dir().join(format!("embodied-campaign-{}", std::process::id())));
+            let settings = embodied::campaign::CampaignSettings { runs, seed, determinism_every, dir: dir.clone() };
+            // Progress on stderr every 100 runs: runs done, runs that broke a promise (seeds).
+            let (mut done, mut bad) = (0usize, Vec::new());
+            let report = embodied::campaign::campaign(&settings, |r| {
+                done += 1;
+                if r.violated() {
+                    bad.push(r.seed);
+                }
+                if done.is_multiple_of(100) {
+                    eprintln!("{done} runs, {} broke a promise {:?}", bad.len(), bad);
+                }
+            })?;
+            let _ = std::fs::remove_dir(&dir);
+            if json {
+                outln!("{}", to_json(&report)?);
+            } else {
+                out!("{}", embodied::campaign::render_campaign(&report));
+            }
+            if report.violating_runs > 0 {
+                return Err(AppError::Failed(format!(
+                    "{} of {} runs broke a promise",
+                    report.violating_runs, report.runs
+                )));
+            }
             Ok(())
         }
         Command::Scenarios { json } => {

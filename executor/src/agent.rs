@@ -203,8 +203,11 @@ impl<C: Send> Agent<C> {
                 continue;
             }
             if self.countdown[k] <= 1 {
-                image.reading = sensor.aggregate(&image.config, &self.readings);
-                image.reading.fresh = true;
+                let reading = sensor.aggregate(&image.config, &self.readings);
+                if !sensor.dropped_out() {
+                    image.reading = reading;
+                    image.reading.fresh = true;
+                }
                 self.countdown[k] = image.config.period;
             } else {
                 self.countdown[k] -= 1;

@@ -7,9 +7,12 @@
 //!   position, velocity and acceleration limits before the wrapped effector sees it. It enforces
 //!   limits by wrapping, from the measured state, not by remembering earlier commands.
 //! * [`SafeHalt`]: the controlled stop (stop category 2) used when a specification error or a
-//!   late plan leaves nothing sensible to command.
+//!   late plan leaves nothing sensible to command and no path is being followed.
+//! * [`PathHalt`]: the controlled stop along the path being followed (a time-scaling of that
+//!   path), and [`BrakeHalt`], the stops off the path used when the stop along it would collide.
 
 use embodied_models::JointLimits;
+use embodied_planner::trajectory::Trajectory;
 
 use crate::error::ExecutorError;
 use crate::image::{CommandMode, InputImages, JointCommand, OutputImages};
@@ -345,4 +348,224 @@ impl<C> TransitionFunction<C> for SafeHalt {
             outputs.has_command = true;
         }
     }
+}
+
+/// A path being followed, parameterised by `s` on `[0, end]` (for a [`Trajectory`], its time).
+pub trait FollowedPath {
+    /// The parameter's end.
+    fn end(&self) -> f64;
+    /// Position at `s` (clamped into `[0, end]`) into `out` (as long as the joints).
+    fn position_into(&self, s: f64, out: &mut [f64]);
+}
+
+impl FollowedPath for Trajectory {
+    fn end(&self) -> f64 {
+        self.duration()
+    }
+    fn position_into(&self, s: f64, out: &mut [f64]) {
+        let (q, _, _) = self.sample(s);
+        for (o, q) in out.iter_mut().zip(q) {
+            *o = q;
+        }
+    }
+}
+
+/// Velocity tolerance (rad/s or m/s) within which a step along the path counts as inside the
+/// [`velocity_window`]: the limiter's clamp then moves the joint off the path by at most this
+/// times `dt` (1e-10 at 1 ms), below the 1e-9 the halt promises, and the next step aims at the
+/// path again (no accumulation). It absorbs a sampled trajectory's own rounding at a limit.
+const WINDOW_TOLERANCE: f64 = 1e-7;
+
+/// The controlled stop along the path being followed: the path's parameter `s` slows from its
+/// rate (1 while the trajectory is followed at its own pace) to rest, as fast as every joint's
+/// velocity, acceleration and position limits allow. Each step commands the next point of the
+/// path, `q' = path(s + r' dt)`, with the consistent feed-forward velocity `(q' - q) / dt`, and
+/// picks the smallest rate `r'` (at most the starting rate where possible) whose step lies inside every joint's
+/// [`velocity_window`] (bisection on `r'`): the executed motion stays on the path, exactly
+/// (to rounding), and inside the limits. It is not the tangent that is scaled (as in
+/// [`SafeHalt`]), so a curved path is followed to second order and beyond.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PathHalt {
+    s: f64,
+    rate: f64,
+    max_rate: f64,
+    next: Vec<f64>,
+}
+
+impl PathHalt {
+    /// A stop beginning at parameter `s`, moving along the path at `rate` (ds/dt; 1 when the
+    /// trajectory was being followed at its own pace).
+    pub fn new(s: f64, rate: f64) -> Self {
+        let s = if s.is_finite() { s } else { 0.0 };
+        let rate = if rate.is_finite() { rate.max(0.0) } else { 0.0 };
+        Self { s, rate, max_rate: rate, next: Vec::new() }
+    }
+
+    /// The path parameter reached.
+    pub fn s(&self) -> f64 {
+        self.s
+    }
+
+    /// The current rate ds/dt.
+    pub fn rate(&self) -> f64 {
+        self.rate
+    }
+
+    /// Whether the path parameter has stopped.
+    pub fn is_stopped(&self) -> bool {
+        self.rate == 0.0
+    }
+
+    /// The halting command for the measured state `(q, qd)` into `out`. Returns `false` when
+    /// no step along the path fits the limits (the state is not on the path, e.g. the effector
+    /// lagged): the command is then the path's next point all the same, and a
+    /// [`SafetyLimiter`] makes it feasible, leaving the path.
+    pub fn command_into<P: FollowedPath + ?Sized>(
+        &mut self,
+        path: &P,
+        q: &[f64],
+        qd: &[f64],
+        limits: &[JointLimits],
+        dt: f64,
+        out: &mut JointCommand,
+    ) -> bool {
+        let n = q.len().min(qd.len()).min(limits.len()).min(out.q.len()).min(out.qd.len());
+        let mut next = std::mem::take(&mut self.next);
+        next.resize(q.len().max(n), 0.0);
+        let end = path.end();
+        let s = self.s;
+        let feasible = |r: f64, next: &mut Vec<f64>| -> bool {
+            path.position_into((s + r * dt).min(end), next);
+            (0..n).all(|j| {
+                let v = (next[j] - q[j]) / dt;
+                let (lo, hi) = velocity_window(q[j], qd[j], &limits[j], dt);
+                v >= lo - WINDOW_TOLERANCE && v <= hi + WINDOW_TOLERANCE
+            })
+        };
+        // A feasible rate to bisect from: the current one, or (when the path's own timing is
+        // a hair over a limit, e.g. a sampled trajectory at full speed) slightly below it.
+        // Where the path itself brakes at a joint's limit, an earlier step that braked a hair
+        // (within the tolerance) harder leaves only rates a hair above the current one: back
+        // up towards the path's own pace; where a sampled trajectory's own next step brakes a
+        // hair harder than a limit allows, a hair past it (the window still bounds every joint).
+        let (rate0, max_rate) = (self.rate, self.max_rate);
+        let start = [1.0, 1.0 - 1e-9, 1.0 - 1e-7, 1.0 - 1e-5, 1.0 - 1e-3, 0.99, 0.9, 0.75, 0.5, 0.25]
+            .into_iter()
+            .map(|f| f * rate0)
+            .chain([1e-6, 1e-4, 1e-2, 0.1, 0.5, 1.0].into_iter().map(|f| rate0 + f * (max_rate - rate0)))
+            .chain([1e-6, 1e-5, 1e-4, 1e-3, 1e-2].into_iter().map(|f| max_rate * (1.0 + f)))
+            .find(|&r| r > 0.0 && feasible(r, &mut next));
+        let (rate, on_path) = if feasible(0.0, &mut next) {
+            (0.0, true)
+        } else if let Some(start) = start {
+            // The smallest feasible rate: [lo, hi] with lo infeasible and hi feasible.
+            let (mut lo, mut hi) = (0.0, start);
+            for _ in 0..40 {
+                let mid = 0.5 * (lo + hi);
+                if mid <= lo || mid >= hi {
+                    break;
+                }
+                if feasible(mid, &mut next) {
+                    hi = mid;
+                } else {
+                    lo = mid;
+                }
+            }
+            (hi, true)
+        } else {
+            (self.rate, false)
+        };
+        self.s = (s + rate * dt).min(end);
+        self.rate = if self.s >= end { 0.0 } else { rate };
+        path.position_into(self.s, &mut next);
+        out.mode = CommandMode::Position;
+        for j in 0..n {
+            out.q[j] = next[j];
+            out.qd[j] = (next[j] - q[j]) / dt;
+        }
+        self.next = next;
+        on_path
+    }
+}
+
+/// The stops off the path, used when the stop along the path would collide.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+#[non_exhaustive]
+pub enum StopMotion {
+    /// Along the path being followed ([`PathHalt`]).
+    Path,
+    /// Along the straight line of the current joint velocity ([`SafeHalt`]).
+    Straight,
+    /// Every joint braking at its own acceleration limit ([`BrakeHalt`]): the quickest stop the
+    /// limits allow for each joint, leaving both the path and the line.
+    JointBrake,
+}
+
+impl StopMotion {
+    /// The name as in the log.
+    pub fn as_str(&self) -> &'static str {
+        match self {
+            StopMotion::Path => "path",
+            StopMotion::Straight => "straight",
+            StopMotion::JointBrake => "joint_brake",
+        }
+    }
+}
+
+/// Every joint brakes at its acceleration limit (inside its [`velocity_window`]) to rest.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct BrakeHalt;
+
+impl BrakeHalt {
+    /// The braking command for the state `(q, qd)` into `out`.
+    pub fn command_into(q: &[f64], qd: &[f64], limits: &[JointLimits], dt: f64, out: &mut JointCommand) {
+        out.mode = CommandMode::Position;
+        let n = q.len().min(qd.len()).min(limits.len()).min(out.q.len()).min(out.qd.len());
+        for j in 0..n {
+            let (lo, hi) = velocity_window(q[j], qd[j], &limits[j], dt);
+            let v = 0.0_f64.clamp(lo, hi);
+            out.qd[j] = v;
+            out.q[j] = q[j] + v * dt;
+        }
+    }
+}
+
+/// The positions an ideal effector (one that executes each consistent one-step command
+/// exactly) passes through while stopping from `(q, qd)` with `motion` (`path` and `halt` for
+/// [`StopMotion::Path`]), the start included; at most `max_steps` steps.
+pub fn predict_stop<P: FollowedPath + ?Sized>(
+    motion: StopMotion,
+    path: Option<(&P, &PathHalt)>,
+    q: &[f64],
+    qd: &[f64],
+    limits: &[JointLimits],
+    dt: f64,
+    max_steps: usize,
+) -> Vec<Vec<f64>> {
+    let (mut q, mut qd) = (q.to_vec(), qd.to_vec());
+    let mut cmd = JointCommand::hold(&q);
+    let mut halt = path.map(|(_, h)| h.clone());
+    let mut out = vec![q.clone()];
+    for _ in 0..max_steps {
+        match (motion, path, halt.as_mut()) {
+            (StopMotion::Path, Some((p, _)), Some(h)) => {
+                h.command_into(p, &q, &qd, limits, dt, &mut cmd);
+            }
+            (StopMotion::JointBrake, ..) => BrakeHalt::command_into(&q, &qd, limits, dt, &mut cmd),
+            _ => SafeHalt::command_into(&q, &qd, limits, dt, &mut cmd),
+        }
+        // The limiter's clamp, as the effector would see it.
+        for j in 0..q.len().min(limits.len()) {
+            let (lo, hi) = velocity_window(q[j], qd[j], &limits[j], dt);
+            let v = finite_or(cmd.qd[j], 0.0).clamp(lo, hi);
+            qd[j] = v;
+            q[j] = limits[j].clamp(q[j] + v * dt);
+        }
+        out.push(q.clone());
+        if qd.iter().all(|v| v.abs() < 1e-9) {
+            break;
+        }
+    }
+    out
 }

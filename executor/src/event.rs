@@ -10,6 +10,8 @@ use std::fmt;
 
 use serde::{Deserialize, Serialize};
 
+use crate::effector::StopMotion;
+
 /// Why an effector is being halted.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -225,6 +227,16 @@ pub enum Event {
         #[serde(default, skip_serializing_if = "Option::is_none")]
         detail: Option<String>,
     },
+    /// The stop along the path being followed would collide (an obstacle entered the stopping
+    /// path), checked before the stop was committed. `chosen` is the stop taken instead: the
+    /// quickest the limits allow along a collision-free direction when one exists (`free`), or,
+    /// when every stop within the limits would collide, the quickest stop (`free: false`).
+    StopPathBlocked {
+        /// The stop taken.
+        chosen: StopMotion,
+        /// Whether the stop taken is collision-free in the agent's world model.
+        free: bool,
+    },
     /// A controlled stop reached rest.
     HaltFinished {
         /// Largest joint travel from the start of the halt, rad or m.
@@ -246,6 +258,11 @@ pub enum Event {
     },
     /// A sensor gave a non-finite reading.
     SensorNonFinite,
+    /// A sensor gave a finite but implausible reading (beyond the agent's plausibility bound).
+    SensorImplausible {
+        /// The largest magnitude read.
+        value: f64,
+    },
     /// A faulty sensor reads well again.
     SensorRecovered,
     /// The plan's goal was reached.
@@ -404,10 +421,12 @@ impl Event {
             Event::ReplanInMotion { .. } => "replan_in_motion",
             Event::PlanJoined { .. } => "plan_joined",
             Event::HaltStarted { .. } => "halt_started",
+            Event::StopPathBlocked { .. } => "stop_path_blocked",
             Event::HaltFinished { .. } => "halt_finished",
             Event::WorldChanged { .. } => "world_changed",
             Event::SensorSilent { .. } => "sensor_silent",
             Event::SensorNonFinite => "sensor_non_finite",
+            Event::SensorImplausible { .. } => "sensor_implausible",
             Event::SensorRecovered => "sensor_recovered",
             Event::GoalReached { .. } => "goal_reached",
             Event::GrantReceived => "grant_received",
@@ -507,11 +526,15 @@ impl fmt::Display for Event {
                 }
                 Ok(())
             }
+            Event::StopPathBlocked { chosen, free } => {
+                write!(f, "{kind}: stopping {} ({})", chosen.as_str(), if *free { "free" } else { "no free stop" })
+            }
             Event::HaltFinished { distance, time_s, steps } => {
                 write!(f, "{kind} distance={distance:.6} time_s={time_s:.3} steps={steps}")
             }
             Event::WorldChanged { version } => write!(f, "{kind} version={version}"),
             Event::SensorSilent { steps } => write!(f, "{kind}: no reading for {steps} steps"),
+            Event::SensorImplausible { value } => write!(f, "{kind}: read {value:e}"),
             Event::GoalReached { id } => match id {
                 Some(id) => write!(f, "{kind} id={id}"),
                 None => write!(f, "{kind}"),
@@ -612,6 +635,8 @@ mod tests {
             Event::OperatorFinished { index: 0, operator: "pick(arm=a)".into(), error: 0.0 },
             Event::RefinementFailed { operator: "o".into(), agent: "a".into(), reason: "r".into() },
             Event::TaskPlanFailed { reason: "infeasible".into(), expansions: 3, best_partial: None, planning_ms: 0.0 },
+            Event::StopPathBlocked { chosen: StopMotion::JointBrake, free: true },
+            Event::SensorImplausible { value: 1e9 },
         ];
         for e in all {
             let v: serde_json::Value = serde_json::to_value(&e).expect("serialisable");

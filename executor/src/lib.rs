@@ -96,7 +96,10 @@ pub use composer::Composer;
 pub use deliberation::{
     DeliberationSettings, DeliberativeState, Deliberator, PlanClock, PlanFollower, PlanRequest, deliberative_agent,
 };
-pub use effector::{Effector, SafeHalt, SafetyLimiter, ServoModel, tracking_velocity, velocity_window};
+pub use effector::{
+    BrakeHalt, Effector, FollowedPath, PathHalt, SafeHalt, SafetyLimiter, ServoModel, StopMotion, predict_stop,
+    tracking_velocity, velocity_window,
+};
 pub use error::{ExecutorError, Violation};
 pub use event::{Event, HaltReason, ReplanReason, WallTiming};
 pub use image::{

@@ -12,6 +12,12 @@ use crate::world::ReceptorReadings;
 pub trait VirtualSensor: Send {
     /// One reading `v_j` from the receptor readings `R`, under the sensor's configuration.
     fn aggregate(&mut self, config: &SensorConfig, receptors: &ReceptorReadings) -> Reading;
+    /// Whether the last [`VirtualSensor::aggregate`] gave no reading at all (a dropout): the
+    /// input image then keeps its previous reading, marked stale, as between two readings of a
+    /// slower sensor.
+    fn dropped_out(&self) -> bool {
+        false
+    }
 }
 
 impl<F> VirtualSensor for F

@@ -36,8 +36,10 @@
 
 pub mod bench_qp;
 pub mod clearance;
+pub mod campaign;
 pub mod deadlines;
 pub mod error;
+pub mod faults;
 pub mod log;
 pub mod mbm;
 pub mod plan;
@@ -49,6 +51,7 @@ pub mod verify;
 pub mod view;
 
 pub use error::SystemError;
+pub use faults::{FaultKind, FaultSpec, FaultTrigger};
 pub use scenario::{
     AgentSpec, CarrySpec, ClockSpec, Coordination, GoalSpec, ObstacleSpec, PlannerSpec, RunSpec, Scenario,
     ScenarioBuilder, StandSpec, TaskSpec,

@@ -13,6 +13,7 @@ use serde::Deserialize;
 use toml::Spanned;
 
 use crate::SystemError;
+use crate::faults::{FaultKind, FaultSpec, FaultTrigger};
 
 /// The scenarios embedded in the binary: (name, TOML text).
 pub const BUILTIN_SCENARIOS: &[(&str, &str)] = &[
@@ -26,6 +27,7 @@ pub const BUILTIN_SCENARIOS: &[(&str, &str)] = &[
     ("two-irp6-carry", include_str!("../scenarios/two-irp6-carry.toml")),
     ("two-irp6-stack", include_str!("../scenarios/two-irp6-stack.toml")),
     ("polycrank-sort", include_str!("../scenarios/polycrank-sort.toml")),
+    ("rnt-faults", include_str!("../scenarios/rnt-faults.toml")),
 ];
 
 /// The scenario `embodied run` uses when given none.
@@ -50,6 +52,26 @@ struct RawScenario {
     carry: Option<Spanned<RawCarry>>,
     #[serde(default)]
     task: Option<Spanned<RawTask>>,
+    #[serde(default)]
+    faults: Vec<Spanned<RawFault>>,
+}
+
+/// One `[[faults]]` table: `kind`, exactly one of `at` (s) and `probability` (per step or
+/// request), optional `agent`, `duration` (s) and `seed`.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawFault {
+    kind: Spanned<String>,
+    #[serde(default)]
+    agent: Option<Spanned<String>>,
+    #[serde(default)]
+    at: Option<f64>,
+    #[serde(default)]
+    probability: Option<f64>,
+    #[serde(default)]
+    duration: Option<f64>,
+    #[serde(default)]
+    seed: Option<u64>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -396,6 +418,8 @@ pub struct Scenario {
     pub carry: Option<CarrySpec>,
     /// The stacking task, if any.
     pub task: Option<TaskSpec>,
+    /// Faults to inject in a run ([`crate::faults`]).
+    pub faults: Vec<FaultSpec>,
 }
 
 impl Scenario {
@@ -517,6 +541,7 @@ impl ScenarioBuilder {
                 run: RunSpec { duration: None, coordination: Coordination::Sequential },
                 carry: None,
                 task: None,
+                faults: Vec::new(),
                 name,
             },
         }
@@ -573,6 +598,12 @@ impl ScenarioBuilder {
     /// How the coordinator grants the agents' motions.
     pub fn coordination(mut self, coordination: Coordination) -> Self {
         self.scenario.run.coordination = coordination;
+        self
+    }
+
+    /// Inject a fault in runs.
+    pub fn fault(mut self, fault: FaultSpec) -> Self {
+        self.scenario.faults.push(fault);
         self
     }
 
@@ -652,6 +683,14 @@ impl ScenarioBuilder {
                 && o.appear_at.is_none_or(|t| t.is_finite() && t >= 0.0);
             if !finite {
                 return Err(bad(format!("obstacle `{}`: expected finite numbers and a time >= 0", o.obstacle.name)));
+            }
+        }
+        for (k, f) in s.faults.iter().enumerate() {
+            f.check().map_err(|e| bad(format!("fault #{} ({}): {e}", k + 1, f.kind.as_str())))?;
+            if let Some(a) = &f.agent
+                && !s.agents.iter().any(|x| x.name == *a)
+            {
+                return Err(bad(format!("fault #{} ({}): no agent `{a}`", k + 1, f.kind.as_str())));
             }
         }
         if let Some(c) = &s.carry {
@@ -1014,7 +1053,12 @@ pub fn parse_scenario(text: &str, file: &Path, dir: &Path) -> Result<Scenario, S
             });
         }
     }
+    let mut faults = Vec::new();
+    for spanned in &raw.faults {
+        faults.push(parse_fault(&ctx, spanned, &agents)?);
+    }
     Ok(Scenario {
+        faults,
         name: raw.name,
         description: raw.description,
         source: file.display().to_string(),
@@ -1136,6 +1180,39 @@ fn parse_task(
         ));
     }
     Ok(TaskSpec { arms, stands, part_size, clearance, handling_s, deadline_ms, give_up_ms, us_per_expansion })
+}
+
+fn parse_fault(ctx: &Ctx, spanned: &Spanned<RawFault>, agents: &[AgentSpec]) -> Result<FaultSpec, SystemError> {
+    let f = spanned.get_ref();
+    let kind = FaultKind::parse(f.kind.get_ref()).ok_or_else(|| {
+        let names: Vec<&str> = FaultKind::ALL.iter().map(|k| k.as_str()).collect();
+        ctx.err(f.kind.span(), format!("fault kind: expected one of {names:?}, got \"{}\"", f.kind.get_ref()))
+    })?;
+    let trigger = match (f.at, f.probability) {
+        (Some(t), None) => FaultTrigger::At(t),
+        (None, Some(p)) => FaultTrigger::Probability(p),
+        _ => {
+            return Err(ctx.err(
+                spanned.span(),
+                "fault: expected exactly one of `at = <time in s>` or `probability = <per step or request>`",
+            ));
+        }
+    };
+    if let Some(a) = &f.agent
+        && !agents.iter().any(|x| x.name == *a.get_ref())
+    {
+        let names: Vec<&str> = agents.iter().map(|a| a.name.as_str()).collect();
+        return Err(ctx.err(a.span(), format!("fault: no agent `{}`; expected one of {names:?}", a.get_ref())));
+    }
+    let spec = FaultSpec {
+        kind,
+        agent: f.agent.as_ref().map(|a| a.get_ref().clone()),
+        trigger,
+        duration: f.duration.unwrap_or(0.0),
+        seed: f.seed,
+    };
+    spec.check().map_err(|e| ctx.err(spanned.span(), format!("fault `{}`: {e}", kind.as_str())))?;
+    Ok(spec)
 }
 
 fn parse_carry(ctx: &Ctx, spanned: &Spanned<RawCarry>, agents: &[AgentSpec]) -> Result<CarrySpec, SystemError> {

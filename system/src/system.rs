@@ -25,7 +25,8 @@ use std::time::{Duration, Instant};
 use embodied_executor::closed_chain::ClosedChainConfig;
 use embodied_executor::closed_chain::carry::{CarryRecord, CarrySetup, ClosedChainSummary, carry_agent, finish};
 use embodied_executor::deliberation::{
-    AsDeliberation, DeliberationSettings, DeliberativeState, PlanBudget, PlanClock, PlanFollower, UnmappedObstacle,
+    AsDeliberation, DeliberationSettings, DeliberativeState, PlanBudget, PlanClock, PlanFollower, PlanMotion,
+    UnmappedObstacle,
 };
 use embodied_executor::{
     Agent, AgentId, Behaviour, Contact, Coordinator, Event, HaltReason, InputImages, Link, Message, OutputImages,
@@ -38,6 +39,7 @@ use embodied_planner::deadline::Deadline;
 use serde::Serialize;
 
 use crate::SystemError;
+use crate::faults::{FaultSpec, FaultyPlanner, FaultySensor, Injection, Injections};
 use crate::log::{LOG_FORMAT, LogHeader, LogStep, LoggedAgent, RunLog};
 use crate::plan::{agent_problem, bodies_as_obstacles, goal_of, motion_settings};
 use crate::scenario::{ClockSpec, Coordination, GoalSpec, Scenario, load_scenario};
@@ -300,6 +302,7 @@ pub fn deliberation_settings(scenario: &Scenario, clock: ClockSpec, dt: f64) -> 
         plan_timeout_steps: give_up_steps + 1000,
         obstacle_sensing: None,
         sensor_max_age: 50,
+        sensor_max_abs: 1e4,
         move_tolerance: 0.02,
         halt_on_any_change: false,
         replan_in_motion: true,
@@ -521,6 +524,7 @@ pub struct System {
     started: Option<Instant>,
     wall: Duration,
     pace: Option<(Instant, u64)>,
+    injections: Injections,
 }
 
 impl System {
@@ -554,7 +558,20 @@ impl System {
                 mapped.push(id);
             }
         }
-        let sensing = scenario.obstacles.iter().any(|o| !o.on_map());
+        let injections: Injections = Arc::default();
+        // Per scenario agent: its faults (index in the scenario, spec, seed).
+        let faults_of = |k: usize, planner: bool| -> Vec<(usize, FaultSpec, u64)> {
+            let name = &scenario.agents[k].name;
+            scenario
+                .faults
+                .iter()
+                .enumerate()
+                .filter(|(_, f)| f.kind.is_planner() == planner && f.agent.as_ref().is_none_or(|a| a == name))
+                .map(|(i, f)| (i, f.clone(), f.seed.unwrap_or(seed).wrapping_add(k as u64)))
+                .collect()
+        };
+        let sensing =
+            scenario.obstacles.iter().any(|o| !o.on_map()) || scenario.faults.iter().any(|f| !f.kind.is_planner());
         let roster = Arc::new(Roster {
             names: scenario.agents.iter().map(|a| a.name.clone()).collect(),
             robots: scenario.agents.iter().map(|a| a.robot.clone()).collect(),
@@ -601,7 +618,14 @@ impl System {
             let force_limit = agent.behaviour.force_limit;
             // The map: the obstacles there from the start; the other agents where they stand.
             let model = agent_problem(scenario, k, &[]);
-            let delib = DeliberativeState::new(robot.clone(), model, goal_of(goal), settings.clone());
+            let mut settings = settings.clone();
+            let planner_faults = faults_of(k, true);
+            if !planner_faults.is_empty() {
+                let inner = PlanMotion::new(model.clone(), settings.motion.clone());
+                let faulty = FaultyPlanner::new(inner, k, planner_faults, dt, injections.clone());
+                settings.planner = Some(Arc::new(faulty));
+            }
+            let delib = DeliberativeState::new(robot.clone(), model, goal_of(goal), settings);
             let mut state = RunAgent {
                 delib,
                 index: k,
@@ -629,7 +653,14 @@ impl System {
             let mut a = Agent::embodied(agent.name.clone(), robot, Some(&agent.start), state, program(force_limit))
                 .map_err(|e| failed(&agent.name, &e))?;
             if sensing {
-                a = a.with_sensor(UnmappedObstacle { mapped: mapped.clone(), bodies: false }, SensorConfig::default());
+                let sensor = UnmappedObstacle { mapped: mapped.clone(), bodies: false };
+                let sensor_faults = faults_of(k, false);
+                if sensor_faults.is_empty() {
+                    a = a.with_sensor(sensor, SensorConfig::default());
+                } else {
+                    let faulty = FaultySensor::new(sensor, k, sensor_faults, dt, injections.clone());
+                    a = a.with_sensor(faulty, SensorConfig::default());
+                }
             }
             if let Some(limit) = force_limit {
                 a = a.with_sensor(Contact, SensorConfig { threshold: limit, ..SensorConfig::default() });
@@ -690,7 +721,13 @@ impl System {
             started: None,
             wall: Duration::ZERO,
             pace: None,
+            injections,
         })
+    }
+
+    /// The faults injected so far, in the order they struck.
+    pub fn injections(&self) -> Vec<Injection> {
+        self.injections.lock().map(|v| v.clone()).unwrap_or_else(|e| e.into_inner().clone())
     }
 
     /// The scenario it was assembled from.

@@ -909,3 +909,129 @@ pub fn verify_files(scenario: &str, plan: Option<&Path>, log: Option<&Path>) -> 
 fn json_of<T: Serialize>(value: &T) -> Result<String, SystemError> {
     serde_json::to_string(value).map_err(|e| SystemError::Failed(e.to_string()))
 }
+
+// ---------------------------------------------------------------------------------------------
+// Robot-environment collisions of a run log.
+
+/// The robots of a run log against the scenario's environment.
+#[derive(Debug, Clone, Serialize, Default)]
+pub struct LogEnvironment {
+    /// Step pairs checked (per agent).
+    pub motions: usize,
+    /// Motions between two logged steps that touch an obstacle on the map (there from the
+    /// start and still): the plans and halts must avoid these.
+    pub map_collisions: usize,
+    /// Steps at which a robot that was moving touches an obstacle that appeared or moves
+    /// (the bounding sphere the detector sees).
+    pub moving_contacts: usize,
+    /// Steps at which an obstacle that appeared or moves touches a robot at rest (the robot
+    /// cannot escape; counted apart).
+    pub resting_contacts: usize,
+    /// The first collision or contact found: time, agent, what.
+    pub first: Option<String>,
+    /// Smallest distance (m) between a robot and an obstacle on the map at any logged step
+    /// (every tenth step and every step with a collision).
+    pub closest_approach_m: f64,
+}
+
+/// Check the motion between consecutive logged configurations of every agent against the
+/// scenario's obstacles: those on the map continuously (sampled at `resolution`), and those
+/// that appear or move (as the bounding spheres the detector sees, where they are at that
+/// step) at each step.
+pub fn verify_log_environment(
+    scenario: &Scenario,
+    file: &Path,
+    resolution: f64,
+) -> Result<LogEnvironment, SystemError> {
+    use embodied_models::collision::{CollisionModel, Environment, Obstacle};
+    use embodied_models::nalgebra::Isometry3;
+    let text = std::fs::read_to_string(file).map_err(|e| SystemError::io(file, e))?;
+    let step_s = text
+        .lines()
+        .next()
+        .and_then(|l| serde_json::from_str::<Value>(l).ok())
+        .and_then(|h| h.get("header")?.get("step_s")?.as_f64())
+        .filter(|s| s.is_finite() && *s > 0.0)
+        .ok_or_else(|| parse_err(file, 1, 1, "header.step_s: missing or not a positive number".into()))?;
+    let map = scenario.initial_environment();
+    let models: Vec<CollisionModel> =
+        scenario.agents.iter().map(|a| CollisionModel::new(&a.robot, map.clone())).collect();
+    let dynamic: Vec<_> = scenario.obstacles.iter().filter(|o| !o.on_map()).collect();
+    // The obstacles that appear or move, as the bounding spheres the detector sees, moved
+    // into place step by step.
+    let mut dynamic_models: Vec<Option<CollisionModel>> = scenario
+        .agents
+        .iter()
+        .map(|a| {
+            (!dynamic.is_empty()).then(|| {
+                let mut env = Environment::new();
+                for o in &dynamic {
+                    let (_, r) = o.obstacle.shape.bounding_sphere();
+                    env.add(Obstacle::new(
+                        o.obstacle.name.clone(),
+                        Isometry3::identity(),
+                        embodied_models::Shape::Sphere { radius: r },
+                    ));
+                }
+                CollisionModel::new(&a.robot, env)
+            })
+        })
+        .collect();
+    let mut out = LogEnvironment { closest_approach_m: f64::INFINITY, ..LogEnvironment::default() };
+    let mut prev: Vec<Option<Vec<f64>>> = vec![None; scenario.agents.len()];
+    for (i, line) in text.lines().enumerate().skip(1) {
+        let Ok(value) = serde_json::from_str::<Value>(line) else { break };
+        let Some(step) = value.get("step").and_then(Value::as_u64) else { break };
+        let t = step as f64 * step_s;
+        let Some(step_agents) = value.get("agents").and_then(Value::as_object) else { break };
+        for (k, agent) in scenario.agents.iter().enumerate() {
+            let Some(a) = step_agents.get(&agent.name) else { continue };
+            let q: Vec<f64> = a.get("q").and_then(|v| serde_json::from_value(v.clone()).ok()).ok_or_else(|| {
+                parse_err(file, i + 1, 1, format!("agents.{}.q: missing or not an array of numbers", agent.name))
+            })?;
+            let qd: Vec<f64> = a.get("qd").and_then(|v| serde_json::from_value(v.clone()).ok()).unwrap_or_default();
+            let model = &models[k];
+            let mut hit = false;
+            if let Some(p) = &prev[k] {
+                out.motions += 1;
+                if !model.motion_is_free(p, &q, resolution) {
+                    out.map_collisions += 1;
+                    hit = true;
+                    out.first
+                        .get_or_insert_with(|| format!("t={t:.3}s {}: touches an obstacle on the map", agent.name));
+                }
+            }
+            if (hit || step.is_multiple_of(10)) && !map.obstacles().is_empty() {
+                out.closest_approach_m = out.closest_approach_m.min(model.distance(&q).distance);
+            }
+            if let Some(m) = dynamic_models[k].as_mut() {
+                for o in &dynamic {
+                    let appear = o.appear_at.unwrap_or(0.0);
+                    let (c, _) = o.obstacle.shape.bounding_sphere();
+                    let mut p = o.obstacle.pose * c;
+                    if t < appear {
+                        // Not there yet: far away.
+                        p.z += 1e6;
+                    } else if let Some(v) = o.velocity {
+                        p += v * (t - appear);
+                    }
+                    m.set_obstacle_pose(&o.obstacle.name, Isometry3::translation(p.x, p.y, p.z));
+                }
+                if m.collides(&q) {
+                    let moving = qd.iter().any(|v| v.abs() > 1e-9);
+                    if moving {
+                        out.moving_contacts += 1;
+                    } else {
+                        out.resting_contacts += 1;
+                    }
+                    out.first.get_or_insert_with(|| {
+                        let how = if moving { "moving" } else { "at rest" };
+                        format!("t={t:.3}s {}: {how}, touches an obstacle that appeared or moves", agent.name)
+                    });
+                }
+            }
+            prev[k] = Some(q);
+        }
+    }
+    Ok(out)
+}

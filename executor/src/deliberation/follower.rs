@@ -12,7 +12,7 @@ use nalgebra::Isometry3;
 
 use crate::agent::Agent;
 use crate::behaviour::{Behaviour, Status};
-use crate::effector::SafeHalt;
+use crate::effector::{BrakeHalt, PathHalt, SafeHalt, StopMotion, predict_stop};
 use crate::error::{ExecutorError, Violation};
 use crate::event::{Event, HaltReason, ReplanReason, WallTiming};
 use crate::image::{InputImages, JointCommand, OutputImages, SensorConfig};
@@ -54,6 +54,8 @@ pub struct DeliberationSettings {
     pub obstacle_sensing: Option<f64>,
     /// Steps without a fresh obstacle reading after which the sensor counts as failed.
     pub sensor_max_age: u64,
+    /// Largest magnitude (m) an obstacle reading may have: a larger one is a sensor fault.
+    pub sensor_max_abs: f64,
     /// Movement of a sensed obstacle (m) that counts as a change of the world.
     pub move_tolerance: f64,
     /// Halt and replan on every change of the world, not only when the plan is hit.
@@ -82,6 +84,7 @@ impl Default for DeliberationSettings {
             plan_timeout_steps: 2000,
             obstacle_sensing: None,
             sensor_max_age: 50,
+            sensor_max_abs: 1e4,
             move_tolerance: 0.02,
             halt_on_any_change: false,
             replan_in_motion: true,
@@ -99,6 +102,9 @@ struct ActivePlan {
 struct Halt {
     started_at: u64,
     q0: Vec<f64>,
+    stop: Stop,
+    /// World-model version the stopping motion was last checked against.
+    checked: Option<u64>,
 }
 
 /// A plan asked for while moving: where and when it joins the plan being followed.
@@ -118,6 +124,17 @@ struct Join {
     brake_q: Vec<Vec<f64>>,
     brake_qd: Vec<Vec<f64>>,
 }
+
+/// How a halt stops.
+enum Stop {
+    /// Along the trajectory that was being followed.
+    Path { trajectory: Arc<Trajectory>, halt: PathHalt },
+    /// Off any path.
+    Off(StopMotion),
+}
+
+/// Longest stop predicted for the collision check of a stopping motion, steps.
+const MAX_STOP_STEPS: usize = 20_000;
 
 /// Distance (largest joint travel) and duration (s) of a halt.
 fn halt_report(h: &Halt, q: &[f64], step: u64, dt: f64) -> Event {
@@ -152,6 +169,9 @@ pub struct DeliberativeState {
     join: Option<Join>,
     /// Why the next halt from speed starts, when it is not the default.
     halt_reason: Option<HaltReason>,
+    /// The trajectory of a plan just dropped and the time reached on it: a halt that begins
+    /// now stops along it.
+    dropped: Option<(Arc<Trajectory>, f64)>,
     halt: Option<Halt>,
     fault: Option<String>,
     attempts: u32,
@@ -192,6 +212,7 @@ impl DeliberativeState {
             plan: None,
             join: None,
             halt_reason: None,
+            dropped: None,
             halt: None,
             fault: None,
             attempts: 0,
@@ -257,7 +278,7 @@ impl DeliberativeState {
         let Some(plan) = &self.plan else { return false };
         let k = sample_at(&plan.trajectory, step.saturating_sub(plan.started_at) as f64 * dt);
         if remaining_collides(&self.collision, &plan.trajectory, k, self.settings.verify_resolution) {
-            self.plan = None;
+            drop_plan(self, step, dt);
             self.join = None;
             self.goal_reached = false;
             self.attempts = 0;
@@ -354,7 +375,7 @@ impl<C: AsDeliberation + Send> Behaviour<C> for PlanFollower {
             s.next_request_at = step;
         }
         if s.fault.is_some() {
-            s.plan = None;
+            drop_plan(s, step, inputs.dt());
             s.join = None;
             s.deliberator.cancel();
         }
@@ -372,7 +393,11 @@ impl<C: AsDeliberation + Send> Behaviour<C> for PlanFollower {
         if let Some(plan) = &s.plan {
             let k = step.saturating_sub(plan.started_at) + 1;
             let t = k as f64 * inputs.dt();
-            let (q, qd, _) = plan.trajectory.sample(t);
+            // The consistent one-step command: the next point of the trajectory with the chord
+            // velocity to it, so that an effector on the trajectory stays exactly on it.
+            let (q, _, _) = plan.trajectory.sample(t);
+            let (q_prev, _, _) = plan.trajectory.sample((k - 1) as f64 * inputs.dt());
+            let qd: Vec<f64> = q.iter().zip(&q_prev).map(|(a, b)| (a - b) / inputs.dt()).collect();
             outputs.set_position_target(&q, &qd);
             if t >= plan.trajectory.duration() {
                 if !s.goal_reached {
@@ -463,11 +488,30 @@ fn late_halt(s: &mut DeliberativeState, id: u64, step: u64, outputs: &mut Output
     s.halted_since.get_or_insert(step);
 }
 
-/// Halt command for this step, with the halt's start and end logged.
+/// Drop the plan being followed, keeping its trajectory and the time reached on it so that a
+/// halt stops along it.
+fn drop_plan(s: &mut DeliberativeState, step: u64, dt: f64) {
+    if let Some(plan) = s.plan.take() {
+        let t = step.saturating_sub(plan.started_at) as f64 * dt;
+        s.dropped = Some((plan.trajectory, t));
+    }
+}
+
+/// Halt command for this step, with the halt's start and end logged. The stop follows the
+/// trajectory that was being followed ([`PathHalt`]); its motion is checked for collision in
+/// the agent's world model before it is committed and again whenever the world changes; when
+/// it would collide, the halt takes the first collision-free stop off the path
+/// ([`StopMotion::Straight`], then [`StopMotion::JointBrake`]), or the joint brake when none is
+/// free, and says so ([`Event::StopPathBlocked`]).
 fn halt(s: &mut DeliberativeState, inputs: &InputImages, outputs: &mut OutputImages) {
     let (q, qd) = (inputs.q(), inputs.qd());
+    let dropped = s.dropped.take();
     if !at_rest(qd) && s.halt.is_none() {
-        s.halt = Some(Halt { started_at: inputs.step(), q0: q.to_vec() });
+        let stop = match dropped {
+            Some((trajectory, t)) => Stop::Path { trajectory, halt: PathHalt::new(t, 1.0) },
+            None => Stop::Off(StopMotion::Straight),
+        };
+        s.halt = Some(Halt { started_at: inputs.step(), q0: q.to_vec(), stop, checked: None });
         s.halted_since = Some(inputs.step());
         let speed = qd.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
         let reason = match s.halt_reason.take() {
@@ -486,8 +530,75 @@ fn halt(s: &mut DeliberativeState, inputs: &InputImages, outputs: &mut OutputIma
     {
         outputs.event(halt_report(&h, q, inputs.step(), inputs.dt()));
     }
-    SafeHalt::command_into(q, qd, inputs.limits(), inputs.dt(), &mut s.scratch);
+    let (limits, dt) = (inputs.limits(), inputs.dt());
+    if s.halt.as_ref().is_some_and(|h| h.checked != Some(s.world_version)) {
+        check_stop(s, q, qd, limits, dt, outputs);
+    }
+    match s.halt.as_mut().map(|h| &mut h.stop) {
+        Some(Stop::Path { trajectory, halt }) => {
+            halt.command_into(&**trajectory, q, qd, limits, dt, &mut s.scratch);
+        }
+        Some(Stop::Off(StopMotion::JointBrake)) => BrakeHalt::command_into(q, qd, limits, dt, &mut s.scratch),
+        _ => SafeHalt::command_into(q, qd, limits, dt, &mut s.scratch),
+    }
     outputs.set_command(&s.scratch);
+}
+
+/// Check the halt's stopping motion against the agent's world model before it is committed;
+/// switch to a free stop off the path when it would collide.
+fn check_stop(
+    s: &mut DeliberativeState,
+    q: &[f64],
+    qd: &[f64],
+    limits: &[embodied_models::JointLimits],
+    dt: f64,
+    outputs: &mut OutputImages,
+) {
+    let Some(h) = s.halt.as_mut() else { return };
+    h.checked = Some(s.world_version);
+    let resolution = s.settings.verify_resolution;
+    let free = |positions: &[Vec<f64>]| path_free(&s.collision, positions, resolution);
+    let current = match &h.stop {
+        Stop::Path { trajectory, halt } => {
+            predict_stop(StopMotion::Path, Some((&**trajectory, halt)), q, qd, limits, dt, MAX_STOP_STEPS)
+        }
+        Stop::Off(m) => predict_stop::<Trajectory>(*m, None, q, qd, limits, dt, MAX_STOP_STEPS),
+    };
+    if free(&current) {
+        return;
+    }
+    for m in [StopMotion::Straight, StopMotion::JointBrake] {
+        if free(&predict_stop::<Trajectory>(m, None, q, qd, limits, dt, MAX_STOP_STEPS)) {
+            h.stop = Stop::Off(m);
+            outputs.event(Event::StopPathBlocked { chosen: m, free: true });
+            return;
+        }
+    }
+    h.stop = Stop::Off(StopMotion::JointBrake);
+    outputs.event(Event::StopPathBlocked { chosen: StopMotion::JointBrake, free: false });
+}
+
+/// Whether the motion through `positions` (consecutive configurations) is collision-free.
+fn path_free(model: &CollisionModel, positions: &[Vec<f64>], resolution: f64) -> bool {
+    let mut scratch = model.scratch();
+    let stride = 4.0 * resolution.max(1e-4);
+    let Some(first) = positions.first() else { return true };
+    if model.collides_with(first, &mut scratch) {
+        return false;
+    }
+    let mut knot = 0;
+    let n = positions.len();
+    for k in 1..n {
+        let last = k + 1 == n;
+        let next_far = !last && positions[k + 1].iter().zip(&positions[knot]).any(|(a, b)| (a - b).abs() > stride);
+        if last || next_far {
+            if !model.motion_is_free_with(&positions[knot], &positions[k], resolution, &mut scratch) {
+                return false;
+            }
+            knot = k;
+        }
+    }
+    true
 }
 
 fn deliver(s: &mut DeliberativeState, d: PlanDelivery, inputs: &InputImages, outputs: &mut OutputImages) {
@@ -591,6 +702,14 @@ fn sense(s: &mut DeliberativeState, inputs: &InputImages, outputs: &mut OutputIm
         }
         return;
     }
+    let largest = r.as_slice().iter().fold(0.0_f64, |m, v| m.max(v.abs()));
+    if largest > s.settings.sensor_max_abs {
+        if s.fault.is_none() {
+            s.fault = Some("sensor implausible".into());
+            outputs.event(Event::SensorImplausible { value: largest });
+        }
+        return;
+    }
     if s.fault.take().is_some() {
         outputs.event(Event::SensorRecovered);
         s.attempts = 0;
@@ -653,7 +772,7 @@ fn sense(s: &mut DeliberativeState, inputs: &InputImages, outputs: &mut OutputIm
         let reason = if hit { ReplanReason::ObstacleInPath } else { ReplanReason::WorldChanged };
         outputs.event(Event::PlanInvalidated { id: Some(plan.id), reason });
         outputs.event(Event::Replan { reason });
-        s.plan = None;
+        drop_plan(s, step, inputs.dt());
         s.join = None;
         s.attempts = 0;
         s.goal_reached = false;

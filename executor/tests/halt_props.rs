@@ -1,0 +1,172 @@
+//! The controlled stop along the path ([`PathHalt`]): over random paths (planned trajectories
+//! of a built-in arm and curved analytic paths) and random halt instants, the effector follows
+//! the path exactly, and the halt stays on the path to 1e-9, within every joint's velocity,
+//! acceleration and position limits, and comes to rest.
+
+use embodied_executor::{
+    CommandMode, Effector, FollowedPath, JointCommand, PathHalt, SafetyLimiter, ServoModel, StopMotion, predict_stop,
+};
+use embodied_models::JointLimits;
+use embodied_planner::trajectory::{Trajectory, time_parameterize};
+use proptest::prelude::*;
+
+const DT: f64 = 0.001;
+const ON_PATH: f64 = 1e-9;
+
+/// A curved path: `q_j(s) = c_j + a_j (1 - cos(w_j s))`, at rest at `s = 0`, its speed and
+/// acceleration at rate 1 within 90% of the limits.
+struct Curve {
+    c: Vec<f64>,
+    a: Vec<f64>,
+    w: Vec<f64>,
+    end: f64,
+}
+
+impl FollowedPath for Curve {
+    fn end(&self) -> f64 {
+        self.end
+    }
+    fn position_into(&self, s: f64, out: &mut [f64]) {
+        let s = s.clamp(0.0, self.end);
+        for (j, o) in out.iter_mut().enumerate() {
+            *o = self.c[j] + self.a[j] * (1.0 - (self.w[j] * s).cos());
+        }
+    }
+}
+
+fn point<P: FollowedPath + ?Sized>(path: &P, s: f64, dof: usize) -> Vec<f64> {
+    let mut q = vec![0.0; dof];
+    path.position_into(s, &mut q);
+    q
+}
+
+fn distance(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).fold(0.0_f64, |m, (x, y)| m.max((x - y).abs()))
+}
+
+/// Follow `path` at its own pace for `follow` steps (the consistent one-step command with the
+/// chord velocity), then halt along it; check every step. Returns the halt's steps.
+fn follow_then_halt<P: FollowedPath + ?Sized>(
+    path: &P,
+    limits: &[JointLimits],
+    follow: usize,
+) -> Result<usize, TestCaseError> {
+    let dof = limits.len();
+    let start = point(path, 0.0, dof);
+    let mut servo = SafetyLimiter::new(ServoModel::new(limits.to_vec(), &start).expect("valid limits"));
+    let mut cmd = JointCommand::hold(&start);
+    let mut prev_v = vec![0.0; dof];
+    let check = |servo: &SafetyLimiter<ServoModel>, prev_v: &mut Vec<f64>| -> Result<(), TestCaseError> {
+        for (j, l) in limits.iter().enumerate() {
+            let (q, v) = (servo.q()[j], servo.qd()[j]);
+            prop_assert!(q >= l.lower && q <= l.upper, "joint {j} at {q} outside [{}, {}]", l.lower, l.upper);
+            prop_assert!(v.abs() <= l.max_velocity * (1.0 + 1e-9), "joint {j} speed {v} over {}", l.max_velocity);
+            let acc = (v - prev_v[j]) / DT;
+            prop_assert!(
+                acc.abs() <= l.max_acceleration * (1.0 + 1e-6),
+                "joint {j} acceleration {acc} over {}",
+                l.max_acceleration
+            );
+            prev_v[j] = v;
+        }
+        Ok(())
+    };
+    let mut s = 0.0;
+    for k in 1..=follow {
+        let next = point(path, k as f64 * DT, dof);
+        cmd.mode = CommandMode::Position;
+        for j in 0..dof {
+            cmd.qd[j] = (next[j] - point(path, (k - 1) as f64 * DT, dof)[j]) / DT;
+            cmd.q[j] = next[j];
+        }
+        servo.execute(&cmd, DT);
+        check(&servo, &mut prev_v)?;
+        s = k as f64 * DT;
+        // A trajectory's timing at a limit rounds a hair over it at places; the limiter clips
+        // it, a few 1e-10 off.
+        let off = distance(servo.q(), &point(path, s, dof));
+        prop_assert!(off <= 1e-8, "following: {off} off the path at s = {s}");
+    }
+    let mut halt = PathHalt::new(s, 1.0);
+    let predicted = predict_stop(StopMotion::Path, Some((path, &halt)), servo.q(), servo.qd(), limits, DT, 100_000);
+    let mut steps = 0;
+    loop {
+        let on = halt.command_into(path, servo.q(), servo.qd(), limits, DT, &mut cmd);
+        prop_assert!(on, "no step along the path fits the limits at s = {} (end {})", halt.s(), path.end());
+        servo.execute(&cmd, DT);
+        check(&servo, &mut prev_v)?;
+        steps += 1;
+        // On the path from the first halting step on, whatever the following left.
+        let off = distance(servo.q(), &point(path, halt.s(), dof));
+        prop_assert!(off <= ON_PATH, "halting: {off} off the path at s = {}", halt.s());
+        // The prediction checked for collision is the motion executed.
+        if let Some(p) = predicted.get(steps) {
+            let d = distance(servo.q(), p);
+            prop_assert!(d <= ON_PATH, "step {steps}: {d} from the predicted stop");
+        }
+        if servo.qd().iter().all(|v| v.abs() < 1e-9) {
+            break;
+        }
+        prop_assert!(steps < 100_000, "no rest after {steps} steps");
+    }
+    prop_assert_eq!(predicted.len(), steps + 1, "the predicted stop has another length");
+    Ok(steps)
+}
+
+/// The stopping time bound: the slowest joint's `|v| / a` stretched by the path's turns; the
+/// halt must not take more than a few times the straight-line stop.
+fn straight_stop_steps(qd: &[f64], limits: &[JointLimits]) -> f64 {
+    qd.iter().zip(limits).map(|(v, l)| v.abs() / l.max_acceleration).fold(0.0, f64::max) / DT
+}
+
+fn rnt() -> embodied_models::Robot {
+    embodied_models::builtin("rnt").expect("built-in robot")
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 64, ..ProptestConfig::default() })]
+
+    #[test]
+    fn halt_on_a_planned_trajectory_stays_on_it(
+        fractions in prop::collection::vec(prop::collection::vec(0.05f64..0.95, 6), 2..5),
+        at in 0.0f64..1.0,
+    ) {
+        let robot = rnt();
+        let limits = robot.limits();
+        let waypoints: Vec<Vec<f64>> = fractions
+            .iter()
+            .map(|f| f.iter().zip(&limits).map(|(x, l)| l.lower + x * (l.upper - l.lower)).collect())
+            .collect();
+        // Knots only, as the motion planner delivers plans.
+        let traj: Trajectory = time_parameterize(&waypoints, &robot, 0.0);
+        let follow = (at * traj.duration() / DT) as usize;
+        follow_then_halt(&traj, &limits, follow)?;
+    }
+
+    #[test]
+    fn halt_on_a_curved_path_stays_on_it(
+        joints in prop::collection::vec((0.3f64..3.0, 1.0f64..20.0, 0.5f64..6.0, -1.0f64..1.0), 1..8),
+        at in 0.0f64..3.0,
+    ) {
+        let limits: Vec<JointLimits> = joints
+            .iter()
+            .map(|&(v, a, _, _)| JointLimits::new(-100.0, 100.0, v, a))
+            .collect();
+        let w: Vec<f64> = joints.iter().map(|j| j.2).collect();
+        let a: Vec<f64> = joints
+            .iter()
+            .map(|&(v, acc, w, _)| (0.9 * v / w).min(0.9 * acc / (w * w)))
+            .collect();
+        let c: Vec<f64> = joints.iter().map(|j| j.3).collect();
+        let curve = Curve { c, a, w, end: 100.0 };
+        let follow = (at / DT) as usize;
+        let steps = follow_then_halt(&curve, &limits, follow)?;
+        // From full speed along the curve the stop is not much longer than a straight one.
+        let s = follow as f64 * DT;
+        let v: Vec<f64> = (0..limits.len())
+            .map(|j| curve.a[j] * curve.w[j] * (curve.w[j] * s).sin())
+            .collect();
+        let bound = straight_stop_steps(&v, &limits);
+        prop_assert!(steps as f64 <= 3.0 * bound + 10.0, "{steps} steps to stop, straight bound {bound:.0}");
+    }
+}
