@@ -193,7 +193,7 @@ enum Command {
     Man,
     /// The fault campaign: random scenarios (built-in robots and random URDF arms, obstacles
     /// on the map, appearing and moving, random goals, deadlines and injected faults), each
-    /// run's log checked by the log verifier. Fails (exit status 2) if any run broke a promise.
+    /// run's log checked by the log verifier. Fails (exit status 1) if any run broke a promise.
     Campaign {
         /// Runs.
         #[arg(long, default_value_t = 100)]

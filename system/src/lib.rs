@@ -35,8 +35,8 @@
 #![forbid(unsafe_code)]
 
 pub mod bench_qp;
-pub mod clearance;
 pub mod campaign;
+pub mod clearance;
 pub mod deadlines;
 pub mod error;
 pub mod faults;
