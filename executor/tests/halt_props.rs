@@ -75,9 +75,10 @@ fn follow_then_halt<P: FollowedPath + ?Sized>(
     for k in 1..=follow {
         let next = point(path, k as f64 * DT, dof);
         cmd.mode = CommandMode::Position;
-        for j in 0..dof {
-            cmd.qd[j] = (next[j] - point(path, (k - 1) as f64 * DT, dof)[j]) / DT;
-            cmd.q[j] = next[j];
+        let prev = point(path, (k - 1) as f64 * DT, dof);
+        for (j, (&n, &p)) in next.iter().zip(&prev).enumerate() {
+            cmd.qd[j] = (n - p) / DT;
+            cmd.q[j] = n;
         }
         servo.execute(&cmd, DT);
         check(&servo, &mut prev_v)?;
