@@ -194,6 +194,28 @@ fn two_irp6_arms_move_at_the_same_time_and_never_collide() {
 }
 
 #[test]
+fn in_two_irp6_together_the_handed_sweep_changes_the_second_arms_plan() {
+    use embodied_planner::verify::Verifier;
+    use embodied_system::plan::{agent_problem, plan_scenario};
+    use embodied_system::scenario::GoalSpec;
+    let sc = load_scenario("two-irp6-together").unwrap();
+    let plan = plan_scenario(&sc, None).unwrap();
+    let (ot, p) = (&plan.plans[0], &plan.plans[1]);
+    assert_eq!((ot.agent.as_str(), p.agent.as_str()), ("irp6ot", "irp6p"));
+    // The postument arm's straight swing passes through the on-track arm where it ends...
+    let parked = vec![ot.path.last().unwrap().clone()];
+    let model = agent_problem(&sc, 1, &[parked, Vec::new()]);
+    let GoalSpec::Configuration(goal) = sc.agents[1].goal.clone().unwrap() else { panic!("a configuration goal") };
+    let straight = [sc.agents[1].start.clone(), goal];
+    assert!(Verifier::sampled(0.01).verify_path(&model, &straight).is_err(), "the straight swing is free");
+    // ... and is free without it: the other arm is what the plan goes around.
+    let alone = agent_problem(&sc, 1, &[Vec::new(), Vec::new()]);
+    assert!(Verifier::sampled(0.01).verify_path(&alone, &straight).is_ok());
+    // So the plan leaves the straight line.
+    assert!(p.path.len() > 2, "{} waypoints", p.path.len());
+}
+
+#[test]
 fn the_default_scenario_runs_through_the_deliberator_one_arm_after_the_other() {
     let log = run("two-irp6-cell", 4.0, "cell.jsonl");
     for a in ["irp6ot", "irp6p"] {
