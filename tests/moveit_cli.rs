@@ -111,6 +111,98 @@ fn planned_joint_trajectory_verifies_and_a_cut_corner_is_refused() {
     }
 }
 
+/// A `MotionPlanRequest` whose goal is the pose of `ee_link` at [`GOAL`] (a 2 mm sphere and
+/// 0.01 rad about each axis), the start as in [`write_problem`].
+fn write_pose_request(dir: &Path) -> (PathBuf, embodied_models::nalgebra::Isometry3<f64>) {
+    let robot = load_urdf(&corpus(UR5), None).expect("UR5 loads");
+    let wanted = robot.link_pose(&GOAL, robot.link_index("ee_link").expect("ee_link"));
+    let (t, q) = (wanted.translation.vector, wanted.rotation.coords);
+    let list = |v: &[f64]| v.iter().map(|x| x.to_string()).collect::<Vec<_>>().join(", ");
+    let req = format!(
+        "group_name: manipulator\nallowed_planning_time: 10\nstart_state:\n  joint_state:\n    name: [{}]\n    position: [{}]\ngoal_constraints:\n  - position_constraints:\n      - link_name: ee_link\n        header: {{frame_id: base_link}}\n        constraint_region:\n          primitives: [{{type: sphere, dimensions: [0.002]}}]\n          primitive_poses: [{{position: {{x: {}, y: {}, z: {}}}}}]\n    orientation_constraints:\n      - link_name: ee_link\n        orientation: {{x: {}, y: {}, z: {}, w: {}}}\n        absolute_x_axis_tolerance: 0.01\n        absolute_y_axis_tolerance: 0.01\n        absolute_z_axis_tolerance: 0.01\n",
+        NAMES.join(", "),
+        list(&START),
+        t.x,
+        t.y,
+        t.z,
+        q.x,
+        q.y,
+        q.z,
+        q.w
+    );
+    let request = dir.join("pose_request.yaml");
+    std::fs::write(&request, req).expect("request");
+    (request, wanted)
+}
+
+#[test]
+fn a_pose_goal_is_planned_around_the_post_and_verifies() {
+    let dir = TempDir::new("moveit-pose");
+    let (srdf, scene, _) = write_problem(&dir);
+    let (request, wanted) = write_pose_request(&dir);
+    let urdf = corpus(UR5);
+    let s = |p: &Path| p.to_str().expect("utf-8 path").to_string();
+    let out = dir.join("traj.yaml");
+    let (code, stdout, stderr) = embodied(&[
+        "plan",
+        "--urdf",
+        &s(&urdf),
+        "--srdf",
+        &s(&srdf),
+        "--scene",
+        &s(&scene),
+        "--request",
+        &s(&request),
+        "--format",
+        "joint-trajectory",
+        "-o",
+        &s(&out),
+    ]);
+    assert_eq!(code, 0, "plan failed: {stdout}{stderr}");
+    let text = std::fs::read_to_string(&out).expect("written");
+    let jt = embodied_models::formats::trajectory::parse_joint_trajectory(&text, &out).expect("reads back");
+    // The last point, by forward kinematics of the robot as loaded here, is at the wanted pose.
+    let robot = load_urdf(&corpus(UR5), None).expect("UR5 loads");
+    let last = &jt.points[jt.points.len() - 1].positions;
+    let mut q = robot.home().to_vec();
+    for (name, v) in jt.joint_names.iter().zip(last) {
+        let d = robot.joint_names().iter().position(|n| n == name).expect("a joint of the robot");
+        q[d] = *v;
+    }
+    let reached = robot.link_pose(&q, robot.link_index("ee_link").expect("ee_link"));
+    assert!((reached.translation.vector - wanted.translation.vector).norm() <= 0.002 + 1e-5);
+    assert!(reached.rotation.angle_to(&wanted.rotation) <= 0.02);
+    let (code, stdout, stderr) = embodied(&[
+        "verify",
+        "--urdf",
+        &s(&urdf),
+        "--srdf",
+        &s(&srdf),
+        "--scene",
+        &s(&scene),
+        "--trajectory",
+        &s(&out),
+    ]);
+    assert_eq!(code, 0, "not certified: {stdout}{stderr}");
+    // A pose out of reach is a planning failure (exit 1) that says why, not bad input.
+    let far = std::fs::read_to_string(&request).expect("request").replacen("x: ", "x: 9", 1);
+    let far_request = dir.join("far.yaml");
+    std::fs::write(&far_request, far).expect("written");
+    let (code, stdout, stderr) = embodied(&[
+        "plan",
+        "--urdf",
+        &s(&urdf),
+        "--srdf",
+        &s(&srdf),
+        "--scene",
+        &s(&scene),
+        "--request",
+        &s(&far_request),
+    ]);
+    assert_eq!(code, 1, "{stdout}{stderr}");
+    assert!(stderr.contains("goal"), "{stderr}");
+}
+
 #[test]
 fn package_path_finds_meshes_of_a_urdf_moved_away_from_its_package() {
     let dir = TempDir::new("pkg");

@@ -407,6 +407,24 @@ impl Robot {
     pub fn end_effectors(&self) -> &[EndEffector] {
         &self.end_effectors
     }
+    /// This robot with one more end effector, `name`, whose flange is link `link` and whose tool
+    /// frame is `tool` in it (no closed-form inverse kinematics); returns it and the end effector's
+    /// index. Errors: no such link.
+    pub fn with_end_effector(
+        &self,
+        name: &str,
+        link: &str,
+        tool: Isometry3<f64>,
+    ) -> Result<(Robot, usize), ModelError> {
+        let Some(link) = self.link_index(link) else {
+            return Err(ModelError::NoSuchName { robot: self.name.clone(), what: "link", name: link.to_string() });
+        };
+        let mut robot = self.clone();
+        robot.end_effectors.push(EndEffector { name: name.to_string(), link, tool });
+        robot.closed_forms.push(None);
+        let index = robot.end_effectors.len() - 1;
+        Ok((robot, index))
+    }
     /// The home configuration `q` (default: zeros clamped into the limits).
     pub fn home(&self) -> &[f64] {
         &self.home

@@ -56,12 +56,128 @@ pub struct MoveitPlan {
     pub stats: MotionStats,
 }
 
-/// Plan `problem` from its start to its joint goal.
+/// Plan `problem` from its start to its goal: the joint goal, or any configuration meeting one
+/// of the request's goal alternatives (link poses through [`goal_configurations`]). The path's
+/// last configuration is checked against the request's goals before it is returned.
 pub fn plan_request(problem: &MoveitProblem, settings: &MotionSettings) -> Result<MoveitPlan, PlanError> {
-    let goal = Goal::Configuration(problem.resolved.goal.clone());
+    let goal = match problem.resolved.goals.as_slice() {
+        [ResolvedGoal::Configuration(q)] => Goal::Configuration(q.clone()),
+        _ => Goal::AnyOf(goal_configurations(problem, settings)?),
+    };
     let plan = plan_motion(&problem.model, &problem.resolved.start, &goal, settings)?;
+    let Some(last) = plan.path.last() else {
+        return Err(PlanError::InvalidInput { message: "the planner returned an empty path".into() });
+    };
+    if let Some(why) = goal_miss(problem, last) {
+        return Err(PlanError::GoalUnreachable { reason: format!("the path ends off the goal: {why}") });
+    }
     let trajectory = time_parameterize(&plan.path, problem.model.robot(), 0.0);
     Ok(MoveitPlan { path: plan.path, trajectory, stats: plan.stats })
+}
+
+/// Largest joint-space distance (rad or m) from a configuration goal at which it counts as
+/// reached.
+pub const CONFIGURATION_GOAL_TOLERANCE: f64 = 1e-6;
+
+/// Why configuration `q` (the group's joints) meets none of the problem's goal alternatives, or
+/// `None` when it meets one.
+pub fn goal_miss(problem: &MoveitProblem, q: &[f64]) -> Option<String> {
+    let robot = problem.model.robot();
+    let space = robot.config_space();
+    let mut reasons = Vec::new();
+    for (k, goal) in problem.resolved.goals.iter().enumerate() {
+        let miss = match goal {
+            ResolvedGoal::Configuration(g) => {
+                let d = space.distance(g, q);
+                (d > CONFIGURATION_GOAL_TOLERANCE).then(|| format!("{d:.3e} from the goal configuration"))
+            }
+            ResolvedGoal::Pose(p) => p.miss(robot, q),
+        };
+        match miss {
+            None => return None,
+            Some(why) => reasons.push(format!("goal {k}: {why}")),
+        }
+    }
+    Some(reasons.join("; "))
+}
+
+/// Goal configurations of the problem: every configuration goal, and for every link-pose goal
+/// up to `settings.ik_solutions` distinct collision-free inverse-kinematics solutions that meet
+/// it. The solver (damped least squares, [`Robot::inverse_kinematics`]) aims the constrained
+/// point at the first region's centre and the link at the wanted orientation (position only
+/// when the goal has no orientation; the start's point when it has no position), seeded at the
+/// start and then at random configurations drawn from `settings.seed`. Every solution is checked
+/// against the whole goal ([`PoseGoal::miss`]), the joint limits and collisions.
+pub fn goal_configurations(problem: &MoveitProblem, settings: &MotionSettings) -> Result<Vec<Vec<f64>>, PlanError> {
+    let robot = problem.model.robot();
+    let start = &problem.resolved.start;
+    let space = robot.config_space();
+    let mut out: Vec<Vec<f64>> = Vec::new();
+    let mut last_miss = None;
+    for (k, goal) in problem.resolved.goals.iter().enumerate() {
+        let pose_goal = match goal {
+            ResolvedGoal::Configuration(q) => {
+                out.push(q.clone());
+                continue;
+            }
+            ResolvedGoal::Pose(p) => p,
+        };
+        let tool = nalgebra::Isometry3::translation(pose_goal.offset.x, pose_goal.offset.y, pose_goal.offset.z);
+        let (arm, ee) = robot
+            .with_end_effector("goal", &pose_goal.link, tool)
+            .map_err(|e| PlanError::InvalidInput { message: format!("goal {k}: {e}") })?;
+        let (_, at_start) = arm.end_effector_poses(start, ee);
+        let (position, orientation) = pose_goal.aim();
+        let target = nalgebra::Isometry3::from_parts(
+            nalgebra::Translation3::from(position.unwrap_or(at_start.translation.vector)),
+            orientation.unwrap_or(at_start.rotation),
+        );
+        let wanted = settings.ik_solutions.max(1);
+        let mut rng = embodied_models::Rng::new(settings.seed ^ 0x90a1_5eed ^ k as u64);
+        let mut found = 0;
+        for attempt in 0..4 * wanted + 4 {
+            if found >= wanted {
+                break;
+            }
+            let mut seed = if attempt == 0 { start.clone() } else { arm.random_configuration(&mut rng) };
+            // Joint constraints of the goal bound the seeds too: the solver starts where the
+            // goal allows (drawn within the allowed interval, or clamped into it at the start).
+            for &(i, lo, hi) in &pose_goal.joints {
+                let limits = arm.limits()[i];
+                let (lo, hi) = (lo.max(limits.lower), hi.min(limits.upper));
+                if lo <= hi {
+                    seed[i] = if attempt == 0 { seed[i].clamp(lo, hi) } else { lo + (hi - lo) * rng.uniform() };
+                }
+            }
+            let options = embodied_models::ik::IkOptions {
+                seed: settings.seed.wrapping_add(attempt as u64),
+                restarts: if attempt == 0 { 20 } else { 3 },
+                position_only: orientation.is_none(),
+                ..embodied_models::ik::IkOptions::default()
+            };
+            let Ok(q) = arm.inverse_kinematics(ee, &target, &seed, &options) else { continue };
+            if let Some(why) = pose_goal.miss(robot, &q) {
+                last_miss = Some(why);
+                continue;
+            }
+            if robot.check_configuration(&q).is_err() || problem.model.first_collision(&q).is_some() {
+                last_miss = Some("every solution found collides or breaks a joint limit".into());
+                continue;
+            }
+            if out.iter().all(|o| space.distance(o, &q) > 1e-3) {
+                out.push(q);
+                found += 1;
+            }
+        }
+    }
+    if out.is_empty() {
+        let reason = match last_miss {
+            Some(why) => format!("no configuration meets the goal: {why}"),
+            None => "no inverse-kinematics solution reaches the goal pose".into(),
+        };
+        return Err(PlanError::GoalUnreachable { reason });
+    }
+    Ok(out)
 }
 
 /// A [`Trajectory`] as a JointTrajectory: every sample a point with its position and velocity;

@@ -98,9 +98,11 @@ fn request_gives_start_goal_and_the_groups_joints() {
     let request = load_request(&fixture("request_ur5.yaml")).expect("request parses");
     assert_eq!(request.group_name, "manipulator");
     assert_eq!(request.planner_id.as_deref(), Some("RRTConnectkConfigDefault"));
-    assert_eq!(request.goal.len(), 6);
-    assert!(close(request.goal[0].tolerance_above, 0.001));
-    assert!(close(request.goal[0].tolerance_below, 0.002));
+    assert_eq!(request.goals.len(), 1);
+    let joints = &request.goals[0].joints;
+    assert_eq!(joints.len(), 6);
+    assert!(close(joints[0].tolerance_above, 0.001));
+    assert!(close(joints[0].tolerance_below, 0.002));
     assert_eq!(request.start.get("robotiq_85_left_knuckle_joint"), Some(0.2));
 
     let resolved = request.resolve(&robot, &srdf, None).expect("resolves");
@@ -190,7 +192,7 @@ fn errors_carry_file_line_column_and_what_was_expected() {
     let missing = "group_name: manipulator\ngoal_constraints:\n  - joint_constraints:\n      - {joint_name: shoulder_pan_joint, position: 1}\n";
     let request = parse_request(missing, Path::new("partial.yaml")).expect("parses");
     let (_, line, column, message) = parse_error(request.resolve(&robot, &srdf, None).expect_err("goal misses joints"));
-    assert_eq!((line, column), (1, 13));
+    assert_eq!((line, column), (3, 5));
     assert!(message.contains("shoulder_lift_joint"), "{message}");
 
     let unknown_group = "group_name: legs\ngoal_constraints:\n  - joint_constraints: []\n";
@@ -206,7 +208,8 @@ fn errors_carry_file_line_column_and_what_was_expected() {
 
     let pose_goal =
         "group_name: manipulator\ngoal_constraints:\n  - position_constraints:\n      - link_name: ee_link\n";
-    let (_, line, column, message) = parse_error(parse_request(pose_goal, Path::new("p.yaml")).expect_err("pose goal"));
-    assert_eq!((line, column), (4, 7));
-    assert!(message.contains("position_constraints"), "{message}");
+    let (_, line, column, message) =
+        parse_error(parse_request(pose_goal, Path::new("p.yaml")).expect_err("pose goal without a region"));
+    assert_eq!((line, column), (4, 9));
+    assert!(message.contains("constraint_region"), "{message}");
 }

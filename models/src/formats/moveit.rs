@@ -10,10 +10,16 @@
 //! clear error rather than approximated.
 //!
 //! A motion plan request (`requestNNNN.yaml`) gives `group_name`, `start_state.joint_state`
-//! (`name[]`, `position[]`) and `goal_constraints[0].joint_constraints[]` (`joint_name`,
-//! `position`, optional `tolerance_above`/`tolerance_below`). [`MotionRequest::resolve`] turns it
-//! into a start and goal configuration over the group's joints (resolved through the SRDF) plus the
-//! values at which every other degree of freedom is frozen.
+//! (`name[]`, `position[]`) and `goal_constraints[]`, alternatives each made of
+//! `joint_constraints[]` (`joint_name`, `position`, optional `tolerance_above`/`tolerance_below`),
+//! `position_constraints[]` (`link_name`, `target_point_offset`, `constraint_region` of box,
+//! sphere or cylinder primitives, `header.frame_id`) and `orientation_constraints[]`
+//! (`link_name`, `orientation`, `absolute_{x,y,z}_axis_tolerance`, `parameterization`).
+//! [`MotionRequest::resolve`] turns it into a start configuration over the group's joints
+//! (resolved through the SRDF), the values at which every other degree of freedom is frozen, and
+//! each goal alternative either as a configuration (joint constraints on every joint of the
+//! group) or as a [`PoseGoal`] in the world frame (one link's position and/or orientation, with
+//! any joint constraints of the same entry as bounds). Visibility constraints are refused.
 //!
 //! Positions and orientations may be written as lists (`[x, y, z]`, `[x, y, z, w]`, as
 //! MotionBenchMaker does) or as mappings (`{x: .., y: .., z: ..}`, as `rostopic echo` does).
@@ -31,7 +37,7 @@
 
 use std::path::{Path, PathBuf};
 
-use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion};
+use nalgebra::{Isometry3, Point3, Quaternion, Translation3, UnitQuaternion, Vector3};
 
 use super::srdf::Srdf;
 use crate::collision::{Environment, Obstacle};
@@ -118,7 +124,56 @@ pub struct JointGoal {
     pub location: Location,
 }
 
-/// A `moveit_msgs/MotionPlanRequest` with a joint-space goal.
+/// A `moveit_msgs/PositionConstraint`: the point `offset` (in `link`'s frame) must lie in
+/// `region`, the union of the constraint region's primitives, posed in frame `frame_id`.
+#[derive(Debug, Clone)]
+pub struct PositionGoal {
+    /// The constrained link (`link_name`).
+    pub link: String,
+    /// `header.frame_id` of the region (empty when absent: the world frame).
+    pub frame_id: String,
+    /// `target_point_offset`: the constrained point in the link's frame.
+    pub offset: [f64; 3],
+    /// `constraint_region.primitives` at their `primitive_poses`, in frame `frame_id`.
+    pub region: Vec<Primitive>,
+    /// Where the constraint stands in the file.
+    pub location: Location,
+}
+
+/// A `moveit_msgs/OrientationConstraint`: `link`'s orientation within the tolerances of
+/// `orientation` (in frame `frame_id`).
+#[derive(Debug, Clone)]
+pub struct OrientationGoal {
+    /// The constrained link (`link_name`).
+    pub link: String,
+    /// `header.frame_id` of the orientation (empty when absent: the world frame).
+    pub frame_id: String,
+    /// The wanted orientation.
+    pub orientation: UnitQuaternion<f64>,
+    /// `absolute_x_axis_tolerance`, `absolute_y_axis_tolerance`, `absolute_z_axis_tolerance` (rad).
+    pub tolerance: [f64; 3],
+    /// `parameterization`: `true` for a rotation vector (1), `false` for XYZ Euler angles (0,
+    /// MoveIt's default).
+    pub rotation_vector: bool,
+    /// Where the constraint stands in the file.
+    pub location: Location,
+}
+
+/// One entry of `goal_constraints` (a `moveit_msgs/Constraints`): all of its constraints must
+/// hold at once. The entries of a request are alternatives: reaching any one is the goal.
+#[derive(Debug, Clone)]
+pub struct GoalConstraints {
+    /// `joint_constraints`, in file order.
+    pub joints: Vec<JointGoal>,
+    /// `position_constraints`.
+    pub positions: Vec<PositionGoal>,
+    /// `orientation_constraints`.
+    pub orientations: Vec<OrientationGoal>,
+    /// Where the entry stands in the file.
+    pub location: Location,
+}
+
+/// A `moveit_msgs/MotionPlanRequest` with a joint-space or link-pose goal.
 #[derive(Debug, Clone)]
 pub struct MotionRequest {
     /// The file the request was read from.
@@ -129,8 +184,9 @@ pub struct MotionRequest {
     pub group_location: Location,
     /// The start state (`start_state.joint_state`).
     pub start: JointState,
-    /// `goal_constraints[0].joint_constraints`, in file order.
-    pub goal: Vec<JointGoal>,
+    /// `goal_constraints`: alternatives, each a set of joint, position and orientation
+    /// constraints.
+    pub goals: Vec<GoalConstraints>,
     /// The requested planner (`planner_id`), if given.
     pub planner_id: Option<String>,
     /// The requested planning time budget (s), if given.
@@ -139,16 +195,135 @@ pub struct MotionRequest {
 
 /// A request made concrete for one robot: the group's degrees of freedom, in the robot's joint
 /// order, with start and goal values, and the value of every other degree of freedom.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone)]
 pub struct ResolvedRequest {
     /// The group's joints, in the robot's degree-of-freedom order.
     pub joint_names: Vec<String>,
     /// Start configuration over `joint_names`.
     pub start: Vec<f64>,
-    /// Goal configuration over `joint_names`.
+    /// The first goal alternative when it is a configuration (over `joint_names`), as
+    /// MotionBenchMaker's requests give it; empty when it is a link pose (see `goals`).
     pub goal: Vec<f64>,
+    /// Every goal alternative (`goal_constraints` in order): reaching any one is the goal.
+    pub goals: Vec<ResolvedGoal>,
     /// Every degree of freedom of the robot outside the group, with the value it keeps.
     pub frozen: Vec<(String, f64)>,
+}
+
+/// A goal alternative of a request made concrete.
+#[derive(Debug, Clone)]
+pub enum ResolvedGoal {
+    /// Every joint of the group at these values (over the group's joints).
+    Configuration(Vec<f64>),
+    /// A link's position and/or orientation, in the world frame.
+    Pose(PoseGoal),
+}
+
+/// An orientation constraint in the world frame.
+#[derive(Debug, Clone)]
+pub struct OrientationTarget {
+    /// The wanted orientation of the link, world frame.
+    pub orientation: UnitQuaternion<f64>,
+    /// Largest error about x, y and z (rad), in the parameterisation below.
+    pub tolerance: [f64; 3],
+    /// The error as a rotation vector (`true`) or as XYZ Euler angles (`false`).
+    pub rotation_vector: bool,
+}
+
+/// Slack on a goal's regions and tolerances (m, rad): a solution found by numerical inverse
+/// kinematics to 1e-6 satisfies a region of zero size.
+pub const POSE_GOAL_SLACK: f64 = 1e-5;
+
+/// A link-pose goal (`position_constraints` and `orientation_constraints` of one entry), world
+/// frame. The error of the orientation is that of MoveIt's `OrientationConstraint`: the rotation
+/// `wanted⁻¹ · actual`, as a rotation vector or as XYZ Euler angles (`R = Rx(a) Ry(b) Rz(c)`),
+/// each component within its tolerance.
+#[derive(Debug, Clone)]
+pub struct PoseGoal {
+    /// The constrained link.
+    pub link: String,
+    /// The constrained point in the link's frame (`target_point_offset`).
+    pub offset: Vector3<f64>,
+    /// The point must lie in one of these primitives (world frame); empty: no position goal.
+    pub region: Vec<Primitive>,
+    /// The orientation goal, if any.
+    pub orientation: Option<OrientationTarget>,
+    /// Joint constraints of the same entry: (index among the group's joints, lowest, highest).
+    pub joints: Vec<(usize, f64, f64)>,
+}
+
+impl PoseGoal {
+    /// The pose aimed at: the first region's centre (or `None` without a position goal) and
+    /// the wanted orientation (or `None` without one).
+    pub fn aim(&self) -> (Option<Vector3<f64>>, Option<UnitQuaternion<f64>>) {
+        (self.region.first().map(|r| r.pose.translation.vector), self.orientation.as_ref().map(|o| o.orientation))
+    }
+
+    /// Why configuration `q` of `robot` (over the group's joints, its other joints frozen)
+    /// misses this goal, or `None` when it meets it (within [`POSE_GOAL_SLACK`]).
+    pub fn miss(&self, robot: &Robot, q: &[f64]) -> Option<String> {
+        let Some(link) = robot.link_index(&self.link) else {
+            return Some(format!("robot `{}` has no link `{}`", robot.name(), self.link));
+        };
+        for &(i, lo, hi) in &self.joints {
+            let v = q.get(i).copied().unwrap_or(f64::NAN);
+            if !(v >= lo - POSE_GOAL_SLACK && v <= hi + POSE_GOAL_SLACK) {
+                return Some(format!("joint {i} at {v:.6}, outside its goal [{lo:.6}, {hi:.6}]"));
+            }
+        }
+        let pose = robot.link_pose(q, link);
+        if !self.region.is_empty() {
+            let point = pose * Point3::from(self.offset);
+            let inside = self.region.iter().any(|r| {
+                let p = r.pose.inverse_transform_point(&point);
+                let s = POSE_GOAL_SLACK;
+                match &r.shape {
+                    Shape::Sphere { radius } => p.coords.norm() <= radius + s,
+                    Shape::Cuboid { half_extents } => {
+                        p.x.abs() <= half_extents.x + s && p.y.abs() <= half_extents.y + s && p.z.abs() <= half_extents.z + s
+                    }
+                    Shape::Cylinder { radius, half_height } => {
+                        (p.x * p.x + p.y * p.y).sqrt() <= radius + s && p.z.abs() <= half_height + s
+                    }
+                    _ => false,
+                }
+            });
+            if !inside {
+                let centre = self.region[0].pose.translation.vector;
+                return Some(format!(
+                    "link `{}`'s point is {:.6} m from the region's centre, outside the region",
+                    self.link,
+                    (point.coords - centre).norm()
+                ));
+            }
+        }
+        if let Some(o) = &self.orientation {
+            let e = orientation_error(&o.orientation, &pose.rotation, o.rotation_vector);
+            if (0..3).any(|k| !(e[k].abs() <= o.tolerance[k] + POSE_GOAL_SLACK)) {
+                return Some(format!(
+                    "link `{}`'s orientation error ({:.6}, {:.6}, {:.6}) rad exceeds the tolerances {:?}",
+                    self.link, e[0], e[1], e[2], o.tolerance
+                ));
+            }
+        }
+        None
+    }
+}
+
+/// The error `wanted⁻¹ · actual` as a rotation vector or as XYZ Euler angles
+/// (`R = Rx(a) Ry(b) Rz(c)`, each in (-π, π]).
+pub fn orientation_error(wanted: &UnitQuaternion<f64>, actual: &UnitQuaternion<f64>, rotation_vector: bool) -> [f64; 3] {
+    let diff = wanted.inverse() * actual;
+    if rotation_vector {
+        let v = diff.scaled_axis();
+        return [v.x, v.y, v.z];
+    }
+    let r = diff.to_rotation_matrix();
+    let m = r.matrix();
+    let b = m[(0, 2)].clamp(-1.0, 1.0).asin();
+    let a = (-m[(1, 2)]).atan2(m[(2, 2)]);
+    let c = (-m[(0, 1)]).atan2(m[(0, 0)]);
+    [a, b, c]
 }
 
 impl ResolvedRequest {
@@ -246,51 +421,12 @@ pub fn parse_request(text: &str, file: &Path) -> Result<MotionRequest, MoveitErr
         }
         None => JointState::default(),
     };
-    let goals = doc.require(root, "goal_constraints", "the goal constraints (a list)")?;
-    let goals = doc.seq(goals, "goal_constraints")?;
-    let Some(first) = goals.first() else {
-        return Err(doc.err(
-            doc.require(root, "goal_constraints", "")?,
-            "expected at least one entry in goal_constraints, got an empty list",
-        ));
-    };
-    doc.expect_mapping(first, "a goal constraint (a mapping with `joint_constraints`)")?;
-    for other in ["position_constraints", "orientation_constraints", "visibility_constraints"] {
-        if let Some(n) = doc.get(first, other)
-            && !is_null(n)
-            && !doc.seq(n, other)?.is_empty()
-        {
-            return Err(doc.err(
-                n,
-                &format!("{other} are not supported: only joint-space goals (joint_constraints) can be planned to"),
-            ));
-        }
+    let goals_node = doc.require(root, "goal_constraints", "the goal constraints (a list)")?;
+    let entries = doc.seq(goals_node, "goal_constraints")?;
+    if entries.is_empty() {
+        return Err(doc.err(goals_node, "expected at least one entry in goal_constraints, got an empty list"));
     }
-    let jc = doc.require(first, "joint_constraints", "the goal's joint constraints")?;
-    let mut goal = Vec::new();
-    for c in doc.seq(jc, "joint_constraints")? {
-        doc.expect_mapping(c, "a joint constraint (a mapping with `joint_name` and `position`)")?;
-        let name_node = doc.require(c, "joint_name", "the constrained joint's name")?;
-        let joint = doc.string(name_node, "a joint name")?;
-        let position = doc.number(doc.require(c, "position", "the joint's goal position")?, "a joint goal position")?;
-        let tol = |key: &str| -> Result<f64, MoveitError> {
-            match doc.get(c, key).filter(|n| !is_null(n)) {
-                Some(n) => {
-                    let v = doc.number(n, key)?;
-                    if v < 0.0 {
-                        return Err(doc.err(n, &format!("expected a non-negative {key}, got {v}")));
-                    }
-                    Ok(v)
-                }
-                None => Ok(0.0),
-            }
-        };
-        let (tolerance_above, tolerance_below) = (tol("tolerance_above")?, tol("tolerance_below")?);
-        if goal.iter().any(|g: &JointGoal| g.joint == joint) {
-            return Err(doc.err(name_node, &format!("joint `{joint}` is constrained twice in the goal")));
-        }
-        goal.push(JointGoal { joint, position, tolerance_above, tolerance_below, location: doc.loc(name_node) });
-    }
+    let goals = entries.iter().map(|entry| doc.goal_constraints(entry)).collect::<Result<Vec<_>, _>>()?;
     let planner_id = match doc.get(root, "planner_id").filter(|n| !is_null(n)) {
         Some(n) => Some(doc.string(n, "the planner id")?),
         None => None,
@@ -304,7 +440,7 @@ pub fn parse_request(text: &str, file: &Path) -> Result<MotionRequest, MoveitErr
         group_name,
         group_location: doc.loc(group),
         start,
-        goal,
+        goals,
         planner_id,
         allowed_planning_time,
     })
@@ -313,6 +449,127 @@ pub fn parse_request(text: &str, file: &Path) -> Result<MotionRequest, MoveitErr
 impl MotionRequest {
     fn err_at(&self, at: Location, message: String) -> MoveitError {
         MoveitError::Parse { file: self.file.clone(), line: at.line, column: at.column, message }
+    }
+
+    /// Entry `k` of the goal constraints over the group's joints: a configuration when it
+    /// constrains joints only (every joint of the group), else a [`PoseGoal`] in the world frame.
+    fn resolve_goal(
+        &self,
+        robot: &Robot,
+        k: usize,
+        entry: &GoalConstraints,
+        joint_names: &[String],
+        start: &[f64],
+        frozen: &[(String, f64)],
+    ) -> Result<ResolvedGoal, MoveitError> {
+        for g in &entry.joints {
+            if !joint_names.contains(&g.joint) {
+                return Err(self.err_at(
+                    g.location,
+                    format!(
+                        "goal constrains joint `{}`, which is not a movable joint of group `{}` (its joints: {})",
+                        g.joint,
+                        self.group_name,
+                        joint_names.join(", ")
+                    ),
+                ));
+            }
+        }
+        if entry.positions.is_empty() && entry.orientations.is_empty() {
+            let mut goal = Vec::with_capacity(joint_names.len());
+            for name in joint_names {
+                match entry.joints.iter().find(|g| &g.joint == name) {
+                    Some(g) => goal.push(g.position),
+                    None => {
+                        return Err(self.err_at(
+                            entry.location,
+                            format!(
+                                "goal_constraints[{k}] does not constrain joint `{name}` of group `{}`",
+                                self.group_name
+                            ),
+                        ));
+                    }
+                }
+            }
+            return Ok(ResolvedGoal::Configuration(goal));
+        }
+        // Frames are placed by the robot's forward kinematics at the start state.
+        let mut full = robot.home().to_vec();
+        for (name, value) in joint_names.iter().zip(start).chain(frozen.iter().map(|(n, v)| (n, v))) {
+            if let Some(d) = robot.joint_names().iter().position(|j| j == name) {
+                full[d] = *value;
+            }
+        }
+        let root = robot.links().iter().find(|l| l.parent_joint.is_none()).map(|l| l.name.clone()).unwrap_or_default();
+        let frame = |frame_id: &str, at: Location| -> Result<Isometry3<f64>, MoveitError> {
+            let f = frame_id.trim_start_matches('/');
+            if f.is_empty() || f == "world" || f == root {
+                return Ok(Isometry3::identity());
+            }
+            match robot.link_index(f) {
+                Some(l) => Ok(robot.link_pose(&full, l)),
+                None => Err(self.err_at(
+                    at,
+                    format!("frame `{frame_id}` is neither the world, the root link `{root}` nor a link of robot `{}`", robot.name()),
+                )),
+            }
+        };
+        let link = entry
+            .positions
+            .first()
+            .map(|p| (&p.link, p.location))
+            .or_else(|| entry.orientations.first().map(|o| (&o.link, o.location)));
+        let Some((link, link_at)) = link else {
+            return Err(self.err_at(entry.location, "expected a position or orientation constraint".into()));
+        };
+        if robot.link_index(link).is_none() {
+            return Err(self.err_at(link_at, format!("robot `{}` has no link `{link}`", robot.name())));
+        }
+        let others = entry.positions.iter().map(|p| (&p.link, p.location));
+        if let Some((other, at)) =
+            others.chain(entry.orientations.iter().map(|o| (&o.link, o.location))).find(|(l, _)| *l != link)
+        {
+            return Err(self.err_at(
+                at,
+                format!("this goal constrains links `{link}` and `{other}`; a goal may constrain the pose of one link only"),
+            ));
+        }
+        if entry.positions.len() > 1 || entry.orientations.len() > 1 {
+            return Err(self.err_at(
+                entry.location,
+                "expected at most one position and one orientation constraint per goal".into(),
+            ));
+        }
+        let (offset, region) = match entry.positions.first() {
+            Some(p) => {
+                let f = frame(&p.frame_id, p.location)?;
+                let region = p.region.iter().map(|r| Primitive { pose: f * r.pose, shape: r.shape.clone() }).collect();
+                (Vector3::from(p.offset), region)
+            }
+            None => (Vector3::zeros(), Vec::new()),
+        };
+        let orientation = match entry.orientations.first() {
+            Some(o) => {
+                let f = frame(&o.frame_id, o.location)?;
+                Some(OrientationTarget {
+                    orientation: f.rotation * o.orientation,
+                    tolerance: o.tolerance,
+                    rotation_vector: o.rotation_vector,
+                })
+            }
+            None => None,
+        };
+        let joints = entry
+            .joints
+            .iter()
+            .filter_map(|g| {
+                joint_names
+                    .iter()
+                    .position(|n| n == &g.joint)
+                    .map(|i| (i, g.position - g.tolerance_below, g.position + g.tolerance_above))
+            })
+            .collect();
+        Ok(ResolvedGoal::Pose(PoseGoal { link: link.clone(), offset, region, orientation, joints }))
     }
 
     /// Resolve the request for `robot`: the group's joints come from the SRDF; start values come
@@ -360,32 +617,15 @@ impl MotionRequest {
                 frozen.push((name.clone(), value_of(i, name)));
             }
         }
-        for g in &self.goal {
-            if !joint_names.contains(&g.joint) {
-                return Err(self.err_at(
-                    g.location,
-                    format!(
-                        "goal constrains joint `{}`, which is not a movable joint of group `{}` (its joints: {})",
-                        g.joint,
-                        self.group_name,
-                        joint_names.join(", ")
-                    ),
-                ));
-            }
+        let mut goals = Vec::with_capacity(self.goals.len());
+        for (k, entry) in self.goals.iter().enumerate() {
+            goals.push(self.resolve_goal(robot, k, entry, &joint_names, &start, &frozen)?);
         }
-        let mut goal = Vec::with_capacity(joint_names.len());
-        for name in &joint_names {
-            match self.goal.iter().find(|g| &g.joint == name) {
-                Some(g) => goal.push(g.position),
-                None => {
-                    return Err(self.err_at(
-                        self.group_location,
-                        format!("goal_constraints[0] does not constrain joint `{name}` of group `{}`", self.group_name),
-                    ));
-                }
-            }
-        }
-        Ok(ResolvedRequest { joint_names, start, goal, frozen })
+        let goal = match goals.first() {
+            Some(ResolvedGoal::Configuration(q)) => q.clone(),
+            _ => Vec::new(),
+        };
+        Ok(ResolvedRequest { joint_names, start, goal, goals, frozen })
     }
 }
 
@@ -655,7 +895,7 @@ impl Doc<'_> {
                 ));
             }
             for (prim, pose) in prims.iter().zip(poses) {
-                let shape = self.primitive(prim, &id)?;
+                let shape = self.primitive(prim, &format!("object `{id}`"))?;
                 let local = self.pose(pose, &format!("object `{id}` primitive pose"))?;
                 primitives.push(Primitive { pose: object_pose * local, shape });
             }
@@ -663,7 +903,162 @@ impl Doc<'_> {
         Ok((CollisionObject { id, frame_id, primitives, location: self.loc(n) }, remove))
     }
 
-    fn primitive(&self, n: &Node, id: &str) -> Result<Shape, MoveitError> {
+    /// One `goal_constraints` entry.
+    fn goal_constraints(&self, entry: &Node) -> Result<GoalConstraints, MoveitError> {
+        self.expect_mapping(
+            entry,
+            "a goal constraint (a mapping with `joint_constraints`, `position_constraints` or `orientation_constraints`)",
+        )?;
+        let list = |key: &str| -> Result<&[Node], MoveitError> {
+            match self.get(entry, key).filter(|n| !is_null(n)) {
+                Some(n) => self.seq(n, key),
+                None => Ok(&[]),
+            }
+        };
+        if let Some(v) = self.get(entry, "visibility_constraints")
+            && !list("visibility_constraints")?.is_empty()
+        {
+            return Err(self.err(
+                v,
+                "visibility_constraints are not supported: a goal is given by joint, position and orientation constraints",
+            ));
+        }
+        let mut joints: Vec<JointGoal> = Vec::new();
+        for c in list("joint_constraints")? {
+            let goal = self.joint_goal(c)?;
+            if joints.iter().any(|g| g.joint == goal.joint) {
+                return Err(self.err(c, &format!("joint `{}` is constrained twice in the goal", goal.joint)));
+            }
+            joints.push(goal);
+        }
+        let positions = list("position_constraints")?.iter().map(|c| self.position_goal(c)).collect::<Result<_, _>>()?;
+        let orientations =
+            list("orientation_constraints")?.iter().map(|c| self.orientation_goal(c)).collect::<Result<_, _>>()?;
+        Ok(GoalConstraints { joints, positions, orientations, location: self.loc(entry) })
+    }
+
+    fn joint_goal(&self, c: &Node) -> Result<JointGoal, MoveitError> {
+        self.expect_mapping(c, "a joint constraint (a mapping with `joint_name` and `position`)")?;
+        let name_node = self.require(c, "joint_name", "the constrained joint's name")?;
+        let joint = self.string(name_node, "a joint name")?;
+        let position =
+            self.number(self.require(c, "position", "the joint's goal position")?, "a joint goal position")?;
+        let tolerance_above = self.non_negative(c, "tolerance_above")?.unwrap_or(0.0);
+        let tolerance_below = self.non_negative(c, "tolerance_below")?.unwrap_or(0.0);
+        Ok(JointGoal { joint, position, tolerance_above, tolerance_below, location: self.loc(name_node) })
+    }
+
+    /// An optional non-negative number under `key`.
+    fn non_negative(&self, map: &Node, key: &str) -> Result<Option<f64>, MoveitError> {
+        match self.get(map, key).filter(|n| !is_null(n)) {
+            Some(n) => {
+                let v = self.number(n, key)?;
+                if !(v >= 0.0) || !v.is_finite() {
+                    return Err(self.err(n, &format!("expected a finite non-negative {key}, got {v}")));
+                }
+                Ok(Some(v))
+            }
+            None => Ok(None),
+        }
+    }
+
+    /// `header.frame_id` of a message, empty when absent.
+    fn frame_id(&self, n: &Node) -> Result<String, MoveitError> {
+        match self.get(n, "header").filter(|h| !is_null(h)) {
+            Some(h) => {
+                self.expect_mapping(h, "a header")?;
+                match self.get(h, "frame_id").filter(|f| !is_null(f)) {
+                    Some(f) => self.string(f, "the header's frame_id"),
+                    None => Ok(String::new()),
+                }
+            }
+            None => Ok(String::new()),
+        }
+    }
+
+    fn position_goal(&self, c: &Node) -> Result<PositionGoal, MoveitError> {
+        self.expect_mapping(c, "a position constraint (a mapping with `link_name` and `constraint_region`)")?;
+        let link = self.string(self.require(c, "link_name", "the constrained link's name")?, "a link name")?;
+        let frame_id = self.frame_id(c)?;
+        let offset = match self.get(c, "target_point_offset").filter(|n| !is_null(n)) {
+            Some(n) => {
+                let v = self.xyz(n, &["x", "y", "z"], "target_point_offset")?;
+                [v[0], v[1], v[2]]
+            }
+            None => [0.0; 3],
+        };
+        let region_node = self.require(c, "constraint_region", "the region the link's point must lie in")?;
+        self.expect_mapping(region_node, "a constraint region (a mapping with `primitives` and `primitive_poses`)")?;
+        let prims = match self.get(region_node, "primitives").filter(|n| !is_null(n)) {
+            Some(p) => self.seq(p, "constraint_region primitives")?,
+            None => &[],
+        };
+        if let Some(m) = self.get(region_node, "meshes").filter(|m| !is_null(m))
+            && !self.seq(m, "constraint_region meshes")?.is_empty()
+        {
+            return Err(self.err(m, "mesh constraint regions are not supported (only box, sphere and cylinder)"));
+        }
+        if prims.is_empty() {
+            return Err(self.err(
+                region_node,
+                &format!("expected at least one primitive in the constraint region of link `{link}`, got none"),
+            ));
+        }
+        let poses_node = self.require(region_node, "primitive_poses", "one pose per primitive")?;
+        let poses = self.seq(poses_node, "constraint_region primitive_poses")?;
+        if poses.len() != prims.len() {
+            return Err(self.err(
+                poses_node,
+                &format!("expected {} primitive poses (one per primitive), got {}", prims.len(), poses.len()),
+            ));
+        }
+        let what = format!("the region of link `{link}`");
+        let mut region = Vec::with_capacity(prims.len());
+        for (prim, pose) in prims.iter().zip(poses) {
+            region.push(Primitive { shape: self.primitive(prim, &what)?, pose: self.pose(pose, "a region pose")? });
+        }
+        Ok(PositionGoal { link, frame_id, offset, region, location: self.loc(c) })
+    }
+
+    fn orientation_goal(&self, c: &Node) -> Result<OrientationGoal, MoveitError> {
+        self.expect_mapping(c, "an orientation constraint (a mapping with `link_name` and `orientation`)")?;
+        let link = self.string(self.require(c, "link_name", "the constrained link's name")?, "a link name")?;
+        let frame_id = self.frame_id(c)?;
+        let o = self.require(c, "orientation", "the wanted orientation (quaternion x, y, z, w)")?;
+        let pose = self.pose_of_orientation(o)?;
+        let mut tolerance = [0.0; 3];
+        for (t, key) in tolerance.iter_mut().zip(["absolute_x_axis_tolerance", "absolute_y_axis_tolerance", "absolute_z_axis_tolerance"]) {
+            *t = self.non_negative(c, key)?.unwrap_or(0.0);
+        }
+        // moveit_msgs/OrientationConstraint: XYZ_EULER_ANGLES = 0, ROTATION_VECTOR = 1.
+        let rotation_vector = match self.get(c, "parameterization").filter(|n| !is_null(n)) {
+            Some(p) => match self.number(p, "the parameterization")? {
+                v if v == 0.0 => false,
+                v if v == 1.0 => true,
+                v => {
+                    return Err(self.err(
+                        p,
+                        &format!("expected parameterization 0 (XYZ Euler angles) or 1 (rotation vector), got {v}"),
+                    ));
+                }
+            },
+            None => false,
+        };
+        Ok(OrientationGoal { link, frame_id, orientation: pose, tolerance, rotation_vector, location: self.loc(c) })
+    }
+
+    /// A quaternion as the orientation of a pose (same checks as a pose's).
+    fn pose_of_orientation(&self, o: &Node) -> Result<UnitQuaternion<f64>, MoveitError> {
+        let q = self.xyz(o, &["x", "y", "z", "w"], "the orientation (quaternion x, y, z, w)")?;
+        let quat = Quaternion::new(q[3], q[0], q[1], q[2]);
+        let norm = quat.norm();
+        if !norm.is_finite() || (norm - 1.0).abs() > 1e-3 {
+            return Err(self.err(o, &format!("expected a unit quaternion (x, y, z, w), got {q:?} of norm {norm:.6}")));
+        }
+        Ok(UnitQuaternion::from_quaternion(quat))
+    }
+
+    fn primitive(&self, n: &Node, owner: &str) -> Result<Shape, MoveitError> {
         self.expect_mapping(n, "a solid primitive (a mapping with `type` and `dimensions`)")?;
         let type_node = self.require(n, "type", "box, sphere or cylinder")?;
         // shape_msgs/SolidPrimitive: BOX=1, SPHERE=2, CYLINDER=3, CONE=4 (also accepted as numbers).
@@ -677,7 +1072,7 @@ impl Doc<'_> {
         let dims_node = self.require(n, "dimensions", "the primitive's dimensions")?;
         let positive = |dims: Vec<f64>, what: &str| -> Result<Vec<f64>, MoveitError> {
             if let Some(bad) = dims.iter().find(|d| **d <= 0.0) {
-                return Err(self.err(dims_node, &format!("expected positive {what} of object `{id}`, got {bad}")));
+                return Err(self.err(dims_node, &format!("expected positive {what} of {owner}, got {bad}")));
             }
             Ok(dims)
         };
@@ -700,7 +1095,7 @@ impl Doc<'_> {
             "cone" => Err(self.err(
                 type_node,
                 &format!(
-                    "object `{id}` has a cone primitive, which is not supported (expected box, sphere or cylinder)"
+                    "{owner} has a cone primitive, which is not supported (expected box, sphere or cylinder)"
                 ),
             )),
             other => {
