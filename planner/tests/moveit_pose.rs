@@ -5,16 +5,15 @@ use std::f64::consts::FRAC_PI_2;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
+use embodied_models::Robot;
 use embodied_models::nalgebra::{Isometry3, UnitQuaternion, Vector3};
 use embodied_models::srdf::{Srdf, load_srdf};
 use embodied_models::urdf::load_urdf;
-use embodied_models::Robot;
 use embodied_planner::PlanError;
 use embodied_planner::deadline::Deadline;
 use embodied_planner::motion::MotionSettings;
 use embodied_planner::moveit::{
-    MoveitError, ResolvedGoal, load_scene, moveit_problem, orientation_error, parse_request, parse_scene,
-    plan_request,
+    MoveitError, ResolvedGoal, load_scene, moveit_problem, orientation_error, parse_request, parse_scene, plan_request,
 };
 use embodied_planner::verify::Verifier;
 
@@ -33,12 +32,20 @@ fn ur5() -> (Robot, Srdf) {
 }
 
 /// MotionBenchMaker's box problem 1 (tests/fixtures/mbm): its start and its joint goal.
+#[allow(clippy::approx_constant)] // the file's own rounded values, not pi
 const START: [f64; 6] = [1.57, -1.5707, 0.0, -1.5707, -1.57, 3.14];
-const GOAL: [f64; 6] =
-    [-0.5967475061264721, -0.7665678720674942, 1.373208815745217, -2.184912337240673, -1.563569777871108, 0.1145459363691259];
+const GOAL: [f64; 6] = [
+    -0.5967475061264721,
+    -0.7665678720674942,
+    1.373208815745217,
+    -2.184912337240673,
+    -1.563569777871108,
+    0.1145459363691259,
+];
 
 fn start_state() -> String {
-    let names = ["shoulder_pan_joint", "shoulder_lift_joint", "elbow_joint", "wrist_1_joint", "wrist_2_joint", "wrist_3_joint"];
+    let names =
+        ["shoulder_pan_joint", "shoulder_lift_joint", "elbow_joint", "wrist_1_joint", "wrist_2_joint", "wrist_3_joint"];
     format!("start_state:\n  joint_state:\n    name: [{}]\n    position: {:?}\n", names.join(", "), START)
 }
 
@@ -164,11 +171,16 @@ fn bad_pose_goals_are_errors_with_their_place() {
         parse_failure(moveit_problem(&robot, &srdf, &scene, &request).expect_err("refused"))
     };
     // A link the robot does not have: named, at the constraint.
-    let (line, _, message) = resolve(&good.replace("link_name: ee_link\n        header", "link_name: hand\n        header"));
+    let (line, _, message) =
+        resolve(&good.replace("link_name: ee_link\n        header", "link_name: hand\n        header"));
     assert_eq!(line, 8);
     assert!(message.contains("no link `hand`"), "{message}");
     // Two links in one goal.
-    let (_, _, message) = resolve(&good.replacen("link_name: ee_link\n        orientation", "link_name: wrist_3_link\n        orientation", 1));
+    let (_, _, message) = resolve(&good.replacen(
+        "link_name: ee_link\n        orientation",
+        "link_name: wrist_3_link\n        orientation",
+        1,
+    ));
     assert!(message.contains("one link"), "{message}");
     // A frame that is neither the world nor a link.
     let (line, _, message) = resolve(&good.replace("frame_id: world", "frame_id: table"));
@@ -181,8 +193,13 @@ fn bad_pose_goals_are_errors_with_their_place() {
     assert!(message.contains("parameterization"), "{message}");
     let (_, _, message) = parse(&good.replace("absolute_y_axis_tolerance: 0.1", "absolute_y_axis_tolerance: -0.1"));
     assert!(message.contains("absolute_y_axis_tolerance"), "{message}");
-    let (_, _, message) = parse(&good.replace("            - {type: 2, dimensions: [0.01]}\n", "            []\n").replace("primitives:\n            []", "primitives: []"));
+    let (_, _, message) = parse(
+        &good
+            .replace("            - {type: 2, dimensions: [0.01]}\n", "            []\n")
+            .replace("primitives:\n            []", "primitives: []"),
+    );
     assert!(message.contains("primitive"), "{message}");
-    let (_, _, message) = parse(&good.replace("orientation: {x: 0, y: 0, z: 0, w: 1}", "orientation: {x: 0, y: 0, z: 0, w: 3}"));
+    let (_, _, message) =
+        parse(&good.replace("orientation: {x: 0, y: 0, z: 0, w: 1}", "orientation: {x: 0, y: 0, z: 0, w: 3}"));
     assert!(message.contains("unit quaternion"), "{message}");
 }

@@ -280,7 +280,9 @@ impl PoseGoal {
                 match &r.shape {
                     Shape::Sphere { radius } => p.coords.norm() <= radius + s,
                     Shape::Cuboid { half_extents } => {
-                        p.x.abs() <= half_extents.x + s && p.y.abs() <= half_extents.y + s && p.z.abs() <= half_extents.z + s
+                        p.x.abs() <= half_extents.x + s
+                            && p.y.abs() <= half_extents.y + s
+                            && p.z.abs() <= half_extents.z + s
                     }
                     Shape::Cylinder { radius, half_height } => {
                         (p.x * p.x + p.y * p.y).sqrt() <= radius + s && p.z.abs() <= half_height + s
@@ -299,7 +301,7 @@ impl PoseGoal {
         }
         if let Some(o) = &self.orientation {
             let e = orientation_error(&o.orientation, &pose.rotation, o.rotation_vector);
-            if (0..3).any(|k| !(e[k].abs() <= o.tolerance[k] + POSE_GOAL_SLACK)) {
+            if (0..3).any(|k| e[k].is_nan() || e[k].abs() > o.tolerance[k] + POSE_GOAL_SLACK) {
                 return Some(format!(
                     "link `{}`'s orientation error ({:.6}, {:.6}, {:.6}) rad exceeds the tolerances {:?}",
                     self.link, e[0], e[1], e[2], o.tolerance
@@ -312,7 +314,11 @@ impl PoseGoal {
 
 /// The error `wanted⁻¹ · actual` as a rotation vector or as XYZ Euler angles
 /// (`R = Rx(a) Ry(b) Rz(c)`, each in (-π, π]).
-pub fn orientation_error(wanted: &UnitQuaternion<f64>, actual: &UnitQuaternion<f64>, rotation_vector: bool) -> [f64; 3] {
+pub fn orientation_error(
+    wanted: &UnitQuaternion<f64>,
+    actual: &UnitQuaternion<f64>,
+    rotation_vector: bool,
+) -> [f64; 3] {
     let diff = wanted.inverse() * actual;
     if rotation_vector {
         let v = diff.scaled_axis();
@@ -510,7 +516,10 @@ impl MotionRequest {
                 Some(l) => Ok(robot.link_pose(&full, l)),
                 None => Err(self.err_at(
                     at,
-                    format!("frame `{frame_id}` is neither the world, the root link `{root}` nor a link of robot `{}`", robot.name()),
+                    format!(
+                        "frame `{frame_id}` is neither the world, the root link `{root}` nor a link of robot `{}`",
+                        robot.name()
+                    ),
                 )),
             }
         };
@@ -531,7 +540,9 @@ impl MotionRequest {
         {
             return Err(self.err_at(
                 at,
-                format!("this goal constrains links `{link}` and `{other}`; a goal may constrain the pose of one link only"),
+                format!(
+                    "this goal constrains links `{link}` and `{other}`; a goal may constrain the pose of one link only"
+                ),
             ));
         }
         if entry.positions.len() > 1 || entry.orientations.len() > 1 {
@@ -931,7 +942,8 @@ impl Doc<'_> {
             }
             joints.push(goal);
         }
-        let positions = list("position_constraints")?.iter().map(|c| self.position_goal(c)).collect::<Result<_, _>>()?;
+        let positions =
+            list("position_constraints")?.iter().map(|c| self.position_goal(c)).collect::<Result<_, _>>()?;
         let orientations =
             list("orientation_constraints")?.iter().map(|c| self.orientation_goal(c)).collect::<Result<_, _>>()?;
         Ok(GoalConstraints { joints, positions, orientations, location: self.loc(entry) })
@@ -953,7 +965,7 @@ impl Doc<'_> {
         match self.get(map, key).filter(|n| !is_null(n)) {
             Some(n) => {
                 let v = self.number(n, key)?;
-                if !(v >= 0.0) || !v.is_finite() {
+                if !v.is_finite() || v < 0.0 {
                     return Err(self.err(n, &format!("expected a finite non-negative {key}, got {v}")));
                 }
                 Ok(Some(v))
@@ -1027,14 +1039,18 @@ impl Doc<'_> {
         let o = self.require(c, "orientation", "the wanted orientation (quaternion x, y, z, w)")?;
         let pose = self.pose_of_orientation(o)?;
         let mut tolerance = [0.0; 3];
-        for (t, key) in tolerance.iter_mut().zip(["absolute_x_axis_tolerance", "absolute_y_axis_tolerance", "absolute_z_axis_tolerance"]) {
+        for (t, key) in tolerance.iter_mut().zip([
+            "absolute_x_axis_tolerance",
+            "absolute_y_axis_tolerance",
+            "absolute_z_axis_tolerance",
+        ]) {
             *t = self.non_negative(c, key)?.unwrap_or(0.0);
         }
         // moveit_msgs/OrientationConstraint: XYZ_EULER_ANGLES = 0, ROTATION_VECTOR = 1.
         let rotation_vector = match self.get(c, "parameterization").filter(|n| !is_null(n)) {
             Some(p) => match self.number(p, "the parameterization")? {
-                v if v == 0.0 => false,
-                v if v == 1.0 => true,
+                0.0 => false,
+                1.0 => true,
                 v => {
                     return Err(self.err(
                         p,
@@ -1094,9 +1110,7 @@ impl Doc<'_> {
             }
             "cone" => Err(self.err(
                 type_node,
-                &format!(
-                    "{owner} has a cone primitive, which is not supported (expected box, sphere or cylinder)"
-                ),
+                &format!("{owner} has a cone primitive, which is not supported (expected box, sphere or cylinder)"),
             )),
             other => {
                 Err(self.err(type_node, &format!("expected a primitive type box, sphere or cylinder, got `{other}`")))
