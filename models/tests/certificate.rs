@@ -500,7 +500,12 @@ proptest! {
         let dof = robot.dof();
         let gap = 10f64.powi(-gap_exp);
         let (mut near, mut hits) = (0, 0);
-        for _ in 0..20 {
+        // At least 20 rounds, and on until both a near-contact configuration and a collision
+        // were checked (one lane may need more rounds to meet a collision).
+        for round in 0..400 {
+            if round >= 20 && near > 0 && hits > 0 {
+                break;
+            }
             let mut qs = Vec::new();
             for lane in 0..lanes {
                 let q = match lane % 2 {
