@@ -7,7 +7,9 @@ use std::ops::Range;
 use std::path::{Path, PathBuf};
 
 use embodied_models::collision::{Environment, Obstacle};
-use embodied_models::nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
+use embodied_models::formats::mesh::read_mesh;
+use embodied_models::formats::moveit::{MoveitError, load_scene};
+use embodied_models::nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use embodied_models::{ConvexHull, Robot, Shape};
 use serde::Deserialize;
 use toml::Spanned;
@@ -44,6 +46,8 @@ struct RawScenario {
     agents: Vec<Spanned<RawAgent>>,
     #[serde(default)]
     obstacles: Vec<Spanned<RawObstacle>>,
+    #[serde(default)]
+    moveit_scene: Option<Spanned<RawMoveitScene>>,
     #[serde(default)]
     planner: RawPlanner,
     #[serde(default)]
@@ -193,6 +197,19 @@ struct RawObstacle {
     /// Velocity (m/s) with which the obstacle moves in a run.
     #[serde(default)]
     velocity: Option<[f64; 3]>,
+}
+
+/// `[moveit_scene]`: a MoveIt planning scene whose collision objects are obstacles on the map.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawMoveitScene {
+    /// The scene file (YAML), relative to the scenario's folder.
+    file: String,
+    /// Where the scene's frame stands in the world (default: the world origin).
+    #[serde(default)]
+    xyz: Option<[f64; 3]>,
+    #[serde(default)]
+    rpy: Option<[f64; 3]>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -739,6 +756,68 @@ impl Ctx<'_> {
     }
 }
 
+/// The collision objects of a `[moveit_scene]` as obstacles on the map, placed by the table's
+/// `xyz`/`rpy`. Objects must be in the scene's frame: an empty `frame_id`, `world`, or the root
+/// link of an agent's robot (a scene written for that robot; place the scene where the robot
+/// stands). A name already taken by another obstacle is an error.
+fn moveit_scene_obstacles(
+    ctx: &Ctx,
+    spanned: &Spanned<RawMoveitScene>,
+    dir: &Path,
+    agents: &[AgentSpec],
+    obstacles: &mut Vec<ObstacleSpec>,
+) -> Result<(), SystemError> {
+    let span = spanned.span();
+    let raw = spanned.get_ref();
+    let numbers = raw.xyz.iter().flatten().chain(raw.rpy.iter().flatten());
+    if !numbers.into_iter().all(|v| v.is_finite()) {
+        return Err(
+            ctx.err(span, format!("[moveit_scene]: expected finite xyz and rpy, got {:?} {:?}", raw.xyz, raw.rpy))
+        );
+    }
+    let path = dir.join(&raw.file);
+    let scene = load_scene(&path).map_err(|e| match e {
+        MoveitError::Parse { file, line, column, message } => SystemError::Parse { file, line, column, message },
+        MoveitError::Io { file, source } => SystemError::io(file, source),
+        other => ctx.err(span.clone(), format!("[moveit_scene] {}: {other}", path.display())),
+    })?;
+    let roots: Vec<String> = agents
+        .iter()
+        .filter_map(|a| a.robot.links().iter().find(|l| l.parent_joint.is_none()).map(|l| l.name.clone()))
+        .collect();
+    for o in &scene.objects {
+        let f = o.frame_id.trim_start_matches('/');
+        if !(f.is_empty() || f == "world" || roots.iter().any(|r| r == f)) {
+            return Err(SystemError::Parse {
+                file: path.clone(),
+                line: o.location.line,
+                column: o.location.column,
+                message: format!(
+                    "object `{}` is in frame `{}`; expected the scene's frame (``, `world` or an agent robot's root link: {})",
+                    o.id,
+                    o.frame_id,
+                    roots.join(", ")
+                ),
+            });
+        }
+    }
+    let placement = pose(raw.xyz.unwrap_or([0.0; 3]), raw.rpy);
+    for o in scene.obstacles() {
+        if obstacles.iter().any(|other| other.obstacle.name == o.name) {
+            return Err(ctx.err(
+                span.clone(),
+                format!("[moveit_scene] {}: object `{}` has the name of another obstacle", path.display(), o.name),
+            ));
+        }
+        obstacles.push(ObstacleSpec {
+            obstacle: Obstacle { name: o.name, pose: placement * o.pose, shape: o.shape },
+            appear_at: None,
+            velocity: None,
+        });
+    }
+    Ok(())
+}
+
 fn pose(xyz: [f64; 3], rpy: Option<[f64; 3]>) -> Isometry3<f64> {
     let [r, p, y] = rpy.unwrap_or([0.0; 3]);
     Isometry3::from_parts(Translation3::new(xyz[0], xyz[1], xyz[2]), UnitQuaternion::from_euler_angles(r, p, y))
@@ -903,16 +982,9 @@ pub fn parse_scenario(text: &str, file: &Path, dir: &Path) -> Result<Scenario, S
         if let Some(m) = &o.mesh {
             let path = dir.join(m);
             let scale = o.scale.unwrap_or(1.0);
-            let mut file = std::fs::File::open(&path)
+            let mesh = read_mesh(&path, Vector3::repeat(scale))
                 .map_err(|e| ctx.err(span.clone(), format!("mesh {}: {e}", path.display())))?;
-            let stl = stl_io::read_stl(&mut file)
-                .map_err(|e| ctx.err(span.clone(), format!("mesh {}: not a readable STL file: {e}", path.display())))?;
-            let points: Vec<Point3<f64>> = stl
-                .vertices
-                .iter()
-                .map(|v| Point3::new(v[0] as f64 * scale, v[1] as f64 * scale, v[2] as f64 * scale))
-                .collect();
-            let hull = ConvexHull::from_points(&points)
+            let hull = ConvexHull::from_points(&mesh.vertices)
                 .ok_or_else(|| ctx.err(span.clone(), format!("mesh {}: degenerate (flat) mesh", path.display())))?;
             shapes.push(Shape::ConvexMesh(std::sync::Arc::new(hull)));
         }
@@ -952,6 +1024,9 @@ pub fn parse_scenario(text: &str, file: &Path, dir: &Path) -> Result<Scenario, S
             appear_at,
             velocity: o.velocity.map(Vector3::from),
         });
+    }
+    if let Some(scene) = &raw.moveit_scene {
+        moveit_scene_obstacles(&ctx, scene, dir, &agents, &mut obstacles)?;
     }
     let seed = raw.seed.unwrap_or(1);
     let deadline_ms = raw.planner.deadline_ms.unwrap_or(200.0);

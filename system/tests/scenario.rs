@@ -100,3 +100,67 @@ fn non_finite_poses_are_refused_with_their_place() {
         assert!(e.starts_with("bad.toml:6:") && e.contains("obstacle `o`: expected finite numbers"), "{bad}: {e}");
     }
 }
+
+/// The repository's test fixtures.
+fn fixtures() -> std::path::PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/fixtures")
+}
+
+#[test]
+fn a_moveit_scene_gives_obstacles_on_the_map_where_the_table_places_it() {
+    let dir = fixtures().join("mbm/problems/box_ur5");
+    let text = "name = \"x\"\ndescription = \"d\"\n[[agents]]\nname = \"a\"\nrobot = \"irp6-postument\"\n[moveit_scene]\nfile = \"scene0001.yaml\"\nxyz = [1.0, 0.5, 0.0]\nrpy = [0, 0, 1.5707963267948966]\n";
+    let sc = parse_scenario(text, &dir.join("s.toml"), &dir).unwrap();
+    let scene = embodied_models::formats::moveit::load_scene(&dir.join("scene0001.yaml")).unwrap();
+    let expected = scene.obstacles();
+    assert!(!expected.is_empty());
+    assert_eq!(sc.obstacles.len(), expected.len());
+    for (got, want) in sc.obstacles.iter().zip(&expected) {
+        assert_eq!(got.obstacle.name, want.name);
+        assert!(got.appear_at.is_none() && got.velocity.is_none(), "a scene's objects are on the map");
+        // Turned a quarter about z, then moved by (1, 0.5, 0): scene (x, y) -> world (1 - y, 0.5 + x).
+        let (w, s) = (got.obstacle.pose.translation.vector, want.pose.translation.vector);
+        assert!((w.x - (1.0 - s.y)).abs() < 1e-9 && (w.y - (0.5 + s.x)).abs() < 1e-9 && (w.z - s.z).abs() < 1e-9);
+    }
+    assert_eq!(sc.initial_environment().obstacles().len(), expected.len());
+}
+
+#[test]
+fn a_bad_moveit_scene_is_an_error_naming_its_file_and_place() {
+    let dir = std::env::temp_dir().join(format!("embodied-scene-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let toml = |file: &str| {
+        format!(
+            "name = \"x\"\ndescription = \"d\"\n[[agents]]\nname = \"a\"\nrobot = \"rnt\"\n[moveit_scene]\nfile = \"{file}\"\n"
+        )
+    };
+    let parse = |text: &str| parse_scenario(text, &dir.join("s.toml"), &dir).map(|_| ()).unwrap_err().to_string();
+    // Missing file.
+    let e = parse(&toml("nowhere.yaml"));
+    assert!(e.contains("nowhere.yaml"), "{e}");
+    // A wrong value, with the scene file's own line and column.
+    std::fs::write(dir.join("bad.yaml"), "world:\n  collision_objects:\n    - id: b\n      primitives:\n        - type: box\n          dimensions: [1, -2, 1]\n      primitive_poses:\n        - position: [0, 0, 0]\n").unwrap();
+    let e = parse(&toml("bad.yaml"));
+    assert!(e.contains("bad.yaml:6:") && e.contains("positive"), "{e}");
+    // An object in a frame the scenario does not have.
+    std::fs::write(dir.join("frame.yaml"), "world:\n  collision_objects:\n    - id: b\n      header: {frame_id: table_link}\n      primitives: [{type: sphere, dimensions: [0.1]}]\n      primitive_poses: [{position: [0, 0, 0]}]\n").unwrap();
+    let e = parse(&toml("frame.yaml"));
+    assert!(e.contains("frame.yaml:3:") && e.contains("table_link"), "{e}");
+    // A name clash with a scenario obstacle.
+    std::fs::write(dir.join("clash.yaml"), "world:\n  collision_objects:\n    - id: o\n      primitives: [{type: sphere, dimensions: [0.1]}]\n      primitive_poses: [{position: [0, 0, 0]}]\n").unwrap();
+    let e = parse(&format!("{}[[obstacles]]\nname = \"o\"\nsphere = 0.1\nxyz = [2, 0, 0]\n", toml("clash.yaml")));
+    assert!(e.contains("`o`") && e.contains("another obstacle"), "{e}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn mesh_obstacles_read_stl_collada_and_obj() {
+    let dir = fixtures().join("corpus/pybullet_data/franka_panda/meshes/collision");
+    let text = "name = \"x\"\ndescription = \"d\"\n[[agents]]\nname = \"a\"\nrobot = \"rnt\"\n[[obstacles]]\nname = \"link\"\nmesh = \"link0.obj\"\nxyz = [2, 0, 0]\n";
+    let sc = parse_scenario(text, &dir.join("s.toml"), &dir).unwrap();
+    assert!(matches!(sc.obstacles[0].obstacle.shape, embodied_models::Shape::ConvexMesh(_)));
+    let e = err_of(
+        "name = \"x\"\ndescription = \"d\"\n[[agents]]\nname = \"a\"\nrobot = \"rnt\"\n[[obstacles]]\nname = \"m\"\nmesh = \"part.step\"\nxyz = [0, 0, 0]\n",
+    );
+    assert!(e.starts_with("bad.toml:6:") && e.contains(".step") && e.contains(".obj"), "{e}");
+}
