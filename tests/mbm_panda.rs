@@ -1,0 +1,114 @@
+//! `bench mbm` on a robot other than the UR5: a MotionBenchMaker-style family written here for
+//! the Franka Emika Panda of the corpus (OBJ collision meshes, two finger joints outside the
+//! planning group), planned and verified end to end through the command line.
+
+mod common;
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+use common::{TempDir, embodied};
+use embodied_models::collision::{Environment, Obstacle};
+use embodied_models::nalgebra::Isometry3;
+use embodied_models::urdf::load_urdf;
+use embodied_models::{CollisionModel, Rng, Shape};
+
+fn panda_urdf() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/corpus/pybullet_data/franka_panda/panda.urdf")
+}
+
+const ARM: [&str; 7] =
+    ["panda_joint1", "panda_joint2", "panda_joint3", "panda_joint4", "panda_joint5", "panda_joint6", "panda_joint7"];
+
+/// The family's obstacles: a table top under the hand's reach and a post beside the robot,
+/// as (name, full box size, centre).
+const BOXES: [(&str, [f64; 3], [f64; 3]); 2] =
+    [("table", [0.8, 1.2, 0.04], [0.65, 0.0, 0.2]), ("post", [0.1, 0.1, 0.6], [0.45, 0.0, 0.55])];
+
+/// Write `count` problems (scene + request) of a family into `dir`: start and goal drawn at
+/// random within the limits, collision-free among the boxes, the hand on either side of the
+/// post (so most straight lines hit it).
+fn write_family(dir: &Path, count: usize) {
+    std::fs::create_dir_all(dir).expect("family folder");
+    let robot = load_urdf(&panda_urdf(), None).expect("Panda loads");
+    let mut env = Environment::new();
+    for (name, size, at) in BOXES {
+        env.add(Obstacle::new(
+            name,
+            Isometry3::translation(at[0], at[1], at[2]),
+            Shape::cuboid(size[0] / 2.0, size[1] / 2.0, size[2] / 2.0),
+        ));
+    }
+    let mut checked = robot.clone();
+    embodied_models::collision::disable_always_colliding(&mut checked, 500, 0x5eed);
+    let model = CollisionModel::new(&checked, env);
+    let hand = robot.link_index("panda_hand").expect("panda_hand");
+    let mut rng = Rng::new(42);
+    let mut draw = |side: f64| loop {
+        let q = robot.random_configuration(&mut rng);
+        let p = robot.link_pose(&q, hand).translation.vector;
+        if model.first_collision(&q).is_none() && p.y * side > 0.15 && p.x > 0.3 && p.z > 0.3 {
+            return q;
+        }
+    };
+    let mut scene = String::from("name: table_post\nworld:\n  collision_objects:\n");
+    for (name, size, at) in BOXES {
+        let _ = write!(
+            scene,
+            "    - id: {name}\n      header: {{frame_id: panda_link0}}\n      primitives:\n        - type: box\n          dimensions: {size:?}\n      primitive_poses:\n        - position: {at:?}\n          orientation: [0, 0, 0, 1]\n"
+        );
+    }
+    let names = robot.joint_names();
+    for k in 1..=count {
+        let (start, goal) = (draw(1.0), draw(-1.0));
+        std::fs::write(dir.join(format!("scene{k:04}.yaml")), &scene).expect("scene");
+        let mut req = format!(
+            "group_name: panda_arm\nallowed_planning_time: 5\nstart_state:\n  joint_state:\n    name: [{}]\n    position: {:?}\ngoal_constraints:\n  - joint_constraints:\n",
+            names.join(", "),
+            start
+        );
+        for j in ARM {
+            let d = names.iter().position(|n| n == j).expect("arm joint");
+            let _ = writeln!(req, "      - {{joint_name: {j}, position: {}}}", goal[d]);
+        }
+        std::fs::write(dir.join(format!("request{k:04}.yaml")), req).expect("request");
+    }
+}
+
+#[test]
+fn bench_mbm_plans_and_verifies_a_panda_family() {
+    let dir = TempDir::new("mbm-panda");
+    let srdf = dir.join("panda.srdf");
+    std::fs::write(
+        &srdf,
+        "<robot name=\"panda\"><group name=\"panda_arm\"><chain base_link=\"panda_link0\" tip_link=\"panda_link8\"/></group></robot>",
+    )
+    .expect("srdf");
+    let problems = dir.join("problems");
+    write_family(&problems.join("table_post_panda"), 6);
+    let s = |p: &Path| p.to_str().expect("utf-8 path").to_string();
+    let (code, stdout, stderr) = embodied(&[
+        "bench",
+        "mbm",
+        "--urdf",
+        &s(&panda_urdf()),
+        "--srdf",
+        &s(&srdf),
+        "--problems",
+        &s(&problems),
+        "--deadline-ms",
+        "5000",
+        "--json",
+    ]);
+    assert_eq!(code, 0, "{stdout}{stderr}");
+    let report: serde_json::Value = serde_json::from_str(&stdout).expect("JSON report");
+    let problems = report["problems"].as_array().expect("problems");
+    assert_eq!(problems.len(), 6, "{report}");
+    for p in problems {
+        assert_eq!(p["joint_names"].as_array().map(Vec::len), Some(7), "the group's seven joints: {p}");
+        assert_eq!(p["solved"], true, "{p}");
+        assert_eq!(p["verified"], true, "{p}");
+    }
+    let family = &report["families"][0];
+    assert_eq!((family["solved"].as_u64(), family["verification_failures"].as_u64()), (Some(6), Some(0)), "{family}");
+}
