@@ -372,6 +372,7 @@ fn moveit_scenes_and_requests() {
         mbm.join("request0001.yaml"),
         moveit.join("scene_shapes.yaml"),
         moveit.join("request_ur5.yaml"),
+        moveit.join("request_pose.yaml"),
     ]
     .into_iter()
     .map(|p| {

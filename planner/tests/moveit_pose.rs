@@ -203,3 +203,32 @@ fn bad_pose_goals_are_errors_with_their_place() {
         parse(&good.replace("orientation: {x: 0, y: 0, z: 0, w: 1}", "orientation: {x: 0, y: 0, z: 0, w: 3}"));
     assert!(message.contains("unit quaternion"), "{message}");
 }
+
+#[test]
+fn a_request_in_ros2_echo_style_gives_a_pose_goal_and_a_joint_alternative() {
+    let (robot, srdf) = ur5();
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/moveit");
+    let request = embodied_planner::moveit::load_request(&dir.join("request_pose.yaml")).expect("parses");
+    assert_eq!(request.goals.len(), 2);
+    let pose = &request.goals[0];
+    assert_eq!((pose.positions.len(), pose.orientations.len(), pose.joints.len()), (1, 1, 1));
+    assert_eq!(pose.positions[0].offset, [0.0, 0.0, 0.02]);
+    assert!(!pose.orientations[0].rotation_vector);
+    let resolved = request.resolve(&robot, &srdf, None).expect("resolves");
+    match &resolved.goals[0] {
+        ResolvedGoal::Pose(p) => {
+            assert_eq!(p.link, "ee_link");
+            assert_eq!(p.joints, [(0, -0.5, 1.5)]);
+            let (centre, orientation) = p.aim();
+            // The region is in base_link's frame, which the model places above its root link.
+            let base = robot.link_pose(robot.home(), robot.link_index("base_link").expect("base_link"));
+            let expected = base * embodied_models::nalgebra::Point3::new(0.4, 0.2, 0.5);
+            assert!((centre.expect("a position goal") - expected.coords).norm() < 1e-12);
+            assert!(orientation.is_some());
+        }
+        other => panic!("expected a pose goal, got {other:?}"),
+    }
+    assert!(matches!(&resolved.goals[1], ResolvedGoal::Configuration(q) if q.len() == 6));
+    // The first alternative is a pose: there is no single joint goal.
+    assert!(resolved.goal.is_empty());
+}
