@@ -7,13 +7,14 @@
 //! the `model` report, and the MotionBenchMaker benchmark.
 #![forbid(unsafe_code)]
 
+pub mod batch_plan;
 pub mod model_report;
 pub mod moveit_cli;
 
 pub use embodied_system::SystemError as AppError;
 pub use embodied_system::{VERSION, generator};
 pub use embodied_system::{
-    bench_qp, campaign, deadlines, error, faults, log, mbm, plan, plot, scenario, system, verify, view,
+    batch, bench_qp, campaign, deadlines, error, faults, log, mbm, ompl_log, plan, plot, scenario, system, verify, view,
 };
 
 /// `println!` that returns [`AppError::Output`] instead of panicking when standard output is
