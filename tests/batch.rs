@@ -335,3 +335,106 @@ fn plan_batch_shards_hold_the_unsharded_plans_and_merge() {
     assert_eq!(code, 2);
     assert!(stderr.contains("K/N"), "{stderr}");
 }
+
+/// The `embodied` invocations of a shell script or manifest: (subcommand path, flags).
+fn invocations(text: &str, yaml: bool) -> Vec<(Vec<String>, Vec<String>)> {
+    // One logical line per command: shell continuations joined, and a YAML block scalar's
+    // lines joined to the line that opens it.
+    let mut logical: Vec<String> = Vec::new();
+    let mut block_indent: Option<usize> = None;
+    let mut continued = false;
+    for line in text.lines() {
+        let indent = line.len() - line.trim_start().len();
+        if let Some(b) = block_indent {
+            if indent >= b && !line.trim().is_empty() {
+                logical.last_mut().unwrap().push_str(&format!(" {}", line.trim()));
+                continue;
+            }
+            block_indent = None;
+        }
+        if continued {
+            logical.last_mut().unwrap().push_str(&format!(" {}", line.trim()));
+        } else {
+            logical.push(line.trim().to_string());
+        }
+        continued = line.trim_end().ends_with('\\');
+        if yaml && (line.trim_end().ends_with(">-") || line.trim_end().ends_with('|')) {
+            block_indent = Some(indent + 1);
+        }
+    }
+    let mut out = Vec::new();
+    for line in logical {
+        let cleaned: String = line.chars().map(|c| if "\"'\\[],".contains(c) { ' ' } else { c }).collect();
+        let tokens: Vec<&str> = cleaned.split_whitespace().collect();
+        for (at, t) in tokens.iter().enumerate() {
+            if *t != "embodied" && !t.ends_with("/embodied") {
+                continue;
+            }
+            let mut path = Vec::new();
+            let mut flags = Vec::new();
+            for t in &tokens[at + 1..] {
+                if [";", "|", "&&", "||", ">", "2>", ":::", "embodied"].contains(t) || t.starts_with('>') {
+                    break;
+                }
+                if let Some(flag) = t.strip_prefix("--") {
+                    flags.push(format!("--{}", flag.split('=').next().unwrap()));
+                } else if flags.is_empty() && ["bench", "mbm", "merge", "plan", "verify", "run"].contains(t) {
+                    path.push(t.to_string());
+                }
+            }
+            if !path.is_empty() {
+                out.push((path, flags));
+            }
+        }
+    }
+    out
+}
+
+#[test]
+fn the_batch_examples_use_real_flags_and_end_with_a_merge() {
+    let dir = root().join("examples/batch");
+    let mut files: Vec<PathBuf> = std::fs::read_dir(&dir).unwrap().map(|e| e.unwrap().path()).collect();
+    files.sort();
+    let names: Vec<String> = files.iter().map(|f| f.file_name().unwrap().to_string_lossy().into_owned()).collect();
+    for wanted in ["parallel.sh", "slurm.sh", "k8s-indexed-job.yaml", "k8s-merge-job.yaml"] {
+        assert!(names.iter().any(|n| n == wanted), "examples/batch/{wanted} missing: {names:?}");
+    }
+    let mut help_cache: std::collections::BTreeMap<Vec<String>, String> = Default::default();
+    let mut checked = 0;
+    for file in files.iter().filter(|f| f.extension().is_some_and(|e| e == "sh" || e == "yaml")) {
+        let text = std::fs::read_to_string(file).unwrap();
+        let calls = invocations(&text, file.extension().is_some_and(|e| e == "yaml"));
+        assert!(!calls.is_empty(), "{}: no embodied invocation found", file.display());
+        let name = file.file_name().unwrap().to_string_lossy();
+        if name != "k8s-indexed-job.yaml" {
+            let last = calls.last().unwrap();
+            assert_eq!(last.0, ["bench", "merge"], "{}: should end with `embodied bench merge`", file.display());
+        } else {
+            assert!(text.contains("JOB_COMPLETION_INDEX") && text.contains("completionMode: Indexed"));
+        }
+        for (path, flags) in &calls {
+            let help = help_cache.entry(path.clone()).or_insert_with(|| {
+                let mut args: Vec<&str> = path.iter().map(String::as_str).collect();
+                args.push("--help");
+                let (code, stdout, stderr) = embodied(&args);
+                assert_eq!(code, 0, "{}: `embodied {}` is not a command: {stderr}", file.display(), path.join(" "));
+                stdout
+            });
+            for flag in flags {
+                let known = help.match_indices(flag.as_str()).any(|(at, _)| {
+                    let after = help[at + flag.len()..].chars().next();
+                    !after.is_some_and(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_')
+                });
+                assert!(
+                    known,
+                    "{}: `embodied {} {flag}` is not a flag of that command",
+                    file.display(),
+                    path.join(" ")
+                );
+                checked += 1;
+            }
+        }
+    }
+    // The examples pass --urdf --srdf --problems --shard --jsonl to bench mbm at least.
+    assert!(checked >= 15, "only {checked} flags found: the extraction misses commands");
+}
