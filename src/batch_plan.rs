@@ -144,9 +144,9 @@ fn items(args: &BatchPlanArgs) -> Result<(Vec<Item>, BatchPlanSettings), AppErro
         };
         return Ok((items, settings));
     }
-    if args.urdf.is_some() || args.srdf.is_some() {
+    if args.urdf.is_some() || args.srdf.is_some() || args.limits.is_some() {
         return Err(AppError::Usage(format!(
-            "{}: --urdf and --srdf go with a folder of MoveIt problems; a list names scenarios",
+            "{}: --urdf, --srdf and --limits go with a folder of MoveIt problems; a list names scenarios",
             args.input.display()
         )));
     }

@@ -712,6 +712,9 @@ fn run(cli: Cli) -> Result<(), AppError> {
         Command::Bench(BenchCommand::Merge { files, json, out }) => {
             let merged = embodied::batch::read_shards(&files)?;
             if merged.header.kind == embodied::batch_plan::PLAN_BATCH_KIND {
+                if out.is_some() {
+                    return Err(AppError::Usage("--out writes the paths of bench mbm shards; these are plan --batch results, whose lines hold the plans".into()));
+                }
                 let report = embodied::batch_plan::merge_plan_batch(merged)?;
                 if json {
                     outln!("{}", to_json(&report)?);

@@ -438,3 +438,38 @@ fn the_batch_examples_use_real_flags_and_end_with_a_merge() {
     // The examples pass --urdf --srdf --problems --shard --jsonl to bench mbm at least.
     assert!(checked >= 15, "only {checked} flags found: the extraction misses commands");
 }
+
+#[test]
+fn bench_mbm_writes_json_lines_to_stdout_and_ompl_logs() {
+    let dir = TempDir::new("mbm-cli");
+    let robot = root().join("models/tests/fixtures");
+    let s = |p: &Path| p.to_str().unwrap().to_string();
+    let logs = dir.join("ompl");
+    let (urdf, srdf, problems) =
+        (s(&robot.join("ur5_spherized.urdf")), s(&robot.join("ur5.srdf")), s(&root().join("tests/fixtures/mbm")));
+    let base = ["bench", "mbm", "--urdf", &urdf, "--srdf", &srdf, "--problems", &problems, "--deadline-ms", "20000"];
+    let mut args = base.to_vec();
+    args.extend(["--limit", "1", "--runs", "2", "--jsonl", "-", "--ompl-log", logs.to_str().unwrap()]);
+    let (code, stdout, stderr) = embodied(&args);
+    assert_eq!(code, 0, "{stderr}");
+    // Standard output carries the JSON Lines, the table goes to standard error.
+    let lines: Vec<serde_json::Value> = stdout.lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+    assert_eq!(lines.len(), 1 + 2 * 2, "{stdout}");
+    assert_eq!(lines[0]["format"], "embodied-batch/1");
+    assert_eq!(lines[0]["runs"], 2);
+    assert!(lines[0]["machine"]["hostname"].as_str().is_some_and(|h| !h.is_empty()));
+    let keys: Vec<(u64, u64)> =
+        lines[1..].iter().map(|l| (l["i"].as_u64().unwrap(), l["run"].as_u64().unwrap())).collect();
+    assert_eq!(keys, [(0, 0), (0, 1), (1, 0), (1, 1)]);
+    assert!(stderr.contains("2 runs per problem") && stderr.contains("overall"), "{stderr}");
+    let mut written: Vec<String> =
+        std::fs::read_dir(&logs).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
+    written.sort();
+    assert_eq!(written, ["bookshelf_small_ur5_0009.log", "box_ur5_0001.log"]);
+
+    let mut args = base.to_vec();
+    args.extend(["--runs", "0"]);
+    let (code, _, stderr) = embodied(&args);
+    assert_eq!(code, 2);
+    assert!(stderr.contains("--runs must be at least 1"), "{stderr}");
+}
