@@ -270,7 +270,7 @@ fn ompl_logs_follow_the_benchmark_log_grammar() {
         assert_eq!(row[col("solution segments INTEGER")], Some((r.path.len() - 1) as f64));
         assert_eq!(row[col("correct solution BOOLEAN")], Some(1.0));
     }
-    assert!(text.contains("commit STRING = "), "{text}");
+    assert!(text.contains("git_commit STRING = "), "{text}");
 
     // An invalid problem: status Invalid goal, not solved, no path properties.
     let mut b = mbm_args();

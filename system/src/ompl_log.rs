@@ -9,7 +9,7 @@
 //! embodied version 0.1.0
 //! Experiment box_ur5_0001
 //! 4 experiment properties
-//! commit STRING = 1a2b3c4
+//! git_commit STRING = 1a2b3c4
 //! ...
 //! Running on HOST
 //! Starting at 2026-11-24T20:00:00Z
@@ -128,7 +128,7 @@ pub fn ompl_log(report: &MbmReport, family: &str, index: u32, machine: &Machine,
     line(format!("embodied version {version}"));
     line(format!("Experiment {family}_{index:04}"));
     let props = [
-        format!("commit STRING = {commit}"),
+        format!("git_commit STRING = {commit}"),
         format!("family STRING = {family}"),
         format!("problem INTEGER = {index}"),
         format!("cores INTEGER = {}", machine.cores),
