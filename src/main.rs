@@ -102,10 +102,10 @@ enum Command {
     /// motion plan request in its planning scene (--urdf --srdf --scene --request).
     Plan {
         /// A built-in scenario name or a scenario TOML file.
-        #[arg(required_unless_present = "request")]
+        #[arg(required_unless_present_any = ["request", "batch"])]
         scenario: Option<String>,
-        /// The robot of a MoveIt request (URDF or .xacro).
-        #[arg(long, requires_all = ["srdf", "scene", "request"])]
+        /// The robot of a MoveIt request or of a --batch folder (URDF or .xacro).
+        #[arg(long, requires = "srdf")]
         urdf: Option<PathBuf>,
         /// Its SRDF (groups).
         #[arg(long)]
@@ -135,6 +135,20 @@ enum Command {
         /// Write a 3-D viewer page of the plan here (one HTML file; opens offline).
         #[arg(long)]
         html: Option<PathBuf>,
+        /// Plan many problems: a folder of MoveIt problems (`<family>/sceneNNNN.yaml` +
+        /// `requestNNNN.yaml`, with --urdf --srdf) or a file listing scenarios (one name or TOML
+        /// file per line). Each is planned and certified; prints a summary. Exit status 1 if any
+        /// problem has no certified plan.
+        #[arg(long, value_name = "DIR|LIST", conflicts_with_all = ["scenario", "request", "out", "html", "format", "json"])]
+        batch: Option<PathBuf>,
+        /// Plan only shard K of N of the --batch problems (problem i, in sorted order, goes to
+        /// shard (i mod N) + 1); join the shards' --jsonl files with `embodied bench merge`.
+        #[arg(long, value_name = "K/N", requires = "batch")]
+        shard: Option<embodied::batch::Shard>,
+        /// Write the --batch results as JSON Lines here (`-`: standard output, the summary then
+        /// goes to standard error): a header line, then one line per problem with its plan.
+        #[arg(long, value_name = "FILE", requires = "batch")]
+        jsonl: Option<PathBuf>,
     },
     /// Write a 3-D viewer page (one self-contained HTML file) of a run log or a plan file:
     /// the robots, obstacles and carried object moving along the logged or planned motion,
@@ -271,6 +285,36 @@ enum BenchCommand {
         /// How RRT-Connect draws samples: uniform or halton.
         #[arg(long, default_value = "uniform")]
         sampler: embodied_planner::motion::Sampler,
+        /// Plan only shard K of N of the problems (problem i, families and problems sorted, goes
+        /// to shard (i mod N) + 1); join the shards' --jsonl files with `embodied bench merge`.
+        #[arg(long, value_name = "K/N")]
+        shard: Option<embodied::batch::Shard>,
+        /// Write the results as JSON Lines here (`-`: standard output, the table then goes to
+        /// standard error): a header line (version, commit, machine, date, shard, settings),
+        /// then one line per problem and run.
+        #[arg(long, value_name = "FILE")]
+        jsonl: Option<PathBuf>,
+        /// Plan every problem N times (run r with seed --seed + r).
+        #[arg(long, default_value_t = 1, value_name = "N")]
+        runs: usize,
+        /// Write OMPL benchmark logs (the format ompl_benchmark_statistics.py reads for Planner
+        /// Arena) into this folder, one <family>_<NNNN>.log per problem with every run.
+        #[arg(long, value_name = "DIR")]
+        ompl_log: Option<PathBuf>,
+    },
+    /// Join the --jsonl files of the shards of `bench mbm --shard` or `plan --batch --shard`
+    /// into the report one unsharded run prints. Refuses files that overlap, miss problems or
+    /// shards, or ran with different settings or programs.
+    Merge {
+        /// The shards' JSON Lines files.
+        #[arg(required = true, value_name = "FILE")]
+        files: Vec<PathBuf>,
+        /// Print the whole report as JSON.
+        #[arg(long)]
+        json: bool,
+        /// bench mbm: write {"problems": [...]} here, as `bench mbm --out` does.
+        #[arg(long)]
+        out: Option<PathBuf>,
     },
     /// The closed-chain QP of a two-handed carry, every held step solved by the fast dense
     /// solver (which drives) and by clarabel: time percentiles, late steps, agreement.
@@ -323,6 +367,35 @@ fn spinner(message: &str) -> indicatif::ProgressBar {
     }
     bar.enable_steady_tick(std::time::Duration::from_millis(120));
     bar
+}
+
+/// A progress bar on standard error, only on a terminal.
+fn progress_bar() -> indicatif::ProgressBar {
+    let bar = indicatif::ProgressBar::hidden();
+    if std::io::IsTerminal::is_terminal(&std::io::stderr()) {
+        bar.set_draw_target(indicatif::ProgressDrawTarget::stderr());
+    }
+    bar
+}
+
+/// Print a `bench mbm` report (table or JSON; to standard error when standard output carries
+/// JSON Lines) and write its paths file.
+fn print_mbm(
+    report: &embodied::mbm::MbmReport,
+    json: bool,
+    out: Option<&std::path::Path>,
+    stdout_taken: bool,
+) -> Result<(), AppError> {
+    if let Some(path) = out {
+        std::fs::write(path, to_json(&report.paths_file())?).map_err(|e| AppError::write(path, e))?;
+    }
+    let text = if json { to_json(report)? + "\n" } else { embodied::mbm::render_table(report) };
+    if stdout_taken {
+        eprint!("{text}");
+    } else {
+        out!("{text}");
+    }
+    Ok(())
 }
 
 fn to_json<T: serde::Serialize>(value: &T) -> Result<String, AppError> {
@@ -412,6 +485,41 @@ fn run(cli: Cli) -> Result<(), AppError> {
                 None => Ok(()),
             }
         }
+        Command::Plan { batch: Some(batch), urdf, srdf, limits, deadline_ms, shard, jsonl, scene, .. } => {
+            if scene.is_some() {
+                return Err(AppError::Usage("--scene goes with --request; a --batch folder holds its scenes".into()));
+            }
+            let args = embodied::batch_plan::BatchPlanArgs {
+                input: batch,
+                urdf,
+                srdf,
+                limits,
+                deadline_ms,
+                shard: shard.unwrap_or(embodied::batch::Shard::ALL),
+            };
+            let mut writer = jsonl.as_deref().map(embodied::batch::JsonlWriter::create).transpose()?;
+            let bar = progress_bar();
+            let report = embodied::batch_plan::plan_batch(&args, writer.as_mut(), &mut |done, total| {
+                bar.set_length(total as u64);
+                bar.set_position(done as u64);
+            });
+            bar.finish_and_clear();
+            let report = report?;
+            let text = embodied::batch_plan::render_batch(&report);
+            if jsonl.as_deref() == Some(std::path::Path::new("-")) {
+                eprint!("{text}");
+            } else {
+                out!("{text}");
+            }
+            if report.certified < report.total {
+                return Err(AppError::Failed(format!(
+                    "{} of {} problems without a certified plan",
+                    report.total - report.certified,
+                    report.total
+                )));
+            }
+            Ok(())
+        }
         Command::Plan { request: Some(request), urdf, srdf, scene, limits, format, out, deadline_ms, .. } => {
             let (Some(urdf), Some(srdf), Some(scene)) = (urdf, srdf, scene) else {
                 return Err(AppError::Usage("--request needs --urdf, --srdf and --scene".into()));
@@ -431,7 +539,10 @@ fn run(cli: Cli) -> Result<(), AppError> {
             }
             Ok(())
         }
-        Command::Plan { scenario, out, deadline_ms, json, format, html, .. } => {
+        Command::Plan { scenario, out, deadline_ms, json, format, html, urdf, .. } => {
+            if urdf.is_some() {
+                return Err(AppError::Usage("--urdf goes with --request or --batch, not with a scenario".into()));
+            }
             let scenario = embodied::scenario::load_scenario(&scenario.unwrap_or_default())?;
             let bar = spinner("planning");
             let plan = embodied::plan::plan_scenario(&scenario, deadline_ms);
@@ -549,6 +660,10 @@ fn run(cli: Cli) -> Result<(), AppError> {
             no_dynamic_domain,
             no_balance,
             sampler,
+            shard,
+            jsonl,
+            runs,
+            ompl_log,
         }) => {
             if threads == 0 {
                 return Err(AppError::Usage("--threads must be at least 1".into()));
@@ -575,25 +690,48 @@ fn run(cli: Cli) -> Result<(), AppError> {
             args.deadline_ms = deadline_ms;
             args.limit = limit;
             args.seed = seed;
-            let interactive = std::io::IsTerminal::is_terminal(&std::io::stderr()) && !json;
-            let bar = indicatif::ProgressBar::hidden();
-            if interactive {
-                bar.set_draw_target(indicatif::ProgressDrawTarget::stderr());
-            }
-            let report = embodied::mbm::run_mbm(&args, &mut |done, total| {
-                bar.set_length(total as u64);
-                bar.set_position(done as u64);
-            })?;
+            args.runs = runs;
+            args.shard = shard.unwrap_or(embodied::batch::Shard::ALL);
+            let mut writer = jsonl.as_deref().map(embodied::batch::JsonlWriter::create).transpose()?;
+            let bar = if json { indicatif::ProgressBar::hidden() } else { progress_bar() };
+            let report = embodied::mbm::run_mbm_to(
+                &args,
+                &mut |done, total| {
+                    bar.set_length(total as u64);
+                    bar.set_position(done as u64);
+                },
+                writer.as_mut(),
+            );
             bar.finish_and_clear();
-            if let Some(path) = &out {
-                std::fs::write(path, to_json(&report.paths_file())?).map_err(|e| AppError::write(path, e))?;
+            let report = report?;
+            if let Some(dir) = &ompl_log {
+                embodied::ompl_log::write_ompl_logs(&report, dir)?;
             }
-            if json {
-                outln!("{}", to_json(&report)?);
-            } else {
-                out!("{}", embodied::mbm::render_table(&report));
+            print_mbm(&report, json, out.as_deref(), jsonl.as_deref() == Some(std::path::Path::new("-")))
+        }
+        Command::Bench(BenchCommand::Merge { files, json, out }) => {
+            let merged = embodied::batch::read_shards(&files)?;
+            if merged.header.kind == embodied::batch_plan::PLAN_BATCH_KIND {
+                if out.is_some() {
+                    return Err(AppError::Usage("--out writes the paths of bench mbm shards; these are plan --batch results, whose lines hold the plans".into()));
+                }
+                let report = embodied::batch_plan::merge_plan_batch(merged)?;
+                if json {
+                    outln!("{}", to_json(&report)?);
+                } else {
+                    out!("{}", embodied::batch_plan::render_batch(&report));
+                }
+                if report.certified < report.total {
+                    return Err(AppError::Failed(format!(
+                        "{} of {} problems without a certified plan",
+                        report.total - report.certified,
+                        report.total
+                    )));
+                }
+                return Ok(());
             }
-            Ok(())
+            let report = embodied::mbm::merge_mbm(merged)?;
+            print_mbm(&report, json, out.as_deref(), false)
         }
         Command::Bench(BenchCommand::Qp { scenario, json }) => {
             let bar = spinner("solving every held step's QP twice");

@@ -28,7 +28,7 @@ pub const DEFAULT_RESOLUTION: f64 = 0.02;
 pub const CERTIFY_TOLERANCE: f64 = 1e-4;
 
 /// How a straight segment between two free configurations is judged free.
-#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub enum EdgeCheck {
     /// The conservative certificate of [`StateValidity::certify_motion`] (for a
     /// [`CollisionModel`]: [`CollisionModel::motion_is_certified_free`]): the whole continuum of

@@ -34,6 +34,7 @@
 //! ```
 #![forbid(unsafe_code)]
 
+pub mod batch;
 pub mod bench_qp;
 pub mod campaign;
 pub mod clearance;
@@ -42,6 +43,7 @@ pub mod error;
 pub mod faults;
 pub mod log;
 pub mod mbm;
+pub mod ompl_log;
 pub mod plan;
 pub mod plot;
 pub mod scenario;

@@ -24,9 +24,10 @@ use embodied_planner::deadline::Deadline;
 use embodied_planner::motion::{CERTIFY_TOLERANCE, EdgeCheck, Goal, MotionSettings, PlannerKind, Sampler, plan_motion};
 use embodied_planner::moveit::{MoveitError, load_request, load_scene};
 use embodied_planner::verify::Verifier;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use crate::SystemError as AppError;
+use crate::batch::{BATCH_FORMAT, Header, JsonlWriter, Machine, MergedShards, Shard};
 
 /// The resolution (rad, largest joint step) at which every returned path is re-checked.
 pub const VERIFY_RESOLUTION: f64 = 0.005;
@@ -76,6 +77,11 @@ pub struct MbmArgs {
     /// Whether the caller shows progress (the CLI's progress bar); `run_mbm` always reports
     /// through its callback.
     pub progress: bool,
+    /// Which share of the problems to plan (problem `i` of the sorted set goes to shard
+    /// `(i mod N) + 1`).
+    pub shard: Shard,
+    /// Plans per problem; run `r` plans with base seed `seed + r`.
+    pub runs: usize,
 }
 
 impl MbmArgs {
@@ -102,12 +108,14 @@ impl MbmArgs {
             families: None,
             limit: None,
             progress: false,
+            shard: Shard::ALL,
+            runs: 1,
         }
     }
 }
 
 /// How one problem ended.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum ProblemStatus {
     /// A path that verifies came back within the deadline.
@@ -130,12 +138,15 @@ impl ProblemStatus {
 }
 
 /// One problem's outcome; `path` runs from the request's start to its goal over `joint_names`.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 pub struct ProblemResult {
     /// The problem's family (its folder name).
     pub family: String,
     /// The problem's index within its family.
     pub index: u32,
+    /// Which of the repeated runs (`--runs`), from 0.
+    #[serde(default)]
+    pub run: u32,
     /// Whether the status is [`ProblemStatus::Solved`].
     pub solved: bool,
     /// How the problem ended.
@@ -151,10 +162,11 @@ pub struct ProblemResult {
     /// Whether the independent check of `path` passed (absent when there is no path).
     pub verified: Option<bool>,
     /// What planning cost (samples, segments and configurations checked), when a plan came back.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub stats: Option<embodied_planner::motion::MotionStats>,
+    /// ([`embodied_planner::motion::MotionStats`] as JSON.)
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub stats: Option<serde_json::Value>,
     /// Why the problem is invalid, failed, or did not verify.
-    #[serde(skip_serializing_if = "Option::is_none")]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub message: Option<String>,
 }
 
@@ -196,7 +208,7 @@ pub struct Summary {
 }
 
 /// The benchmark's settings, echoed in the report.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 pub struct MbmSettings {
     /// The robot's URDF file.
     pub urdf: PathBuf,
@@ -226,6 +238,15 @@ pub struct MbmSettings {
     pub sampler: Sampler,
     /// Planners racing per problem.
     pub threads: usize,
+    /// Plans per problem (run `r` with base seed `seed + r`).
+    #[serde(default = "one")]
+    pub runs: usize,
+    /// Only the first N problems of each family, when limited.
+    #[serde(default)]
+    pub limit: Option<usize>,
+    /// Only these families, when chosen.
+    #[serde(default)]
+    pub families: Option<Vec<String>>,
     /// Resolution at which every returned path was re-checked (rad, largest joint step).
     pub verify_resolution: f64,
     /// Self-collision pairs disabled because they touch in every sampled configuration.
@@ -235,11 +256,18 @@ pub struct MbmSettings {
     pub never_colliding_disabled: Vec<(String, String)>,
 }
 
+fn one() -> usize {
+    1
+}
+
 /// The whole benchmark: per-family and overall summaries and every problem with its path.
 #[derive(Debug, Clone, Serialize)]
 pub struct MbmReport {
     /// The program (version and commit) that made the report.
     pub generator: String,
+    /// The share of the problems this report holds (absent: all of them).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub shard: Option<Shard>,
     /// The settings the benchmark ran with.
     pub settings: MbmSettings,
     /// One summary per family.
@@ -252,11 +280,21 @@ pub struct MbmReport {
 
 /// One problem found on disk.
 #[derive(Debug, Clone)]
-struct ProblemFiles {
-    family: String,
-    index: u32,
-    scene: PathBuf,
-    request: PathBuf,
+pub struct ProblemFiles {
+    /// The family (its folder's name).
+    pub family: String,
+    /// The problem's index in its family.
+    pub index: u32,
+    /// The planning scene (`sceneNNNN.yaml`).
+    pub scene: PathBuf,
+    /// The motion plan request (`requestNNNN.yaml`).
+    pub request: PathBuf,
+}
+
+/// The problems of `args.problems` (its families and limit) in the benchmark's stable order:
+/// families sorted by name, problems by index.
+pub fn find_problems(args: &MbmArgs) -> Result<Vec<ProblemFiles>, AppError> {
+    discover(args)
 }
 
 fn from_moveit(e: MoveitError) -> AppError {
@@ -499,7 +537,7 @@ pub fn sample_problems(args: &MbmArgs, n: usize) -> Result<Vec<MbmProblem>, AppE
     Ok(out)
 }
 
-fn run_problem(args: &MbmArgs, loaded: &Loaded, p: &ProblemFiles) -> Result<ProblemResult, AppError> {
+fn run_problem(args: &MbmArgs, loaded: &Loaded, p: &ProblemFiles, run: u32) -> Result<ProblemResult, AppError> {
     let scene = load_scene(&p.scene).map_err(from_moveit)?;
     let request = load_request(&p.request).map_err(from_moveit)?;
     scene.check_frames(&loaded.robot).map_err(from_moveit)?;
@@ -512,6 +550,7 @@ fn run_problem(args: &MbmArgs, loaded: &Loaded, p: &ProblemFiles) -> Result<Prob
     let mut result = ProblemResult {
         family: p.family.clone(),
         index: p.index,
+        run,
         solved: false,
         status: ProblemStatus::Failed,
         planning_us: None,
@@ -534,7 +573,7 @@ fn run_problem(args: &MbmArgs, loaded: &Loaded, p: &ProblemFiles) -> Result<Prob
     }
     let budget = Duration::from_secs_f64(args.deadline_ms.max(0.0) / 1000.0);
     let settings = MotionSettings {
-        seed: problem_seed(args.seed, &p.family, p.index),
+        seed: problem_seed(args.seed.wrapping_add(u64::from(run)), &p.family, p.index),
         resolution: args.resolution,
         edge_check: args.edge_check,
         deadline: Deadline::after(budget),
@@ -556,7 +595,7 @@ fn run_problem(args: &MbmArgs, loaded: &Loaded, p: &ProblemFiles) -> Result<Prob
         Ok(plan) => {
             let space = arm.config_space();
             result.path_length = Some(path_length(&space, &plan.path));
-            result.stats = Some(plan.stats.clone());
+            result.stats = serde_json::to_value(&plan.stats).ok();
             match check_path(&model, &plan.path, &resolved.start, &resolved.goal) {
                 Ok(()) => {
                     result.solved = true;
@@ -584,21 +623,119 @@ fn run_problem(args: &MbmArgs, loaded: &Loaded, p: &ProblemFiles) -> Result<Prob
 /// Run the benchmark. `on_progress(done, total)` is called once before the first problem and
 /// after each one. Errors are for unreadable or malformed inputs; planner failures are results.
 pub fn run_mbm(args: &MbmArgs, on_progress: &mut dyn FnMut(usize, usize)) -> Result<MbmReport, AppError> {
+    run_mbm_to(args, on_progress, None)
+}
+
+/// Kind of the batch results files of `bench mbm --jsonl`.
+pub const MBM_BATCH_KIND: &str = "bench-mbm";
+
+/// [`run_mbm`], also writing the results as JSON Lines to `jsonl` as they come: a
+/// [`Header`] line, then one line per problem and run (the [`ProblemResult`] with the
+/// problem's ordinal `i` in the whole sorted set).
+pub fn run_mbm_to(
+    args: &MbmArgs,
+    on_progress: &mut dyn FnMut(usize, usize),
+    mut jsonl: Option<&mut JsonlWriter>,
+) -> Result<MbmReport, AppError> {
     if !(args.deadline_ms > 0.0 && args.deadline_ms.is_finite()) {
         return Err(AppError::Usage(format!("--deadline-ms must be a positive number, got {}", args.deadline_ms)));
     }
     if !(args.resolution > 0.0 && args.resolution.is_finite()) {
         return Err(AppError::Usage(format!("the resolution must be a positive number, got {}", args.resolution)));
     }
+    if args.runs == 0 || args.runs > u32::MAX as usize {
+        return Err(AppError::Usage(format!("--runs must be at least 1, got {}", args.runs)));
+    }
     let loaded = load_robot(args)?;
     let problems = discover(args)?;
-    let total = problems.len();
+    let settings = settings_of(args, &loaded);
+    if let Some(out) = jsonl.as_deref_mut() {
+        out.line(&batch_header(MBM_BATCH_KIND, args.shard, &problem_names(&problems), args.runs, &settings)?)?;
+    }
+    let mine: Vec<(usize, &ProblemFiles)> = problems.iter().enumerate().filter(|(i, _)| args.shard.holds(*i)).collect();
+    let total = mine.len() * args.runs;
     on_progress(0, total);
     let mut results = Vec::with_capacity(total);
-    for (k, p) in problems.iter().enumerate() {
-        results.push(run_problem(args, &loaded, p)?);
-        on_progress(k + 1, total);
+    for (i, p) in mine {
+        for run in 0..args.runs {
+            let result = run_problem(args, &loaded, p, run as u32)?;
+            if let Some(out) = jsonl.as_deref_mut() {
+                out.line(&with_ordinal(i, &result)?)?;
+            }
+            results.push(result);
+            on_progress(results.len(), total);
+        }
     }
+    let shard = (args.shard != Shard::ALL).then_some(args.shard);
+    Ok(assemble(crate::generator(), shard, settings, results))
+}
+
+/// `family/NNNN` of every problem, in the batch's order.
+fn problem_names(problems: &[ProblemFiles]) -> Vec<String> {
+    problems.iter().map(|p| format!("{}/{:04}", p.family, p.index)).collect()
+}
+
+/// The header line of a batch results file.
+pub fn batch_header<S: Serialize>(
+    kind: &str,
+    shard: Shard,
+    names: &[String],
+    runs: usize,
+    settings: &S,
+) -> Result<Header, AppError> {
+    Ok(Header {
+        format: BATCH_FORMAT.to_string(),
+        kind: kind.to_string(),
+        generator: crate::generator(),
+        machine: Machine::this(),
+        date: crate::batch::utc_now(),
+        shard,
+        problems_total: names.len(),
+        problem_set: crate::batch::problem_set_hash(names.iter().map(String::as_str)),
+        runs,
+        settings: serde_json::to_value(settings).map_err(|e| AppError::Failed(e.to_string()))?,
+    })
+}
+
+/// A result as a JSON object with the problem's ordinal `i` first.
+pub fn with_ordinal<T: Serialize>(i: usize, result: &T) -> Result<serde_json::Value, AppError> {
+    let value = serde_json::to_value(result).map_err(|e| AppError::Failed(e.to_string()))?;
+    let mut map = serde_json::Map::new();
+    map.insert("i".to_string(), serde_json::Value::from(i));
+    if let serde_json::Value::Object(fields) = value {
+        map.extend(fields);
+    }
+    Ok(serde_json::Value::Object(map))
+}
+
+fn settings_of(args: &MbmArgs, loaded: &Loaded) -> MbmSettings {
+    MbmSettings {
+        urdf: args.urdf.clone(),
+        srdf: args.srdf.clone(),
+        problems: args.problems.clone(),
+        deadline_ms: args.deadline_ms,
+        seed: args.seed,
+        edge_check: args.edge_check,
+        resolution: args.resolution,
+        shortcut_attempts: args.shortcut_attempts,
+        algorithm: args.algorithm,
+        rrt_range: args.rrt_range,
+        dynamic_domain: args.dynamic_domain,
+        balance: args.balance,
+        sampler: args.sampler,
+        threads: args.threads.max(1),
+        runs: args.runs,
+        limit: args.limit,
+        families: args.families.clone(),
+        verify_resolution: VERIFY_RESOLUTION,
+        always_colliding_disabled: loaded.always_colliding.clone(),
+        never_colliding_disabled: loaded.never_colliding.clone(),
+    }
+}
+
+/// The report of a set of results (in the batch's order): per-family summaries in order of
+/// first appearance, and the overall one.
+fn assemble(generator: String, shard: Option<Shard>, settings: MbmSettings, results: Vec<ProblemResult>) -> MbmReport {
     let mut by_family: BTreeMap<&str, Vec<&ProblemResult>> = BTreeMap::new();
     let mut order: Vec<&str> = Vec::new();
     for r in &results {
@@ -610,31 +747,37 @@ pub fn run_mbm(args: &MbmArgs, on_progress: &mut dyn FnMut(usize, usize)) -> Res
     let families = order.iter().map(|f| summarize(f, by_family.get(f).map(Vec::as_slice).unwrap_or(&[]))).collect();
     let all: Vec<&ProblemResult> = results.iter().collect();
     let overall = summarize("overall", &all);
-    Ok(MbmReport {
-        generator: crate::generator(),
-        settings: MbmSettings {
-            urdf: args.urdf.clone(),
-            srdf: args.srdf.clone(),
-            problems: args.problems.clone(),
-            deadline_ms: args.deadline_ms,
-            seed: args.seed,
-            edge_check: args.edge_check,
-            resolution: args.resolution,
-            shortcut_attempts: args.shortcut_attempts,
-            algorithm: args.algorithm,
-            rrt_range: args.rrt_range,
-            dynamic_domain: args.dynamic_domain,
-            balance: args.balance,
-            sampler: args.sampler,
-            threads: args.threads.max(1),
-            verify_resolution: VERIFY_RESOLUTION,
-            always_colliding_disabled: loaded.always_colliding.clone(),
-            never_colliding_disabled: loaded.never_colliding.clone(),
-        },
-        families,
-        overall,
-        problems: results,
-    })
+    MbmReport { generator, shard, settings, families, overall, problems: results }
+}
+
+/// The report of the whole benchmark from the checked shards of `bench mbm --shard K/N
+/// --jsonl` (see [`crate::batch::read_shards`]): the report one unsharded run gives.
+pub fn merge_mbm(merged: MergedShards) -> Result<MbmReport, AppError> {
+    let MergedShards { header, lines } = merged;
+    if header.kind != MBM_BATCH_KIND {
+        return Err(AppError::Usage(format!("these are `{}` results, not `{MBM_BATCH_KIND}`", header.kind)));
+    }
+    let settings: MbmSettings = serde_json::from_value(header.settings.clone())
+        .map_err(|e| AppError::Usage(format!("the header's settings are not bench mbm settings: {e}")))?;
+    let mut results = Vec::with_capacity(lines.len());
+    for l in lines {
+        let r: ProblemResult = serde_json::from_value(l.value).map_err(|e| AppError::Parse {
+            file: l.file.clone(),
+            line: l.line,
+            column: 1,
+            message: format!("expected a bench mbm problem result: {e}"),
+        })?;
+        if r.run as usize != l.run {
+            return Err(AppError::Parse {
+                file: l.file,
+                line: l.line,
+                column: 1,
+                message: format!("run {} does not match the line's run {}", r.run, l.run),
+            });
+        }
+        results.push(r);
+    }
+    Ok(assemble(header.generator, None, settings, results))
 }
 
 /// The `q`-quantile (0..=1) of sorted values, nearest rank.
@@ -753,13 +896,15 @@ pub fn render_table(report: &MbmReport) -> String {
         EdgeCheck::Sampled => format!("edges sampled at {} rad", report.settings.resolution),
     };
     let mut out = format!(
-        "MotionBenchMaker: deadline {} ms, seed {}, {edges}, paths re-checked at {} rad, {} ({} thread{})\n",
+        "MotionBenchMaker: deadline {} ms, seed {}, {edges}, paths re-checked at {} rad, {} ({} thread{}){}{}\n",
         report.settings.deadline_ms,
         report.settings.seed,
         report.settings.verify_resolution,
         report.settings.algorithm,
         report.settings.threads,
         if report.settings.threads == 1 { "" } else { "s" },
+        if report.settings.runs > 1 { format!(", {} runs per problem", report.settings.runs) } else { String::new() },
+        report.shard.map_or(String::new(), |s| format!(", shard {s}")),
     );
     out.push_str(&line(&header.iter().map(|h| h.to_string()).collect::<Vec<_>>()));
     for (i, r) in rows.iter().enumerate() {
@@ -777,7 +922,13 @@ pub fn render_table(report: &MbmReport) -> String {
         .problems
         .iter()
         .filter(|p| !p.solved && !p.status.is_invalid())
-        .map(|p| format!("{}#{}", p.family, p.index))
+        .map(|p| {
+            if report.settings.runs > 1 {
+                format!("{}#{} run {}", p.family, p.index, p.run)
+            } else {
+                format!("{}#{}", p.family, p.index)
+            }
+        })
         .collect();
     if !unsolved.is_empty() {
         out.push_str(&format!("unsolved: {}\n", unsolved.join(", ")));

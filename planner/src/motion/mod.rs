@@ -46,7 +46,7 @@ pub enum Goal {
 pub const DEFAULT_LAZY_PROBE: f64 = 0.1;
 
 /// Which search runs after the straight segment fails.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub enum PlannerKind {
     /// Bidirectional RRT-Connect (fastest on single queries in our measurements).
     RrtConnect,

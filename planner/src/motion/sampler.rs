@@ -5,7 +5,7 @@
 use embodied_models::{Rng, Robot};
 
 /// How the planner draws configurations within the joint limits.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
 pub enum Sampler {
     /// Independent uniform draws (xoshiro256**).
     #[default]
