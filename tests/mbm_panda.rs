@@ -1,6 +1,7 @@
-//! `bench mbm` on a robot other than the UR5: a MotionBenchMaker-style family written here for
+//! `bench mbm` on a robot other than the UR5: MotionBenchMaker-style families written here for
 //! the Franka Emika Panda of the corpus (OBJ collision meshes, two finger joints outside the
-//! planning group), planned and verified end to end through the command line.
+//! planning group), one with joint goals and one with hand-pose goals, planned and verified end
+//! to end through the command line.
 
 mod common;
 
@@ -28,7 +29,7 @@ const BOXES: [(&str, [f64; 3], [f64; 3]); 2] =
 /// Write `count` problems (scene + request) of a family into `dir`: start and goal drawn at
 /// random within the limits, collision-free among the boxes, the hand on either side of the
 /// post (so most straight lines hit it).
-fn write_family(dir: &Path, count: usize) {
+fn write_family(dir: &Path, count: usize, pose_goals: bool) {
     std::fs::create_dir_all(dir).expect("family folder");
     let robot = load_urdf(&panda_urdf(), None).expect("Panda loads");
     let mut env = Environment::new();
@@ -67,9 +68,21 @@ fn write_family(dir: &Path, count: usize) {
             names.join(", "),
             start
         );
-        for j in ARM {
-            let d = names.iter().position(|n| n == j).expect("arm joint");
-            let _ = writeln!(req, "      - {{joint_name: {j}, position: {}}}", goal[d]);
+        if pose_goals {
+            // The hand's pose at the drawn goal: a 5 mm sphere and 0.02 rad about each axis.
+            let pose = robot.link_pose(&goal, hand);
+            let (t, q) = (pose.translation.vector, pose.rotation.coords);
+            req = req.replace("  - joint_constraints:\n", "");
+            let _ = write!(
+                req,
+                "  - position_constraints:\n      - link_name: panda_hand\n        header: {{frame_id: panda_link0}}\n        constraint_region:\n          primitives: [{{type: sphere, dimensions: [0.005]}}]\n          primitive_poses: [{{position: [{}, {}, {}]}}]\n    orientation_constraints:\n      - link_name: panda_hand\n        orientation: [{}, {}, {}, {}]\n        absolute_x_axis_tolerance: 0.02\n        absolute_y_axis_tolerance: 0.02\n        absolute_z_axis_tolerance: 0.02\n",
+                t.x, t.y, t.z, q.x, q.y, q.z, q.w
+            );
+        } else {
+            for j in ARM {
+                let d = names.iter().position(|n| n == j).expect("arm joint");
+                let _ = writeln!(req, "      - {{joint_name: {j}, position: {}}}", goal[d]);
+            }
         }
         std::fs::write(dir.join(format!("request{k:04}.yaml")), req).expect("request");
     }
@@ -85,7 +98,8 @@ fn bench_mbm_plans_and_verifies_a_panda_family() {
     )
     .expect("srdf");
     let problems = dir.join("problems");
-    write_family(&problems.join("table_post_panda"), 6);
+    write_family(&problems.join("table_post_panda"), 6, false);
+    write_family(&problems.join("table_post_pose_panda"), 3, true);
     let s = |p: &Path| p.to_str().expect("utf-8 path").to_string();
     let (code, stdout, stderr) = embodied(&[
         "bench",
@@ -103,12 +117,17 @@ fn bench_mbm_plans_and_verifies_a_panda_family() {
     assert_eq!(code, 0, "{stdout}{stderr}");
     let report: serde_json::Value = serde_json::from_str(&stdout).expect("JSON report");
     let problems = report["problems"].as_array().expect("problems");
-    assert_eq!(problems.len(), 6, "{report}");
+    assert_eq!(problems.len(), 9, "{report}");
     for p in problems {
         assert_eq!(p["joint_names"].as_array().map(Vec::len), Some(7), "the group's seven joints: {p}");
         assert_eq!(p["solved"], true, "{p}");
         assert_eq!(p["verified"], true, "{p}");
     }
-    let family = &report["families"][0];
-    assert_eq!((family["solved"].as_u64(), family["verification_failures"].as_u64()), (Some(6), Some(0)), "{family}");
+    for (family, n) in [(&report["families"][0], 6), (&report["families"][1], 3)] {
+        assert_eq!(
+            (family["solved"].as_u64(), family["verification_failures"].as_u64()),
+            (Some(n), Some(0)),
+            "{family}"
+        );
+    }
 }

@@ -22,7 +22,7 @@ use embodied_models::{CollisionModel, ConfigSpace, Robot};
 use embodied_planner::PlanError;
 use embodied_planner::deadline::Deadline;
 use embodied_planner::motion::{CERTIFY_TOLERANCE, EdgeCheck, Goal, MotionSettings, PlannerKind, Sampler, plan_motion};
-use embodied_planner::moveit::{MoveitError, load_request, load_scene};
+use embodied_planner::moveit::{MoveitError, MoveitProblem, goal_configurations, goal_miss, load_request, load_scene};
 use embodied_planner::verify::Verifier;
 use serde::{Deserialize, Serialize};
 
@@ -566,7 +566,10 @@ fn run_problem(args: &MbmArgs, loaded: &Loaded, p: &ProblemFiles, run: u32) -> R
         result.message = Some(format!("start {why}"));
         return Ok(result);
     }
-    if let Some(why) = invalid_reason(&model, &resolved.goal) {
+    // A link-pose goal (no joint goal) is planned to the configurations inverse kinematics
+    // finds for it, within the timed planning; its path must end on the goal.
+    let pose_goal = resolved.goal.is_empty();
+    if !pose_goal && let Some(why) = invalid_reason(&model, &resolved.goal) {
         result.status = ProblemStatus::InvalidGoal;
         result.message = Some(format!("goal {why}"));
         return Ok(result);
@@ -586,9 +589,13 @@ fn run_problem(args: &MbmArgs, loaded: &Loaded, p: &ProblemFiles, run: u32) -> R
         racers: args.threads.max(1),
         ..MotionSettings::default()
     };
-    let goal = Goal::Configuration(resolved.goal.clone());
+    let problem = pose_goal.then(|| MoveitProblem { resolved: resolved.clone(), model: model.clone() });
     let t0 = Instant::now();
-    let outcome = plan_motion(&model, &resolved.start, &goal, &settings);
+    let outcome = match &problem {
+        Some(problem) => goal_configurations(problem, &settings)
+            .and_then(|goals| plan_motion(&model, &resolved.start, &Goal::AnyOf(goals), &settings)),
+        None => plan_motion(&model, &resolved.start, &Goal::Configuration(resolved.goal.clone()), &settings),
+    };
     let elapsed = t0.elapsed();
     result.planning_us = Some((elapsed.as_secs_f64() * 1e7).round() / 10.0);
     match outcome {
@@ -596,7 +603,15 @@ fn run_problem(args: &MbmArgs, loaded: &Loaded, p: &ProblemFiles, run: u32) -> R
             let space = arm.config_space();
             result.path_length = Some(path_length(&space, &plan.path));
             result.stats = serde_json::to_value(&plan.stats).ok();
-            match check_path(&model, &plan.path, &resolved.start, &resolved.goal) {
+            let goal_end = match (&problem, plan.path.last()) {
+                (Some(problem), Some(last)) => match goal_miss(problem, last) {
+                    Some(why) => Err(format!("the path ends off the request's goal: {why}")),
+                    None => Ok(last.clone()),
+                },
+                _ => Ok(resolved.goal.clone()),
+            };
+            let checked = goal_end.and_then(|end| check_path(&model, &plan.path, &resolved.start, &end));
+            match checked {
                 Ok(()) => {
                     result.solved = true;
                     result.status = ProblemStatus::Solved;
