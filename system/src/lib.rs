@@ -44,6 +44,7 @@ pub mod log;
 pub mod mbm;
 pub mod plan;
 pub mod plot;
+pub mod polish;
 pub mod scenario;
 pub mod system;
 pub mod task;
