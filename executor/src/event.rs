@@ -209,6 +209,10 @@ pub enum Event {
         plan: u64,
         /// Time until the new plan's start, s.
         join_in_s: f64,
+        /// Whether the arm turns onto the new plan at speed (the braking and the new plan
+        /// superposed), else the path is braked to rest where the new plan starts.
+        #[serde(default)]
+        moving: bool,
     },
     /// A plan landed after a halt: the agent moves again.
     Resumed {
@@ -543,8 +547,9 @@ impl fmt::Display for Event {
             Event::ReplanInMotion { plan, id, join_after_s, speed } => {
                 write!(f, "{kind} plan={plan} id={id} join_after_s={join_after_s:.3} speed={speed:.6}")
             }
-            Event::PlanJoined { id, plan, join_in_s } => {
-                write!(f, "{kind} id={id} plan={plan} join_in_s={join_in_s:.3}")
+            Event::PlanJoined { id, plan, join_in_s, moving } => {
+                let how = if *moving { "at speed" } else { "at rest" };
+                write!(f, "{kind} id={id} plan={plan} join_in_s={join_in_s:.3} {how}")
             }
             Event::HaltStarted { reason, speed, detail } => {
                 write!(f, "{kind} reason={} speed={speed:.6}", reason.as_str())?;

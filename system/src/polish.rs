@@ -4,8 +4,8 @@
 //! stop.
 //!
 //! **Planning** ([`PolishJob::plan`], before the first step). The face is covered by parallel
-//! passes along its longer side, at most 1.8 pad radii apart and 0.8 radii in from its edges,
-//! joined at alternate ends (a raster). Every pass and every step between passes is a straight
+//! passes along its longer side, at most 1.8 pad radii apart, 0.8 radii in from the long edges
+//! and 0.4 from the short ones, joined at alternate ends (a raster). Every pass and every step between passes is a straight
 //! Cartesian line of the tool point at the height where the pad just touches the face, with
 //! the tool axis along the face's inward normal: a trapezoidal speed profile along the line,
 //! sampled every 10 ms, each sample solved by inverse kinematics from the previous one, its
@@ -127,7 +127,10 @@ impl PolishJob {
         let top_z = c.z + h.z;
         let face = [[c.x - h.x, c.x + h.x], [c.y - h.y, c.y + h.y]];
         let r = spec.tool_radius;
-        let inset = 0.8 * r;
+        // Passes 0.8 radii in from the long edges (1.8 radii apart at most: the pads' bands
+        // overlap) and from 0.4 radii of the short edges (the pad reaching over the edge covers
+        // the notches between the ends of two passes not joined there).
+        let (inset, inset_ends) = (0.8 * r, 0.4 * r);
         // Passes along the longer side; their number so that neighbours are <= 1.8 r apart.
         let along_x = h.x >= h.y;
         let (long, short) = if along_x { (face[0], face[1]) } else { (face[1], face[0]) };
@@ -139,7 +142,7 @@ impl PolishJob {
         let passes: Vec<([f64; 3], [f64; 3])> = (0..n)
             .map(|k| {
                 let b = short[0] + inset + k as f64 * spacing;
-                let (a0, a1) = (long[0] + inset, long[1] - inset);
+                let (a0, a1) = (long[0] + inset_ends, long[1] - inset_ends);
                 if k % 2 == 0 { (point(a0, b), point(a1, b)) } else { (point(a1, b), point(a0, b)) }
             })
             .collect();
@@ -358,15 +361,14 @@ impl PolishArm {
         if i.sensor_count() > self.force_sensor { i.sensor(self.force_sensor).values[4] } else { 0.0 }
     }
 
-    /// Command the planned `(q, qd)` shifted by the regulated depth along the face's normal.
+    /// Command the planned `(q, qd)` shifted by the regulated depth along the face's normal:
+    /// one Jacobian per step, `dq/d depth` for a unit depth, applied to the depth and its rate.
     fn command_shifted(&mut self, q: &[f64], qd: &[f64], depth_rate: f64, o: &mut OutputImages) {
-        let down = Vector3::new(0.0, 0.0, -self.depth);
-        shifted(&self.robot, q, &down, &mut self.command);
-        // Velocity: the plan's plus the depth's rate, through the same Jacobian.
-        let mut moved = vec![0.0; q.len()];
-        shifted(&self.robot, q, &Vector3::new(0.0, 0.0, -depth_rate), &mut moved);
+        shifted(&self.robot, q, &Vector3::new(0.0, 0.0, -1.0), &mut self.command);
         for k in 0..q.len() {
-            self.rates[k] = qd[k] + (moved[k] - q[k]);
+            let per_depth = self.command[k] - q[k];
+            self.command[k] = q[k] + per_depth * self.depth;
+            self.rates[k] = qd[k] + per_depth * depth_rate;
         }
         o.set_position_target(&self.command, &self.rates);
     }

@@ -306,7 +306,9 @@ pub fn deliberation_settings(scenario: &Scenario, clock: ClockSpec, dt: f64) -> 
         move_tolerance: 0.02,
         halt_on_any_change: false,
         replan_in_motion: true,
-        brake_fraction: 0.9,
+        // Half of each acceleration limit brakes towards a replan's start; the other half is what
+        // the new plan's first segment may use while superposed on the braking (a join at speed).
+        brake_fraction: 0.5,
     }
 }
 
