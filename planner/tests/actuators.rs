@@ -127,12 +127,12 @@ fn the_verifier_refuses_a_screw_faster_than_its_limit_while_every_joint_is_withi
     assert!(report.limits.violations > 0);
     let text = report.limits.violation.as_ref().unwrap().to_string();
     assert!(text.contains("actuator `shoulder_screw` speed"), "{text}");
-    // The same motion at 0.4 rad/s is certified.
+    // The same motion at 0.35 rad/s is certified.
     for qd in traj.qd.iter_mut() {
-        qd[1] = 0.4;
+        qd[1] = 0.35;
     }
     for (k, qk) in traj.q.iter_mut().enumerate() {
-        qk[1] = q[1] + 0.4 * k as f64 * 0.001;
+        qk[1] = q[1] + 0.35 * k as f64 * 0.001;
     }
     let report = Verifier::certified(0.0).check_trajectory(&model, &traj, &[]);
     assert!(report.limits.ok, "{:?}", report.limits.violation);
