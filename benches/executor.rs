@@ -107,5 +107,45 @@ fn plan_gate(c: &mut Criterion) {
     g.finish();
 }
 
-criterion_group!(benches, bench, plan_gate);
+/// Per control step: the safety limiter on one RNT with and without its screws' speed check
+/// (a command that drives both screws past their limits, so the check also scales), and the
+/// polishing regulator's per-step work (the joint motion per unit depth along the face's
+/// normal, through the position Jacobian).
+fn actuators_and_regulator(c: &mut Criterion) {
+    use embodied_models::nalgebra::Vector3;
+    let robot = embodied_models::builtin("rnt").expect("built-in robot");
+    let mut q = robot.home().to_vec();
+    q[1] = -1.55;
+    let mut wanted = vec![0.0; q.len()];
+    wanted[1] = 0.5;
+    wanted[2] = 0.5;
+    let command = JointCommand { mode: CommandMode::Velocity, q: q.clone(), qd: wanted };
+    let mut g = c.benchmark_group("control-step");
+    g.sample_size(30).measurement_time(Duration::from_secs(2)).warm_up_time(Duration::from_secs(1));
+    for (name, screws) in [("joints-only", false), ("joints-and-screws", true)] {
+        let servo = ServoModel::new(robot.limits(), &q).expect("servo");
+        let limiter = if screws {
+            SafetyLimiter::new(servo).with_actuators(robot.actuators().to_vec())
+        } else {
+            SafetyLimiter::new(servo)
+        };
+        let mut out = JointCommand { mode: CommandMode::Position, q: vec![0.0; q.len()], qd: vec![0.0; q.len()] };
+        g.bench_function(BenchmarkId::new("rnt-safety-limiter", name), |b| {
+            b.iter(|| {
+                limiter.limit_into(black_box(&command), 0.001, &mut out);
+                black_box(out.qd[1])
+            })
+        });
+    }
+    let mut shifted = vec![0.0; q.len()];
+    g.bench_function(BenchmarkId::new("rnt-polish-regulator", "normal-shift"), |b| {
+        b.iter(|| {
+            embodied_system::polish::shifted(&robot, black_box(&q), &Vector3::new(0.0, 0.0, -1.0), &mut shifted);
+            black_box(shifted[1])
+        })
+    });
+    g.finish();
+}
+
+criterion_group!(benches, bench, plan_gate, actuators_and_regulator);
 criterion_main!(benches);

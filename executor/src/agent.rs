@@ -98,6 +98,9 @@ impl<C: Send + 'static> Agent<C> {
     ) -> Result<Self, ExecutorError> {
         let servo = ServoModel::new(robot.limits(), q0.unwrap_or(robot.home()))?;
         let mut agent = Self::new(name, internal, behaviour).with_effector(servo)?;
+        if let Some(e) = agent.effector.take() {
+            agent.effector = Some(e.with_actuators(robot.actuators().to_vec()));
+        }
         agent.receptors.robot = Some((robot, 0));
         Ok(agent)
     }

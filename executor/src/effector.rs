@@ -4,14 +4,15 @@
 //! * [`ServoModel`]: a simulated joint servo, tracking position or velocity targets within the
 //!   robot's limits.
 //! * [`SafetyLimiter`]: a decorator implementing the same trait that makes every command respect
-//!   position, velocity and acceleration limits before the wrapped effector sees it. It enforces
+//!   position, velocity and acceleration limits (and, for serial-parallel robots, the speed
+//!   limits of the screws driving joints) before the wrapped effector sees it. It enforces
 //!   limits by wrapping, from the measured state, not by remembering earlier commands.
 //! * [`SafeHalt`]: the controlled stop (stop category 2) used when a specification error or a
 //!   late plan leaves nothing sensible to command and no path is being followed.
 //! * [`PathHalt`]: the controlled stop along the path being followed (a time-scaling of that
 //!   path), and [`BrakeHalt`], the stops off the path used when the stop along it would collide.
 
-use embodied_models::JointLimits;
+use embodied_models::{JointLimits, ScrewTriangle};
 use embodied_planner::trajectory::Trajectory;
 
 use crate::error::ExecutorError;
@@ -232,6 +233,8 @@ pub struct SafetyLimiter<E> {
     inner: E,
     limited: JointCommand,
     gain: f64,
+    /// Screws driving joints through triangles: their speed limits hold too.
+    actuators: Vec<ScrewTriangle>,
 }
 
 impl<E: Effector> SafetyLimiter<E> {
@@ -242,7 +245,19 @@ impl<E: Effector> SafetyLimiter<E> {
             inner,
             limited: JointCommand { mode: CommandMode::Position, q: vec![0.0; n], qd: vec![0.0; n] },
             gain: 50.0,
+            actuators: Vec::new(),
         }
+    }
+    /// Also keep every actuator (screw) within its speed limit: a command whose screw speeds
+    /// at the measured configuration exceed a limit has all its joint velocities scaled down by
+    /// one factor (the motion keeps its direction), as far as the acceleration limits allow.
+    pub fn with_actuators(mut self, actuators: Vec<ScrewTriangle>) -> Self {
+        self.actuators = actuators;
+        self
+    }
+    /// The actuators whose speed limits the limiter enforces.
+    pub fn actuators(&self) -> &[ScrewTriangle] {
+        &self.actuators
     }
     /// Position-loop gain in 1/s used to turn position targets into velocities (default 50).
     pub fn with_gain(mut self, gain: f64) -> Self {
@@ -259,6 +274,29 @@ impl<E: Effector> SafetyLimiter<E> {
     }
     /// Limit `command` for the current state into `out` (as long as the joints).
     pub fn limit_into(&self, command: &JointCommand, dt: f64, out: &mut JointCommand) {
+        self.limit_joints(command, dt, out);
+        if !self.actuators.is_empty() {
+            self.limit_actuators(dt, out);
+        }
+    }
+
+    /// Scale the joint velocities of `out` so that every actuator is within its speed limit at
+    /// the measured configuration, each joint staying within its velocity window.
+    fn limit_actuators(&self, dt: f64, out: &mut JointCommand) {
+        let (q, v, limits) = (self.inner.q(), self.inner.qd(), self.inner.limits());
+        let ratio = self.actuators.iter().fold(0.0_f64, |m, a| m.max(a.rate(q, &out.qd).abs() / a.max_speed));
+        if ratio <= 1.0 || !ratio.is_finite() {
+            return;
+        }
+        for (i, lim) in limits.iter().enumerate() {
+            let (lo, hi) = velocity_window(q[i], v[i], lim, dt);
+            let v_next = (out.qd[i] / ratio).clamp(lo, hi);
+            out.qd[i] = v_next;
+            out.q[i] = lim.clamp(q[i] + v_next * dt);
+        }
+    }
+
+    fn limit_joints(&self, command: &JointCommand, dt: f64, out: &mut JointCommand) {
         let (q, v, limits) = (self.inner.q(), self.inner.qd(), self.inner.limits());
         out.mode = CommandMode::Position;
         let k = self.gain.min(1.0 / dt);

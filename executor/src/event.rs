@@ -209,6 +209,10 @@ pub enum Event {
         plan: u64,
         /// Time until the new plan's start, s.
         join_in_s: f64,
+        /// Whether the arm turns onto the new plan at speed (the braking and the new plan
+        /// superposed), else the path is braked to rest where the new plan starts.
+        #[serde(default)]
+        moving: bool,
     },
     /// A plan landed after a halt: the agent moves again.
     Resumed {
@@ -301,6 +305,30 @@ pub enum Event {
     ForceLimit {
         /// The force read, N.
         force_n: f64,
+    },
+    /// The tool touched the surface it works on (the force along the surface normal passed the
+    /// contact threshold).
+    ContactMade {
+        /// Force along the surface normal, N.
+        force_n: f64,
+    },
+    /// The force regulator holds the contact force within its band around the setpoint.
+    ForceRegulated {
+        /// Force along the surface normal, N.
+        force_n: f64,
+        /// The setpoint, N.
+        setpoint_n: f64,
+        /// How far the regulator pushes the tool below its planned path, mm.
+        depth_mm: f64,
+    },
+    /// One pass of a coverage path was finished in contact.
+    PassFinished {
+        /// The pass (0-based).
+        pass: usize,
+        /// How many passes the path has.
+        passes: usize,
+        /// Mean force along the surface normal over the pass, N.
+        mean_force_n: f64,
     },
     /// Both hands hold the object: the closed chain begins.
     Grasp,
@@ -436,6 +464,9 @@ impl Event {
             Event::AgentFailed { .. } => "agent_failed",
             Event::AllDone => "all_done",
             Event::ForceLimit { .. } => "force_limit",
+            Event::ContactMade { .. } => "contact_made",
+            Event::ForceRegulated { .. } => "force_regulated",
+            Event::PassFinished { .. } => "pass_finished",
             Event::Grasp => "grasp",
             Event::Release => "release",
             Event::ObjectPlaced { .. } => "object_placed",
@@ -516,8 +547,9 @@ impl fmt::Display for Event {
             Event::ReplanInMotion { plan, id, join_after_s, speed } => {
                 write!(f, "{kind} plan={plan} id={id} join_after_s={join_after_s:.3} speed={speed:.6}")
             }
-            Event::PlanJoined { id, plan, join_in_s } => {
-                write!(f, "{kind} id={id} plan={plan} join_in_s={join_in_s:.3}")
+            Event::PlanJoined { id, plan, join_in_s, moving } => {
+                let how = if *moving { "at speed" } else { "at rest" };
+                write!(f, "{kind} id={id} plan={plan} join_in_s={join_in_s:.3} {how}")
             }
             Event::HaltStarted { reason, speed, detail } => {
                 write!(f, "{kind} reason={} speed={speed:.6}", reason.as_str())?;
@@ -547,6 +579,13 @@ impl fmt::Display for Event {
             Event::AgentFailed { agent } => write!(f, "{kind}: {agent}"),
             Event::ForceLimit { force_n } => write!(f, "{kind}: {force_n:.1} N, plan abandoned"),
             Event::ObjectPlaced { error_m } => write!(f, "{kind}: {error_m:.4} m from its goal"),
+            Event::ContactMade { force_n } => write!(f, "{kind}: {force_n:.1} N"),
+            Event::ForceRegulated { force_n, setpoint_n, depth_mm } => {
+                write!(f, "{kind}: {force_n:.1} N (setpoint {setpoint_n:.1} N), {depth_mm:.2} mm below the path")
+            }
+            Event::PassFinished { pass, passes, mean_force_n } => {
+                write!(f, "{kind}: pass {} of {passes}, mean {mean_force_n:.1} N", pass + 1)
+            }
             Event::SpecificationError { message } => write!(f, "{kind}; safe halt: {message}"),
             Event::TaskPlanFound {
                 operators,
@@ -637,6 +676,9 @@ mod tests {
             Event::TaskPlanFailed { reason: "infeasible".into(), expansions: 3, best_partial: None, planning_ms: 0.0 },
             Event::StopPathBlocked { chosen: StopMotion::JointBrake, free: true },
             Event::SensorImplausible { value: 1e9 },
+            Event::ContactMade { force_n: 2.0 },
+            Event::ForceRegulated { force_n: 20.0, setpoint_n: 20.0, depth_mm: 1.0 },
+            Event::PassFinished { pass: 0, passes: 5, mean_force_n: 20.0 },
         ];
         for e in all {
             let v: serde_json::Value = serde_json::to_value(&e).expect("serialisable");

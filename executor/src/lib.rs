@@ -111,4 +111,4 @@ pub use runtime::{Clearance, Parallelism, Runtime, RuntimeConfig, StepMonitor, S
 pub use sensor::{Contact, JointState, NearestObstacle, VirtualSensor};
 pub use transition::{Predicate, TransitionFunction, idle};
 pub use transmitter::{ChannelStats, Link, Transmitter};
-pub use world::{Body, Obstacle, ObstacleEcho, ReceptorReadings, ReceptorSpec, World, receptor_noise};
+pub use world::{Body, Obstacle, ObstacleEcho, ReceptorReadings, ReceptorSpec, Solid, World, receptor_noise};

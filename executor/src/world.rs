@@ -34,6 +34,41 @@ impl Obstacle {
     }
 }
 
+/// An axis-aligned box that the force sensor feels through a compliant skin of thickness
+/// `skin` (a polishing pad's, modelled on the surface): within `skin` of the box the sensing
+/// point feels `stiffness * (skin - distance)` along the outward normal of the box at the
+/// nearest point. A workpiece a tool works on; detectors do not see it.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Solid {
+    /// Its name.
+    pub name: String,
+    /// Centre, m.
+    pub centre: [f64; 3],
+    /// Half sizes along x, y, z, m.
+    pub half: [f64; 3],
+    /// Thickness of the compliant skin, m.
+    pub skin: f64,
+}
+
+impl Solid {
+    /// Signed distance from `p` to the box (negative inside) and the outward unit normal there.
+    pub fn distance(&self, p: [f64; 3]) -> (f64, [f64; 3]) {
+        let d: [f64; 3] = std::array::from_fn(|k| p[k] - self.centre[k]);
+        let out: [f64; 3] = std::array::from_fn(|k| d[k].abs() - self.half[k]);
+        if out.iter().any(|&o| o > 0.0) {
+            let v: [f64; 3] = std::array::from_fn(|k| out[k].max(0.0) * d[k].signum());
+            let n = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+            (n, std::array::from_fn(|k| v[k] / n))
+        } else {
+            // Inside: the nearest face.
+            let k = (0..3).max_by(|&a, &b| out[a].total_cmp(&out[b])).unwrap_or(2);
+            let mut normal = [0.0; 3];
+            normal[k] = if d[k] >= 0.0 { 1.0 } else { -1.0 };
+            (out[k], normal)
+        }
+    }
+}
+
 /// An agent's body in the world, as other agents' receptors see it: the bounding spheres of
 /// its shapes where its joints stood after the last step.
 #[derive(Debug, Clone, PartialEq, Default)]
@@ -50,6 +85,7 @@ pub struct Body {
 #[derive(Debug, Clone, Default)]
 pub struct World {
     obstacles: Vec<Obstacle>,
+    solids: Vec<Solid>,
     bodies: Vec<Body>,
     step: u64,
 }
@@ -63,6 +99,15 @@ impl World {
     pub fn add_obstacle(&mut self, obstacle: Obstacle) -> usize {
         self.obstacles.push(obstacle);
         self.obstacles.len() - 1
+    }
+    /// Add a solid the force sensor feels (see [`Solid`]); returns its index.
+    pub fn add_solid(&mut self, solid: Solid) -> usize {
+        self.solids.push(solid);
+        self.solids.len() - 1
+    }
+    /// The solids the force sensor feels.
+    pub fn solids(&self) -> &[Solid] {
+        &self.solids
     }
     /// All obstacles, present or not, at their current positions.
     pub fn obstacles(&self) -> &[Obstacle] {
@@ -255,6 +300,16 @@ impl Receptors {
                     sense(id, Some(b.agent), position, radius);
                 }
                 id += 1;
+            }
+        }
+        if let Some(k) = spec.force_stiffness {
+            for solid in &world.solids {
+                let (distance, normal) = solid.distance(p);
+                if distance < solid.skin {
+                    for (f, n) in out.force.iter_mut().zip(normal) {
+                        *f += k * (solid.skin - distance) * n;
+                    }
+                }
             }
         }
         if spec.force_stiffness.is_some() && spec.force_noise > 0.0 {

@@ -7,6 +7,7 @@ use std::f64::consts::{FRAC_PI_2, PI};
 
 use nalgebra::{Isometry3, Vector3};
 
+use crate::actuator::{irp6_arm_screws, triangle};
 use crate::error::ModelError;
 use crate::geometry::{PlacedShape, Shape};
 use crate::ik::IRP6_DH;
@@ -45,7 +46,10 @@ pub fn builtin(name: &str) -> Result<Robot, ModelError> {
 const IRP6_SOURCE: &str = "IRp-6 on postument, 6 DOF. DH table: shared/robots/README.md 1.3.1 (derived from MRROC++ \
 kinematic_model_irp6p_with_wrist.cc, a2=0.455, a3=0.67, d5=0.19 m); shoulder 0.95 m above base (ROS Irp6pmKinematic.h); \
 tool 0.25 m along flange z (MRROC++); joint limits MRROC++ joint space (README 1.5). ASSUMPTION: 1.5 rad/s and 7 rad/s^2 \
-per joint (README 1.6: no authoritative spec); collision capsules (README 1.9).";
+per joint (README 1.6: no authoritative spec); collision capsules (README 1.9). Lower and upper arm driven by ball \
+screws through triangles, MRROC++ constants (sl123, mi, ni, lead 5 mm, README 1.5); screw speed 0.159 m/s from MRROC++'s \
+motor_max_velocity 200 rad/s (a generator default, README 1.6). The screws' strokes are widened to the joint limits: \
+MRROC++'s motor range would cut the upper arm's absolute angle to -25.3..36.6 degrees.";
 const IRP6_OT_SOURCE: &str = "IRp-6 on track, 7 DOF: prismatic track along +y (-0.125..1.21 m, MRROC++ \
 kinematic_model_irp6ot_with_wrist.cc) then the IRp-6 arm (flange = Ty(q0) Tz(0.95) DH(q1..q6)). ASSUMPTION: track 0.5 m/s \
 (URDF .53), 2 m/s^2; arm 1.5 rad/s, 7 rad/s^2; collision capsules and track bed box (README 1.9).";
@@ -58,7 +62,8 @@ link meshes' bounding boxes (README 2.3). Reconstructed from a 2010 simulation m
 all joints continuous, 3 rad/s, 10 rad/s^2.";
 const RNT_SOURCE: &str = "RNT serial-parallel milling robot: ASSUMPTION MODEL. No public RNT numbers exist \
 (README 3); this is the invented, parameterised RNT-like 6R stand-in of README 3 (reach ~2.5 m, J1-J3 0.5 rad/s, \
-J4-J6 1.5 rad/s, ASSUMPTION accelerations 2 and 5 rad/s^2). Replace when real data arrive.";
+J4-J6 1.5 rad/s, ASSUMPTION accelerations 2 and 5 rad/s^2). ASSUMPTION (invented): J2 and J3 driven by screws through \
+triangles (L1 0.45, L2 0.55 m, phi 3.0 rad, 0.15 m/s; L1 0.3, L2 0.4 m, phi pi/2, 0.10 m/s). Replace when real data arrive.";
 
 fn tz(z: f64) -> Isometry3<f64> {
     Isometry3::translation(0.0, 0.0, z)
@@ -151,7 +156,9 @@ fn irp6_joint_names(prefix: &str) -> Vec<String> {
     IRP6_JOINTS.iter().map(|j| format!("{prefix}{j}")).collect()
 }
 
-fn add_irp6_arm(b: &mut RobotBuilder, parent: usize, base: Isometry3<f64>, prefix: &str) {
+/// The arm's six joints below `parent`; `lower_arm` is the degree of freedom of its lower arm
+/// (its ball screws drive that joint and the next, MRROC++'s serial-parallel actuation).
+fn add_irp6_arm(b: &mut RobotBuilder, parent: usize, base: Isometry3<f64>, prefix: &str, lower_arm: usize) {
     let names = irp6_joint_names(prefix);
     let names: Vec<&str> = names.iter().map(|s| s.as_str()).collect();
     let links = dh_chain(
@@ -166,13 +173,24 @@ fn add_irp6_arm(b: &mut RobotBuilder, parent: usize, base: Isometry3<f64>, prefi
         irp6_arm_shapes(),
     );
     debug_assert_eq!(links.len(), 6);
+    // The screws' speed limits bind; their strokes are widened to the joint limits. MRROC++'s
+    // motor ranges would cut the upper arm's absolute angle q1 + q2 + pi/2 to [-25.3, 36.6]
+    // degrees (the range its older, absolute-angle joint limits of -25..40 degrees gave), which
+    // the DH joint limits here exceed (-65..80 degrees) and the built-in carry and stacking poses
+    // use; `irp6_arm_screws` keeps MRROC++'s strokes.
+    let mut limits = vec![JointLimits::new(0.0, 0.0, 1.0, 1.0); lower_arm - 1];
+    limits.extend(irp6_arm_limits());
+    for mut screw in irp6_arm_screws(prefix, lower_arm) {
+        screw.widen_to_joint_limits(&limits, 1e-3);
+        b.actuator(screw);
+    }
 }
 
 /// IRp-6 on postument: base at the world origin, shoulder 0.95 m above it.
 pub fn irp6_postument() -> Result<Robot, ModelError> {
     let mut b = RobotBuilder::new("irp6-postument").provenance(IRP6_SOURCE);
     let base = b.link("base", irp6_column_shapes(0.0));
-    add_irp6_arm(&mut b, base, tz(0.95), "");
+    add_irp6_arm(&mut b, base, tz(0.95), "", 1);
     b.end_effector("irp6p", "link6", tz(0.25));
     b.closed_form_ik("irp6p", ClosedForm::Irp6);
     b.home(IRP6_FRONT.to_vec());
@@ -204,7 +222,7 @@ fn add_track(b: &mut RobotBuilder, prefix: &str) -> (usize, usize) {
 pub fn irp6_on_track() -> Result<Robot, ModelError> {
     let mut b = RobotBuilder::new("irp6-on-track").provenance(IRP6_OT_SOURCE);
     let (_, carriage) = add_track(&mut b, "");
-    add_irp6_arm(&mut b, carriage, tz(0.95), "");
+    add_irp6_arm(&mut b, carriage, tz(0.95), "", 2);
     b.end_effector("irp6ot", "link6", tz(0.25));
     b.closed_form_ik("irp6ot", ClosedForm::Irp6);
     let mut home = vec![0.0];
@@ -229,7 +247,7 @@ pub fn two_irp6() -> Result<Robot, ModelError> {
         Isometry3::identity(),
         JointLimits::new(0.0, 0.0, 0.0, 0.0),
     );
-    add_irp6_arm(&mut b, carriage, tz(0.95), "ot_");
+    add_irp6_arm(&mut b, carriage, tz(0.95), "ot_", 2);
     let pbase = b.link("p_base", irp6_column_shapes(0.0));
     b.joint(
         "p_base",
@@ -242,7 +260,7 @@ pub fn two_irp6() -> Result<Robot, ModelError> {
         Isometry3::identity(),
         JointLimits::new(0.0, 0.0, 0.0, 0.0),
     );
-    add_irp6_arm(&mut b, pbase, tz(0.95), "p_");
+    add_irp6_arm(&mut b, pbase, tz(0.95), "p_", 8);
     b.end_effector("irp6ot", "ot_link6", tz(0.25));
     b.end_effector("irp6p", "p_link6", tz(0.25));
     b.closed_form_ik("irp6ot", ClosedForm::Irp6);
@@ -309,6 +327,24 @@ pub fn polycrank() -> Result<Robot, ModelError> {
     b.build()
 }
 
+/// The RNT's shoulder (J2) and elbow (J3) screws, README 3's "actuator-space option"
+/// `l^2 = L1^2 + L2^2 - 2 L1 L2 cos(q + phi)`. INVENTED (ASSUMPTION): no RNT numbers exist.
+/// Chosen so that the triangle angle `q + phi` stays inside (0, pi) where the arm works: the
+/// elbow's whole joint range fits (its stroke is the lengths at the joint limits, 1 mm wider),
+/// the shoulder's half-turn range cannot (no triangle covers pi), so its stroke ends where the
+/// angle is 0.25 and 2.95 rad (q2 in [-2.75, -0.05]), as the IRp-6 screws' strokes cut their
+/// joints' ranges. Speeds 0.15 and 0.10 m/s: below what 0.5 rad/s asks mid-stroke (0.17 and
+/// 0.12 m/s), so the screws, not the joints, bound the shoulder and elbow there.
+fn rnt_screws(limits: &[JointLimits; 6]) -> [crate::actuator::ScrewTriangle; 2] {
+    let (l1, l2, phi) = (0.45, 0.55, 3.0);
+    let len = |a: f64, l1: f64, l2: f64| (l1 * l1 + l2 * l2 - 2.0 * l1 * l2 * a.cos()).sqrt();
+    let shoulder = triangle("shoulder_screw", 1, l1, l2, phi, (len(0.25, l1, l2), len(2.95, l1, l2)), 0.15);
+    let (e1, e2, ephi) = (0.3, 0.4, FRAC_PI_2);
+    let stroke = (len(limits[2].lower + ephi, e1, e2) - 1e-3, len(limits[2].upper + ephi, e1, e2) + 1e-3);
+    let elbow = triangle("elbow_screw", 2, e1, e2, ephi, stroke, 0.10);
+    [shoulder, elbow]
+}
+
 /// RNT-like serial-parallel milling robot: ASSUMPTION MODEL (README 3).
 pub fn rnt() -> Result<Robot, ModelError> {
     let mut b = RobotBuilder::new("rnt").provenance(RNT_SOURCE);
@@ -347,6 +383,9 @@ pub fn rnt() -> Result<Robot, ModelError> {
     ];
     let names = ["j1", "j2", "j3", "j4", "j5", "j6"];
     dh_chain(&mut b, base, Isometry3::identity(), "", &names, &dh, &[JointKind::Revolute; 6], &limits, shapes);
+    for screw in rnt_screws(&limits) {
+        b.actuator(screw);
+    }
     // ASSUMPTION: a 0.10 m milling/polishing spindle along the flange z.
     b.end_effector("rnt", "link6", tz(0.10));
     // With README 3's theta3 offset (+pi/2) the forearm folds back along the upper arm at q3 = 0

@@ -36,6 +36,18 @@ pub enum ModelError {
         /// Upper position limit (rad or m).
         upper: f64,
     },
+    /// A configuration that puts a joint-driving actuator (screw) outside its stroke.
+    #[error("actuator `{actuator}` length {length:.5} m is outside its stroke [{min:.5}, {max:.5}] m")]
+    OutOfStroke {
+        /// The actuator's name.
+        actuator: String,
+        /// Its length at the configuration (m).
+        length: f64,
+        /// Shortest length (m).
+        min: f64,
+        /// Longest length (m).
+        max: f64,
+    },
     /// A joint value that is NaN or infinite.
     #[error("joint `{joint}` value {value} is not a finite number")]
     NotFinite {

@@ -76,6 +76,15 @@ pub fn pose_error(current: &Isometry3<f64>, target: &Isometry3<f64>) -> Vector6<
 }
 
 impl Robot {
+    /// A seed's checks: its length, finiteness and joint limits (a seed out of a screw's stroke
+    /// is still a place to start from; solutions keep within the strokes).
+    fn check_joint_configuration(&self, seed: &[f64]) -> Result<(), ModelError> {
+        match self.check_configuration(seed) {
+            Err(ModelError::OutOfStroke { .. }) => Ok(()),
+            other => other,
+        }
+    }
+
     /// The closed form attached to end effector `ee`, if it has one.
     pub fn closed_form(&self, ee: usize) -> Option<ClosedForm> {
         self.closed_forms.get(ee).and_then(|c| c.as_ref()).map(|c| c.kind)
@@ -97,7 +106,7 @@ impl Robot {
         seed: &[f64],
     ) -> Result<Vec<Vec<f64>>, ModelError> {
         let effector = self.end_effector_checked(ee)?;
-        self.check_configuration(seed)?;
+        self.check_joint_configuration(seed)?;
         let Some(chain) = self.closed_forms.get(ee).and_then(|c| c.as_ref()) else {
             return Err(ModelError::NoClosedForm { robot: self.name().to_string(), frame: effector.name.clone() });
         };
@@ -154,7 +163,9 @@ impl Robot {
             let e = pose_error(&(self.link_pose(&q, effector.link) * effector.tool), target);
             let close =
                 e.fixed_rows::<3>(0).norm() <= CLOSED_FORM_CHECK && e.fixed_rows::<3>(3).norm() <= CLOSED_FORM_CHECK;
-            if close && found.iter().all(|(_, o)| space.distance(o, &q) > 1e-9) {
+            // Within the screws' strokes too (a serial-parallel arm's joint ranges are cut by them).
+            let stroked = self.actuators().iter().all(|a| a.stroke_excess(&q) <= 1e-9);
+            if close && stroked && found.iter().all(|(_, o)| space.distance(o, &q) > 1e-9) {
                 found.push((space.distance(seed, &q), q));
             }
         }
@@ -168,7 +179,8 @@ impl Robot {
         })
     }
 
-    /// Joint values placing end effector `ee`'s tool frame at `target`, within the position limits.
+    /// Joint values placing end effector `ee`'s tool frame at `target`, within the position limits
+    /// (and the strokes of screws driving joints, [`Robot::actuators`]).
     ///
     /// Where the end effector has a closed form that covers every joint moving it (the IRp-6 on
     /// its postument), the answer is the closed-form solution nearest `seed`. Otherwise (and for
@@ -183,7 +195,7 @@ impl Robot {
         options: &IkOptions,
     ) -> Result<Vec<f64>, ModelError> {
         let effector = self.end_effector_checked(ee)?;
-        self.check_configuration(seed)?;
+        self.check_joint_configuration(seed)?;
         let whole = self.closed_forms.get(ee).and_then(|c| c.as_ref()).is_some_and(|c| c.whole);
         if whole
             && options.closed_form
@@ -232,7 +244,8 @@ impl Robot {
                 if pos_err + rot_err < best.0 {
                     best = (pos_err + rot_err, q.clone());
                 }
-                if pos_err <= options.position_tolerance && rot_err <= options.orientation_tolerance {
+                let stroked = self.actuators().iter().all(|a| a.stroke_excess(&q) <= 1e-9);
+                if pos_err <= options.position_tolerance && rot_err <= options.orientation_tolerance && stroked {
                     return Ok(q);
                 }
                 // Active set: a joint at a bound that the step would push further out is frozen
@@ -277,7 +290,9 @@ impl Robot {
                 }
                 let (e2, p2, r2) = residual_of(&mut poses, &trial);
                 let cost2 = p2 * p2 + r2 * r2;
-                if cost2 < cost {
+                // A step out of a screw's stroke is refused like one that does not help.
+                let stroked = self.actuators().iter().all(|a| a.stroke_excess(&trial) <= 1e-9);
+                if cost2 < cost && stroked {
                     q.copy_from_slice(&trial);
                     (e, pos_err, rot_err, cost) = (e2, p2, r2, cost2);
                     lambda = (lambda / 3.0).max(1e-12);

@@ -14,6 +14,7 @@
 //! ```
 #![forbid(unsafe_code)]
 
+pub mod actuator;
 pub mod builtin;
 pub mod collision;
 pub mod cspace;
@@ -36,6 +37,7 @@ pub mod srdf {
     pub use crate::formats::srdf::*;
 }
 
+pub use actuator::ScrewTriangle;
 pub use builtin::{BUILTIN_NAMES, builtin, builtin_summaries};
 pub use collision::{Body, CollisionModel, CollisionScratch, Contact, DistanceReport, Environment, Obstacle};
 pub use cspace::{ConfigSpace, wrap_angle};

@@ -63,7 +63,9 @@ impl Rng {
 }
 
 impl crate::Robot {
-    /// A configuration drawn uniformly within the position limits (continuous joints in [-pi, pi)).
+    /// A configuration drawn uniformly within the position limits (continuous joints in [-pi, pi))
+    /// and, for a robot with screws driving joints, within their strokes (rejection sampling; after
+    /// 1,000 rejections the last draw is kept as it is).
     pub fn random_configuration(&self, rng: &mut Rng) -> Vec<f64> {
         let mut q = vec![0.0; self.dof()];
         self.random_configuration_into(rng, &mut q);
@@ -71,13 +73,18 @@ impl crate::Robot {
     }
     /// [`crate::Robot::random_configuration`] into a buffer.
     pub fn random_configuration_into(&self, rng: &mut Rng, q: &mut [f64]) {
-        for (i, v) in q.iter_mut().enumerate() {
-            let l = self.dof_joint(i).limits;
-            *v = if l.is_bounded() {
-                rng.range(l.lower, l.upper)
-            } else {
-                rng.range(-std::f64::consts::PI, std::f64::consts::PI)
-            };
+        for _ in 0..1000 {
+            for (i, v) in q.iter_mut().enumerate() {
+                let l = self.dof_joint(i).limits;
+                *v = if l.is_bounded() {
+                    rng.range(l.lower, l.upper)
+                } else {
+                    rng.range(-std::f64::consts::PI, std::f64::consts::PI)
+                };
+            }
+            if self.actuators().iter().all(|a| a.stroke_excess(q) <= 0.0) {
+                return;
+            }
         }
     }
 }

@@ -4,6 +4,7 @@ use std::collections::HashSet;
 
 use nalgebra::{DVector, Isometry3, Matrix6xX, Point3, Vector3};
 
+use crate::actuator::ScrewTriangle;
 use crate::error::ModelError;
 use crate::geometry::PlacedShape;
 use crate::joint::{Joint, JointKind, JointLimits};
@@ -72,6 +73,8 @@ pub struct Robot {
     base: Isometry3<f64>,
     /// Per end effector: its closed-form inverse kinematics, if the builder attached one.
     pub(crate) closed_forms: Vec<Option<ArmChain>>,
+    /// Linear actuators driving joints through triangles (serial-parallel actuation).
+    actuators: Vec<ScrewTriangle>,
 }
 
 /// Builds a [`Robot`] link by link; [`RobotBuilder::build`] checks and orders the tree.
@@ -87,6 +90,7 @@ pub struct RobotBuilder {
     pending_mimic: Vec<(usize, String, f64, f64)>,
     base: Isometry3<f64>,
     closed_forms: Vec<(String, ClosedForm)>,
+    actuators: Vec<ScrewTriangle>,
 }
 
 impl RobotBuilder {
@@ -103,6 +107,7 @@ impl RobotBuilder {
             pending_mimic: Vec::new(),
             base: Isometry3::identity(),
             closed_forms: Vec::new(),
+            actuators: Vec::new(),
         }
     }
     /// Where the numbers come from (shown in `--help` and `embodied model`).
@@ -170,6 +175,11 @@ impl RobotBuilder {
     /// checks that the chain ending at its flange has the joints the closed form needs.
     pub fn closed_form_ik(&mut self, end_effector: impl Into<String>, kind: ClosedForm) {
         self.closed_forms.push((end_effector.into(), kind));
+    }
+    /// Drive degrees of freedom by a linear actuator through a triangle: its stroke and speed
+    /// limit hold besides the joints' limits.
+    pub fn actuator(&mut self, actuator: ScrewTriangle) {
+        self.actuators.push(actuator);
     }
     /// The configuration reported as "home" (default: zeros clamped into limits).
     pub fn home(&mut self, q: Vec<f64>) {
@@ -322,6 +332,7 @@ impl RobotBuilder {
             home,
             disabled_pairs,
             base: self.base,
+            actuators: self.actuators,
         })
     }
 }
@@ -508,16 +519,51 @@ impl Robot {
                 });
             }
         }
+        for a in &self.actuators {
+            if a.stroke_excess(q) > 1e-9 {
+                return Err(ModelError::OutOfStroke {
+                    actuator: a.name.clone(),
+                    length: a.length(q),
+                    min: a.min_length,
+                    max: a.max_length,
+                });
+            }
+        }
         Ok(())
     }
 
-    /// Whether `q` is within every position limit (no allocation; for hot paths).
+    /// Whether `q` is within every position limit and every actuator's stroke (no allocation;
+    /// for hot paths).
     pub fn within_limits(&self, q: &[f64]) -> bool {
         q.len() == self.dof()
             && q.iter().zip(&self.dof_joints).all(|(&v, &j)| {
                 let l = &self.joints[j].limits;
                 v.is_finite() && v >= l.lower - 1e-9 && v <= l.upper + 1e-9
             })
+            && self.actuators.iter().all(|a| a.stroke_excess(q) <= 1e-9)
+    }
+
+    /// The linear actuators that drive joints through triangles (empty for a robot whose
+    /// joints are driven directly).
+    pub fn actuators(&self) -> &[ScrewTriangle] {
+        &self.actuators
+    }
+
+    /// Add an actuator to a built robot (its degrees of freedom must exist).
+    pub fn add_actuator(&mut self, actuator: ScrewTriangle) -> Result<(), ModelError> {
+        if let Some(&(k, _)) = actuator.angle.iter().find(|(k, _)| *k >= self.dof()) {
+            return Err(ModelError::Invalid {
+                robot: self.name.clone(),
+                message: format!("actuator `{}` drives degree of freedom {k} of {}", actuator.name, self.dof()),
+            });
+        }
+        self.actuators.push(actuator);
+        Ok(())
+    }
+
+    /// The largest `|dl/dt| / max_speed` over the actuators at `(q, qd)` (0 without actuators).
+    pub fn actuator_speed_ratio(&self, q: &[f64], qd: &[f64]) -> f64 {
+        self.actuators.iter().fold(0.0, |m, a| m.max(a.rate(q, qd).abs() / a.max_speed))
     }
 
     /// The value of joint `ji` for configuration `q` (fixed: 0; mimic: follows its leader).
@@ -704,6 +750,17 @@ impl Robot {
             if let Some((d, m, o)) = j.mimic {
                 j.mimic = old_to_new[d].map(|nd| (nd, m, o));
             }
+        }
+        // Actuators: a frozen degree of freedom's share of the drive angle becomes constant.
+        for a in robot.actuators.iter_mut() {
+            let mut angle = Vec::new();
+            for &(d, w) in &a.angle {
+                match old_to_new[d] {
+                    Some(nd) => angle.push((nd, w)),
+                    None => a.offset += w * q_full[d],
+                }
+            }
+            a.angle = angle;
         }
         robot.home = self
             .dof_joints

@@ -100,7 +100,33 @@ impl Profile {
     }
 }
 
-fn profile(delta: &[f64], robot: &Robot) -> Option<Profile> {
+/// Relative margin kept below an actuator's speed limit: the screw's speed per unit path rate
+/// is sampled along the segment (every [`ACTUATOR_STEP`] rad of the largest joint motion), and
+/// it varies smoothly between the samples.
+const ACTUATOR_MARGIN: f64 = 0.01;
+/// Largest joint motion between two samples of an actuator's speed along a segment, rad or m.
+const ACTUATOR_STEP: f64 = 0.01;
+
+/// The largest `|dl/ds|` of every actuator of `robot` along the straight motion
+/// `start + s delta`, `s` in [0, 1], sampled; one entry per actuator.
+fn actuator_rates(start: &[f64], delta: &[f64], robot: &Robot) -> Vec<f64> {
+    let span = delta.iter().fold(0.0_f64, |m, d| m.max(d.abs()));
+    let n = ((span / ACTUATOR_STEP).ceil() as usize).clamp(4, 10_000);
+    let mut q = start.to_vec();
+    let mut worst = vec![0.0_f64; robot.actuators().len()];
+    for k in 0..=n {
+        let s = k as f64 / n as f64;
+        for ((qi, &x), &d) in q.iter_mut().zip(start).zip(delta) {
+            *qi = x + s * d;
+        }
+        for (w, a) in worst.iter_mut().zip(robot.actuators()) {
+            *w = w.max(a.rate_along(&q, delta).abs());
+        }
+    }
+    worst
+}
+
+fn profile(start: &[f64], delta: &[f64], robot: &Robot) -> Option<Profile> {
     let limits = robot.limits();
     let mut v = f64::INFINITY;
     let mut a = f64::INFINITY;
@@ -109,6 +135,14 @@ fn profile(delta: &[f64], robot: &Robot) -> Option<Profile> {
         if d > 0.0 {
             v = v.min(l.max_velocity / d);
             a = a.min(l.max_acceleration / d);
+        }
+    }
+    // Serial-parallel actuation: every screw within its speed limit along the whole segment.
+    if !robot.actuators().is_empty() {
+        for (rate, act) in actuator_rates(start, delta, robot).into_iter().zip(robot.actuators()) {
+            if rate > 0.0 {
+                v = v.min(act.max_speed / (rate * (1.0 + ACTUATOR_MARGIN)));
+            }
         }
     }
     if !(v.is_finite() && a.is_finite() && v > 0.0 && a > 0.0) {
@@ -151,7 +185,9 @@ fn spread(times: &[f64], gap: f64) -> Vec<f64> {
 }
 
 /// Time-parameterise `path` for `robot`: rest-to-rest synchronised trapezoids per segment,
-/// within every joint's velocity and acceleration limit, passing exactly through every
+/// within every joint's velocity and acceleration limit and every actuator's speed limit
+/// ([`Robot::actuators`]: the segment's peak rate is the largest every screw allows anywhere
+/// along it, so a screw near its fastest point slows the whole segment), passing exactly through every
 /// waypoint. Sampled every `sample_dt` seconds plus every knot (waypoints and profile switch
 /// points, merged where closer than 10 µs or a quarter of `sample_dt`); `sample_dt <= 0` or
 /// NaN gives the knots only. Continuous joints move the short way
@@ -174,7 +210,7 @@ pub fn time_parameterize(path: &[Vec<f64>], robot: &Robot, sample_dt: f64) -> Tr
             break;
         }
         let delta: Vec<f64> = (0..dof).map(|i| space.delta(i, current[i], next[i])).collect();
-        let Some(p) = profile(&delta, robot) else { continue };
+        let Some(p) = profile(&current, &delta, robot) else { continue };
         let mut times: Vec<f64> = Vec::new();
         if dt.is_finite() {
             let n = (p.t_end / dt).floor() as usize;

@@ -46,6 +46,7 @@ pub mod mbm;
 pub mod ompl_log;
 pub mod plan;
 pub mod plot;
+pub mod polish;
 pub mod scenario;
 pub mod system;
 pub mod task;

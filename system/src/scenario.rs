@@ -23,6 +23,7 @@ pub const BUILTIN_SCENARIOS: &[(&str, &str)] = &[
     ("irp6-pick", include_str!("../scenarios/irp6-pick.toml")),
     ("two-irp6-cell", include_str!("../scenarios/two-irp6-cell.toml")),
     ("rnt-polish", include_str!("../scenarios/rnt-polish.toml")),
+    ("rnt-polish-raster", include_str!("../scenarios/rnt-polish-raster.toml")),
     ("polycrank-intruder", include_str!("../scenarios/polycrank-intruder.toml")),
     ("irp6-late-plan", include_str!("../scenarios/irp6-late-plan.toml")),
     ("two-irp6-together", include_str!("../scenarios/two-irp6-together.toml")),
@@ -57,7 +58,26 @@ struct RawScenario {
     #[serde(default)]
     task: Option<Spanned<RawTask>>,
     #[serde(default)]
+    polish: Option<Spanned<RawPolish>>,
+    #[serde(default)]
     faults: Vec<Spanned<RawFault>>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawPolish {
+    agent: Spanned<String>,
+    workpiece: Spanned<String>,
+    #[serde(default)]
+    force_n: Option<Spanned<f64>>,
+    #[serde(default)]
+    band_n: Option<Spanned<f64>>,
+    #[serde(default)]
+    tool_radius: Option<Spanned<f64>>,
+    #[serde(default)]
+    speed: Option<Spanned<f64>>,
+    #[serde(default)]
+    skin_mm: Option<Spanned<f64>>,
 }
 
 /// One `[[faults]]` table: `kind`, exactly one of `at` (s) and `probability` (per step or
@@ -371,6 +391,28 @@ pub struct CarrySpec {
     pub lattice_step: f64,
 }
 
+/// A polishing job (`[polish]`): agent `agent` covers the top face of the box obstacle
+/// `workpiece` with a boustrophedon raster, tool normal to the face, pressing with a regulated
+/// force (see `embodied_system::polish`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct PolishSpec {
+    /// Index of the polishing agent.
+    pub agent: usize,
+    /// Index of the workpiece among the scenario's obstacles (an axis-aligned box).
+    pub workpiece: usize,
+    /// Contact force setpoint along the face's normal, N.
+    pub force_n: f64,
+    /// Half-width of the band around the setpoint that counts as regulated, N.
+    pub band_n: f64,
+    /// Radius of the polishing pad, m (passes are at most 1.8 radii apart).
+    pub tool_radius: f64,
+    /// Tool speed along the passes, m/s.
+    pub speed: f64,
+    /// Free thickness of the compliant pad, m (the tool point rides this far above the face at
+    /// zero force).
+    pub skin: f64,
+}
+
 /// A stand of a stacking task (`[[task.stands]]`): a box whose top face is centred at `top`,
 /// with a stack of parts on it.
 #[derive(Debug, Clone, PartialEq)]
@@ -435,6 +477,8 @@ pub struct Scenario {
     pub carry: Option<CarrySpec>,
     /// The stacking task, if any.
     pub task: Option<TaskSpec>,
+    /// The polishing job, if any.
+    pub polish: Option<PolishSpec>,
     /// Faults to inject in a run ([`crate::faults`]).
     pub faults: Vec<FaultSpec>,
 }
@@ -558,6 +602,7 @@ impl ScenarioBuilder {
                 run: RunSpec { duration: None, coordination: Coordination::Sequential },
                 carry: None,
                 task: None,
+                polish: None,
                 faults: Vec::new(),
                 name,
             },
@@ -1128,6 +1173,10 @@ pub fn parse_scenario(text: &str, file: &Path, dir: &Path) -> Result<Scenario, S
             });
         }
     }
+    let polish = match &raw.polish {
+        None => None,
+        Some(p) => Some(parse_polish(&ctx, p, &agents, &obstacles)?),
+    };
     let mut faults = Vec::new();
     for spanned in &raw.faults {
         faults.push(parse_fault(&ctx, spanned, &agents)?);
@@ -1145,6 +1194,7 @@ pub fn parse_scenario(text: &str, file: &Path, dir: &Path) -> Result<Scenario, S
         run: RunSpec { duration, coordination },
         carry,
         task,
+        polish,
     })
 }
 
@@ -1288,6 +1338,69 @@ fn parse_fault(ctx: &Ctx, spanned: &Spanned<RawFault>, agents: &[AgentSpec]) -> 
     };
     spec.check().map_err(|e| ctx.err(spanned.span(), format!("fault `{}`: {e}", kind.as_str())))?;
     Ok(spec)
+}
+
+fn parse_polish(
+    ctx: &Ctx,
+    spanned: &Spanned<RawPolish>,
+    agents: &[AgentSpec],
+    obstacles: &[ObstacleSpec],
+) -> Result<PolishSpec, SystemError> {
+    let p = spanned.get_ref();
+    let agent = agents.iter().position(|a| a.name == *p.agent.get_ref()).ok_or_else(|| {
+        let names: Vec<&str> = agents.iter().map(|a| a.name.as_str()).collect();
+        ctx.err(p.agent.span(), format!("polish: no agent `{}`; expected one of {names:?}", p.agent.get_ref()))
+    })?;
+    if agents[agent].goal.is_some() {
+        return Err(ctx.err(
+            p.agent.span(),
+            format!(
+                "polish: agent `{}` has a goal; the polishing job decides its motion, remove it",
+                p.agent.get_ref()
+            ),
+        ));
+    }
+    if agents[agent].robot.end_effectors().is_empty() {
+        return Err(ctx.err(p.agent.span(), format!("polish: agent `{}` has no end effector", p.agent.get_ref())));
+    }
+    let workpiece = obstacles.iter().position(|o| o.obstacle.name == *p.workpiece.get_ref()).ok_or_else(|| {
+        let names: Vec<&str> = obstacles.iter().map(|o| o.obstacle.name.as_str()).collect();
+        ctx.err(
+            p.workpiece.span(),
+            format!("polish: no obstacle `{}`; expected one of {names:?}", p.workpiece.get_ref()),
+        )
+    })?;
+    let o = &obstacles[workpiece];
+    let axis_aligned = o.obstacle.pose.rotation.angle() < 1e-9;
+    if !(axis_aligned && o.on_map() && matches!(o.obstacle.shape, Shape::Cuboid { .. })) {
+        return Err(ctx.err(
+            p.workpiece.span(),
+            format!("polish: workpiece `{}`: expected a still box without rotation (rpy = 0)", p.workpiece.get_ref()),
+        ));
+    }
+    let number = |v: &Option<Spanned<f64>>, default: f64, lo: f64, hi: f64, what: &str, unit: &str| match v {
+        None => Ok(default),
+        Some(x) if x.get_ref().is_finite() && (lo..=hi).contains(x.get_ref()) => Ok(*x.get_ref()),
+        Some(x) => Err(ctx.err(x.span(), format!("polish: {what}: expected {lo}..{hi} {unit}, got {}", x.get_ref()))),
+    };
+    let force_n = number(&p.force_n, 20.0, 0.5, 500.0, "force_n", "N")?;
+    let band_n = number(&p.band_n, 5.0, 0.1, 100.0, "band_n", "N")?;
+    let tool_radius = number(&p.tool_radius, 0.05, 0.005, 0.5, "tool_radius", "m")?;
+    let speed = number(&p.speed, 0.1, 0.005, 1.0, "speed", "m/s")?;
+    let skin = number(&p.skin_mm, 5.0, 0.5, 50.0, "skin_mm", "mm")? * 1e-3;
+    if let Some(limit) = agents[agent].behaviour.force_limit
+        && limit <= force_n + band_n
+    {
+        return Err(ctx.err(
+            spanned.span(),
+            format!(
+                "polish: force_n + band_n ({} N) must stay below agent `{}`'s force_limit ({limit} N)",
+                force_n + band_n,
+                p.agent.get_ref()
+            ),
+        ));
+    }
+    Ok(PolishSpec { agent, workpiece, force_n, band_n, tool_radius, speed, skin })
 }
 
 fn parse_carry(ctx: &Ctx, spanned: &Spanned<RawCarry>, agents: &[AgentSpec]) -> Result<CarrySpec, SystemError> {

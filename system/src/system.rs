@@ -33,7 +33,7 @@ use embodied_executor::{
     Predicate, Primitive, Reactive, ReceptorSpec, ReplanReason, Runtime, RuntimeConfig, SafeHalt, SensorConfig, Status,
     StepRecord, TransitionFunction, Violation, World,
 };
-use embodied_models::Robot;
+use embodied_models::{Robot, Shape};
 use embodied_planner::carry::plan_carry;
 use embodied_planner::deadline::Deadline;
 use serde::Serialize;
@@ -306,7 +306,9 @@ pub fn deliberation_settings(scenario: &Scenario, clock: ClockSpec, dt: f64) -> 
         move_tolerance: 0.02,
         halt_on_any_change: false,
         replan_in_motion: true,
-        brake_fraction: 0.9,
+        // Half of each acceleration limit brakes towards a replan's start; the other half is what
+        // the new plan's first segment may use while superposed on the braking (a join at speed).
+        brake_fraction: 0.5,
     }
 }
 
@@ -543,15 +545,35 @@ impl System {
         let failed = |name: &str, e: &dyn std::fmt::Display| SystemError::Failed(format!("agent `{name}`: {e}"));
         let mut runtime = Runtime::new(RuntimeConfig { dt, seed, ..RuntimeConfig::default() });
         let mut mapped = Vec::new();
-        for o in &scenario.obstacles {
+        let polish = match &scenario.polish {
+            Some(spec) => Some(Arc::new(crate::polish::PolishJob::plan(scenario, spec)?)),
+            None => None,
+        };
+        for (i, o) in scenario.obstacles.iter().enumerate() {
             let (c, r) = o.obstacle.shape.bounding_sphere();
             let p = o.obstacle.pose * c;
+            // A polished workpiece is felt as its box through the pad's compliant skin, not as
+            // its bounding sphere; its sphere entry (never present) keeps obstacle ids in order.
+            let workpiece = polish.as_ref().filter(|j| j.spec.workpiece == i);
+            if let (Some(job), Shape::Cuboid { half_extents: h }) = (workpiece, &o.obstacle.shape) {
+                let t = o.obstacle.pose.translation.vector;
+                runtime.world_mut().add_solid(embodied_executor::Solid {
+                    name: o.obstacle.name.clone(),
+                    centre: [t.x, t.y, t.z],
+                    half: [h.x, h.y, h.z],
+                    skin: job.spec.skin,
+                });
+            }
             let id = runtime.world_mut().add_obstacle(embodied_executor::Obstacle {
                 name: o.obstacle.name.clone(),
                 position: [p.x, p.y, p.z],
                 velocity: o.velocity.map_or([0.0; 3], |v| [v.x, v.y, v.z]),
                 radius: r,
-                appears_at: o.appear_at.map_or(0, |t| (t / dt).round().max(0.0) as u64),
+                appears_at: if workpiece.is_some() {
+                    u64::MAX
+                } else {
+                    o.appear_at.map_or(0, |t| (t / dt).round().max(0.0) as u64)
+                },
                 vanishes_at: None,
             });
             if o.on_map() {
@@ -596,6 +618,22 @@ impl System {
                 let a =
                     Agent::embodied(agent.name.clone(), robot, Some(&agent.start), state, crate::task::arm_program())
                         .map_err(|e| failed(&agent.name, &e))?;
+                runtime.add_agent(a);
+                continue;
+            }
+            if let Some(job) = polish.as_ref().filter(|j| j.spec.agent == k) {
+                let force_limit = agent.behaviour.force_limit;
+                let state = crate::polish::PolishArm::new(job.clone(), robot.clone(), 0);
+                let program = crate::polish::polish_program(force_limit);
+                let threshold = force_limit.unwrap_or(f64::INFINITY);
+                let a = Agent::embodied(agent.name.clone(), robot, Some(&agent.start), state, program)
+                    .map_err(|e| failed(&agent.name, &e))?
+                    .with_sensor(Contact, SensorConfig { threshold, ..SensorConfig::default() })
+                    .with_receptors(ReceptorSpec {
+                        force_stiffness: Some(crate::polish::CONTACT_STIFFNESS),
+                        force_noise: 0.5,
+                        ..ReceptorSpec::default()
+                    });
                 runtime.add_agent(a);
                 continue;
             }

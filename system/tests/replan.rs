@@ -1,6 +1,6 @@
 //! Replanning in motion: a ball drops into the Polycrank's path while it moves. The agent asks
 //! for a new plan without stopping, from where its path, braked from the deadline on, comes to
-//! rest. In time: the plan is joined and there is no halt. Late: the agent halts from speed at
+//! rest. In time: the plan is joined at speed (superposed on the braking) and there is no halt. Late: the agent halts from speed at
 //! the deadline, within its limits, and resumes from where it stopped. Both runs' logs pass
 //! `verify --log` with collision checking.
 #![allow(clippy::unwrap_used)]
@@ -92,9 +92,27 @@ fn a_replan_that_lands_in_time_is_joined_in_motion_without_a_halt() {
     assert!(r.first(|e| matches!(e, Event::HaltStarted { .. })).is_none(), "{ev:?}");
     assert!(r.first(|e| matches!(e, Event::PlanDiscarded { .. })).is_none(), "{ev:?}");
     assert!(r.first(|e| matches!(e, Event::GoalReached { id: Some(2) })).is_some(), "{ev:?}");
-    // The arm kept moving from the request until the plan landed.
+    // The arm kept moving from the request until the plan landed ...
     for k in asked..=joined {
         assert!(r.qd(k).iter().any(|v| v.abs() > 0.1), "still moving at step {k}");
+    }
+    // ... and through the join: the new plan is superposed on the braking, so the arm turns onto
+    // it at speed instead of coming to rest where it starts; position, velocity and
+    // acceleration stay within the limits (and the log verified above).
+    let (_, e) = r.first(|e| matches!(e, Event::PlanJoined { id: 2, .. })).unwrap();
+    let Event::PlanJoined { join_in_s, moving, .. } = e else { unreachable!() };
+    assert!(moving, "{e}");
+    let join_step = joined + (join_in_s / 0.001).round() as usize;
+    let speed = |k: usize| r.qd(k).iter().fold(0.0_f64, |m, v| m.max(v.abs()));
+    let slowest = (asked..=join_step + 50).map(speed).fold(f64::INFINITY, f64::min);
+    assert!(slowest > 0.2, "the arm slowed to {slowest} rad/s around the join at step {join_step}");
+    let limits = r.scenario.agents[0].robot.limits();
+    for k in asked..=join_step + 50 {
+        for (j, l) in limits.iter().enumerate() {
+            let a = (r.qd(k)[j] - r.qd(k - 1)[j]) / 0.001;
+            assert!(a.abs() <= l.max_acceleration * (1.0 + 1e-6), "joint {j} at step {k}: {a}");
+            assert!(r.qd(k)[j].abs() <= l.max_velocity * (1.0 + 1e-9));
+        }
     }
 }
 

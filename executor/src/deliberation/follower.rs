@@ -6,8 +6,8 @@ use std::sync::Arc;
 
 use embodied_models::{CollisionModel, Environment, Obstacle, Robot, Shape};
 use embodied_planner::motion::{Goal, MotionSettings};
-use embodied_planner::trajectory::Trajectory;
-use embodied_planner::verify::Verifier;
+use embodied_planner::trajectory::{Trajectory, time_parameterize};
+use embodied_planner::verify::{CheckSettings, LimitsChecker, Verifier};
 use nalgebra::Isometry3;
 
 use crate::agent::Agent;
@@ -900,6 +900,104 @@ fn splice(old: &Trajectory, j: &Join, new: &Trajectory, dt: f64) -> Trajectory {
     out
 }
 
+/// The join without a stop: the new plan (which starts at rest where the braked path would
+/// stop) superposed on the braking, so that the arm turns onto the new path at speed instead of
+/// coming to rest at the join. From `t_brake` on, the joined motion is
+/// `B(tau) + N(tau) - q_stop`: the braking `B` (every joint at most `frac` of its acceleration
+/// limit, to rest at `q_stop` after `T`) plus the new plan `N` from its start, its first segment
+/// re-timed with `1 - frac` of each acceleration limit (so the sum stays within the limits);
+/// after `T` it is `N` itself. Position and velocity are continuous at `t_brake` (the braking
+/// starts with the path's velocity, `N` at rest) and at `T` (the braking ends at rest).
+/// `None` when the superposed motion breaks a limit (joint or screw) or is not free in the
+/// agent's world model at `resolution`: then the join comes to rest ([`splice`]).
+#[allow(clippy::too_many_arguments)]
+fn blend(
+    old: &Trajectory,
+    j: &Join,
+    new: &Trajectory,
+    dt: f64,
+    robot: &Robot,
+    frac: f64,
+    model: &CollisionModel,
+    resolution: f64,
+) -> Option<Trajectory> {
+    let n = j.brake_q.len();
+    if n == 0 || new.t.len() < 2 || frac >= 1.0 {
+        return None;
+    }
+    let dof = robot.dof();
+    let (qb, qdb, _) = old.sample(j.t_brake);
+    let q_stop = j.brake_q.last()?.clone();
+    if new.q[0].len() != dof || new.q[0].iter().zip(&q_stop).any(|(a, b)| (a - b).abs() > 1e-9) {
+        return None;
+    }
+    // The new plan's first segment (to its first rest after the start), re-timed gentler.
+    let e1 = (1..new.t.len()).find(|&k| new.qd[k].iter().all(|v| *v == 0.0))?;
+    let mut gentle = robot.clone();
+    for (i, &ji) in robot.dof_joints().iter().enumerate() {
+        let mut l = robot.limits()[i];
+        l.max_acceleration *= 1.0 - frac;
+        gentle.set_joint_limits(ji, l);
+    }
+    let first = time_parameterize(&[new.q[0].clone(), new.q[e1].clone()], &gentle, 0.0);
+    let shift = first.duration() - new.t[e1];
+    let mut renewed = first;
+    for k in e1 + 1..new.t.len() {
+        renewed.t.push(new.t[k] + shift);
+        renewed.q.push(new.q[k].clone());
+        renewed.qd.push(new.qd[k].clone());
+    }
+    // Superpose over the braking's span T, at every control step and every knot of N there.
+    let total = n as f64 * dt;
+    let mut times: Vec<f64> = (1..=n).map(|k| k as f64 * dt).collect();
+    times.extend(renewed.t.iter().copied().filter(|&t| t > 0.0 && t < total));
+    times.sort_by(f64::total_cmp);
+    times.dedup_by(|a, b| (*a - *b).abs() < 1e-7);
+    let mut out = Trajectory { joint_names: old.joint_names.clone(), t: Vec::new(), q: Vec::new(), qd: Vec::new() };
+    for k in 0..old.t.len() {
+        if old.t[k] >= j.t_brake - 1e-9 {
+            break;
+        }
+        out.t.push(old.t[k]);
+        out.q.push(old.q[k].clone());
+        out.qd.push(old.qd[k].clone());
+    }
+    let first_blended = out.t.len();
+    out.t.push(j.t_brake);
+    out.q.push(qb.clone());
+    out.qd.push(qdb.clone());
+    for &tau in &times {
+        let (x, v) = (tau - tau * tau / (2.0 * total), 1.0 - tau / total);
+        let (qn, qdn, _) = renewed.sample(tau);
+        out.t.push(j.t_brake + tau);
+        out.q.push((0..dof).map(|i| qb[i] + qdb[i] * x + qn[i] - q_stop[i]).collect());
+        out.qd.push((0..dof).map(|i| qdb[i] * v + qdn[i]).collect());
+    }
+    for k in 1..renewed.t.len() {
+        if renewed.t[k] > total + 1e-7 {
+            out.t.push(j.t_brake + renewed.t[k]);
+            out.q.push(renewed.q[k].clone());
+            out.qd.push(renewed.qd[k].clone());
+        }
+    }
+    // The superposed part (and the first sample of N after it) within every limit and free.
+    let last_blended = (first_blended + times.len() + 1).min(out.t.len() - 1);
+    let mut limits = LimitsChecker::new(robot, &CheckSettings::default());
+    for k in first_blended..=last_blended {
+        limits.push(out.t[k], &out.q[k], &out.qd[k]);
+    }
+    if limits.violations() > 0 {
+        return None;
+    }
+    let mut scratch = model.scratch();
+    for k in first_blended..last_blended {
+        if !model.motion_is_free_with(&out.q[k], &out.q[k + 1], resolution, &mut scratch) {
+            return None;
+        }
+    }
+    Some(out)
+}
+
 /// A delivery of the plan asked for in motion: joined to the path being followed when it is in
 /// time, for this world and the plan still followed; discarded otherwise.
 #[allow(clippy::too_many_arguments)]
@@ -937,10 +1035,22 @@ fn deliver_join(
                         duration_s: trajectory.duration(),
                         wall,
                     });
-                    let joined = splice(&old, &j, &trajectory, inputs.dt());
+                    let frac = s.settings.brake_fraction.clamp(0.05, 1.0);
+                    let blended = blend(
+                        &old,
+                        &j,
+                        &trajectory,
+                        inputs.dt(),
+                        &s.robot,
+                        frac,
+                        &s.collision,
+                        s.settings.verify_resolution,
+                    );
+                    let moving = blended.is_some();
+                    let joined = blended.unwrap_or_else(|| splice(&old, &j, &trajectory, inputs.dt()));
                     let now = step.saturating_sub(started_at) as f64 * inputs.dt();
                     let join_in_s = (j.t_brake + j.brake_q.len() as f64 * inputs.dt() - now).max(0.0);
-                    outputs.event(Event::PlanJoined { id, plan: j.plan, join_in_s });
+                    outputs.event(Event::PlanJoined { id, plan: j.plan, join_in_s, moving });
                     s.attempts = 0;
                     s.goal_reached = false;
                     s.plan = Some(ActivePlan { trajectory: Arc::new(joined), id, started_at });

@@ -65,6 +65,22 @@ pub enum Finding {
         /// By how much `|value|` exceeds the limit.
         excess: f64,
     },
+    /// A linear actuator (a screw driving a joint through a triangle) outside its stroke
+    /// (`what` = `length`) or faster than its speed limit (`what` = `speed`).
+    Actuator {
+        /// When, s (the path parameter for a path).
+        t: f64,
+        /// The actuator's name.
+        actuator: String,
+        /// `length` (m) or `speed` (m/s).
+        what: String,
+        /// Its length (m) or speed (m/s).
+        value: f64,
+        /// The bound exceeded: the nearer stroke end (m) or the speed limit (m/s).
+        limit: f64,
+        /// By how much it is exceeded.
+        excess: f64,
+    },
     /// A configuration on the path in collision: the pair and how deep (m, >= 0).
     Collision {
         /// When, s (the path parameter for a path).
@@ -148,6 +164,10 @@ impl std::fmt::Display for Finding {
             Finding::Acceleration { t, joint, value, limit, excess } => {
                 write!(f, "t = {t:.4} s: joint `{joint}` acceleration {value:.6} exceeds {limit:.6} by {excess:.3e}")
             }
+            Finding::Actuator { t, actuator, what, value, limit, excess } => write!(
+                f,
+                "t = {t:.4} s: actuator `{actuator}` {what} {value:.6} is beyond its limit {limit:.6} by {excess:.3e}"
+            ),
             Finding::Collision { t, q, a, b, penetration_m } => {
                 write!(f, "t = {t:.4} s: {a} and {b} collide (penetration {penetration_m:.3e} m) at q = {}", fmt_q(q))
             }
@@ -189,6 +209,7 @@ impl Finding {
             Finding::Position { t, .. }
             | Finding::Velocity { t, .. }
             | Finding::Acceleration { t, .. }
+            | Finding::Actuator { t, .. }
             | Finding::Collision { t, .. }
             | Finding::TooClose { t, .. }
             | Finding::ClosureDrift { t, .. } => Some(*t),

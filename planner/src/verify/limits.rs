@@ -5,7 +5,7 @@
 use std::time::Instant;
 
 use embodied_models::JointLimits;
-use embodied_models::{ConfigSpace, Robot};
+use embodied_models::{ConfigSpace, Robot, ScrewTriangle};
 
 use super::finding::Finding;
 use super::report::{CheckSettings, LimitsReport};
@@ -18,11 +18,15 @@ use super::report::{CheckSettings, LimitsReport};
 /// from the second sample on, the finite difference of the positions against the velocity
 /// limit (unless [`LimitsChecker::without_position_differences`]) and the finite difference of
 /// the stated velocities against the acceleration limit. Velocity and acceleration limits hold up
-/// to [`CheckSettings::limit_tolerance`] relative. Every limit exceeded counts as one violation;
-/// the first one is kept.
+/// to [`CheckSettings::limit_tolerance`] relative. Then, for a robot with actuators
+/// ([`Robot::actuators`]), every screw's length against its stroke (up to the position
+/// tolerance, in metres) and its speed `dl/dq qd` (from the stated velocities) against its speed
+/// limit. Every limit exceeded counts as one violation; the first one is kept.
 #[derive(Debug, Clone)]
 pub struct LimitsChecker {
     limits: Vec<JointLimits>,
+    /// Screws driving joints through triangles: stroke and speed checked too.
+    actuators: Vec<ScrewTriangle>,
     names: Vec<String>,
     space: ConfigSpace,
     limit_tolerance: f64,
@@ -47,6 +51,7 @@ impl LimitsChecker {
     pub fn new(robot: &Robot, settings: &CheckSettings) -> Self {
         Self {
             limits: robot.limits(),
+            actuators: robot.actuators().to_vec(),
             names: robot.joint_names(),
             space: robot.config_space(),
             limit_tolerance: settings.limit_tolerance,
@@ -148,6 +153,10 @@ impl LimitsChecker {
                 }
             }
         }
+        let found = self.check_actuators(t, q, Some(qd));
+        for f in found {
+            self.note(f);
+        }
         self.previous = Some(t);
         self.previous_q.clear();
         self.previous_q.extend_from_slice(q);
@@ -179,7 +188,46 @@ impl LimitsChecker {
                 }
             }
         }
+        for f in self.check_actuators(t, q, None) {
+            self.note(f);
+        }
         self.violations - before
+    }
+
+    /// Actuator strokes at `q` and, with velocities, speeds at `(q, qd)`.
+    fn check_actuators(&mut self, t: f64, q: &[f64], qd: Option<&[f64]>) -> Vec<Finding> {
+        let mut found = Vec::new();
+        let rel = 1.0 + self.limit_tolerance;
+        for a in &self.actuators {
+            let length = a.length(q);
+            let excess = a.stroke_excess(q);
+            if excess > self.position_tolerance {
+                let limit = if length < a.min_length { a.min_length } else { a.max_length };
+                found.push(Finding::Actuator {
+                    t,
+                    actuator: a.name.clone(),
+                    what: "length".into(),
+                    value: length,
+                    limit,
+                    excess,
+                });
+            }
+            if let Some(qd) = qd {
+                let rate = a.rate(q, qd);
+                self.max_velocity_ratio = self.max_velocity_ratio.max(rate.abs() / a.max_speed);
+                if rate.abs() > a.max_speed * rel + 1e-12 {
+                    found.push(Finding::Actuator {
+                        t,
+                        actuator: a.name.clone(),
+                        what: "speed".into(),
+                        value: rate,
+                        limit: a.max_speed,
+                        excess: rate.abs() - a.max_speed,
+                    });
+                }
+            }
+        }
+        found
     }
 
     fn note(&mut self, f: Finding) {
@@ -266,12 +314,12 @@ mod tests {
             }
             other => panic!("{other:?}"),
         }
-        // Joint 1 out of its position limits (so moving too fast) and joint 0 stopping at once:
-        // three more violations, the first kept.
+        // Joint 1 out of its position limits (so moving too fast, and its screw beyond its
+        // stroke) and joint 0 stopping at once: four more violations, the first kept.
         q[1] = l[1].upper + 0.1;
         // Half a step later: stopping from v takes 2.2 / 1.1 times the acceleration limit.
-        assert_eq!(c.push(2.5 * h, &q, &zero), 3, "position, velocity from q, acceleration");
-        assert_eq!(c.violations(), 4);
+        assert_eq!(c.push(2.5 * h, &q, &zero), 4, "position, velocity from q, acceleration, stroke");
+        assert_eq!(c.violations(), 5);
         assert_eq!(c.samples(), 4);
         assert!(matches!(c.first(), Some(Finding::Velocity { .. })));
         assert!(c.max_acceleration_ratio() > 1.0);
