@@ -40,6 +40,7 @@ pub mod clearance;
 pub mod deadlines;
 pub mod error;
 pub mod faults;
+pub mod fuzz;
 pub mod log;
 pub mod mbm;
 pub mod plan;

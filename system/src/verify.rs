@@ -501,7 +501,20 @@ fn parse_err(file: &Path, line: usize, column: usize, message: String) -> System
 /// Check a run log against `scenario` (see the module documentation).
 pub fn verify_log(scenario: &Scenario, file: &Path, settings: &CheckSettings) -> Result<LogVerification, SystemError> {
     let start = Instant::now();
-    let text = crate::error::read_input(file)?;
+    let text = crate::error::read_input(file, embodied_models::formats::limits::InputKind::Log)?;
+    let mut v = verify_log_text(scenario, &text, file, settings)?;
+    v.time_s = start.elapsed().as_secs_f64();
+    Ok(v)
+}
+
+/// [`verify_log`] of a log's text; `file` names it in errors.
+pub fn verify_log_text(
+    scenario: &Scenario,
+    text: &str,
+    file: &Path,
+    settings: &CheckSettings,
+) -> Result<LogVerification, SystemError> {
+    let start = Instant::now();
     let lines: Vec<&str> = text.split('\n').collect();
     let last_nonempty = lines.iter().rposition(|l| !l.trim().is_empty());
     let header_line = lines.first().copied().unwrap_or("");
@@ -945,7 +958,9 @@ pub fn verify_log_environment(
 ) -> Result<LogEnvironment, SystemError> {
     use embodied_models::collision::{CollisionModel, Environment, Obstacle};
     use embodied_models::nalgebra::Isometry3;
-    let text = std::fs::read_to_string(file).map_err(|e| SystemError::io(file, e))?;
+    let text =
+        embodied_models::formats::limits::read_text_limited(file, embodied_models::formats::limits::InputKind::Log)
+            .map_err(|e| SystemError::io(file, e))?;
     let step_s = text
         .lines()
         .next()
