@@ -13,7 +13,7 @@ pub mod moveit_cli;
 pub use embodied_system::SystemError as AppError;
 pub use embodied_system::{VERSION, generator};
 pub use embodied_system::{
-    bench_qp, campaign, deadlines, error, faults, fuzz, log, mbm, plan, plot, scenario, system, verify, view,
+    bench_qp, campaign, deadlines, error, faults, fuzz, load, log, mbm, plan, plot, scenario, system, verify, view,
 };
 
 /// `println!` that returns [`AppError::Output`] instead of panicking when standard output is

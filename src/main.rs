@@ -319,6 +319,38 @@ enum BenchCommand {
         #[arg(long)]
         json: bool,
     },
+    /// Many agents on one runtime, a share of them deliberative, all asking one bounded planning
+    /// queue (earliest deadline first or first come first served) for their plans: the
+    /// real-time factor, the step's wall time, requests answered in time or halted for, waits.
+    /// Exit status 1 if a request went unanswered without a halt or an agent never got a plan.
+    Load {
+        /// Agents in all.
+        #[arg(long, default_value_t = 1000)]
+        agents: usize,
+        /// Share of them that deliberate (0 to 1).
+        #[arg(long, default_value_t = 0.5)]
+        deliberative_share: f64,
+        /// Planner workers serving the queue.
+        #[arg(long, default_value_t = 2)]
+        workers: usize,
+        /// Queue order: edf (earliest deadline first) or fifo.
+        #[arg(long, default_value = "edf", value_parser = ["edf", "fifo"])]
+        policy: String,
+        /// Simulated seconds.
+        #[arg(long, default_value_t = 3.0)]
+        duration: f64,
+        /// When a plan is needed, ms after its request.
+        #[arg(long, default_value_t = 50.0)]
+        deadline_ms: f64,
+        /// When a request is given up, ms after it.
+        #[arg(long, default_value_t = 500.0)]
+        give_up_ms: f64,
+        /// Step the agents one after the other instead of on the rayon pool.
+        #[arg(long)]
+        sequential: bool,
+        #[arg(long)]
+        json: bool,
+    },
     /// Share of plans delivered in time, safe halts and overshoot for a set of deadlines.
     Deadlines {
         /// Deadlines in milliseconds, comma separated.
@@ -633,6 +665,45 @@ fn run(cli: Cli) -> Result<(), AppError> {
             }
             Ok(())
         }
+        Command::Bench(BenchCommand::Load {
+            agents,
+            deliberative_share,
+            workers,
+            policy,
+            duration,
+            deadline_ms,
+            give_up_ms,
+            sequential,
+            json,
+        }) => {
+            use embodied_executor::deliberation::QueuePolicy;
+            let settings = embodied::load::LoadSettings {
+                agents,
+                deliberative_share,
+                workers,
+                policy: if policy == "fifo" { QueuePolicy::Fifo } else { QueuePolicy::EarliestDeadline },
+                duration_s: duration,
+                deadline_ms,
+                give_up_ms,
+                parallel: !sequential,
+                ..embodied::load::LoadSettings::default()
+            };
+            let bar = spinner("running");
+            let report = embodied::load::run_load(&settings);
+            bar.finish_and_clear();
+            let report = report?;
+            if json {
+                outln!("{}", to_json(&report)?);
+            } else {
+                out!("{}", embodied::load::render_load(&report));
+            }
+            if report.unanswered_without_halt > 0 || report.starved_agents > 0 {
+                return Err(AppError::Failed(
+                    "a request went unanswered without a halt, or an agent got no plan".into(),
+                ));
+            }
+            Ok(())
+        }
         Command::Bench(BenchCommand::Qp { scenario, json }) => {
             let bar = spinner("solving every held step's QP twice");
             let report = embodied::bench_qp::bench_qp(&scenario);
@@ -753,13 +824,14 @@ fn run(cli: Cli) -> Result<(), AppError> {
             let settings = embodied::fuzz::FuzzSettings { loaders, inputs, seed, dir };
             let report = embodied::fuzz::fuzz(&settings, |r| {
                 eprintln!(
-                    "{}: {} inputs, {} accepted, {} refused, {} panics, slowest {:.1} ms, peak {:.0} MB, {:.1} s",
+                    "{}: {} inputs, {} accepted, {} refused, {} panics, slowest {:.1} ms (input {}), peak {:.0} MB, {:.1} s",
                     r.loader,
                     r.inputs,
                     r.accepted,
                     r.refused,
                     r.panics,
                     r.slowest_s * 1e3,
+                    r.slowest_input,
                     r.peak_rss_mb,
                     r.time_s
                 );

@@ -41,6 +41,7 @@ pub mod deadlines;
 pub mod error;
 pub mod faults;
 pub mod fuzz;
+pub mod load;
 pub mod log;
 pub mod mbm;
 pub mod plan;

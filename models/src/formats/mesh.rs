@@ -42,6 +42,26 @@ pub const MESH_EXTENSIONS: [&str; 3] = ["stl", "dae", "obj"];
 /// names the file).
 pub fn read_mesh(path: &Path, scale: Vector3<f64>) -> Result<TriMesh, String> {
     let ext = mesh_extension(path)?;
+    if ext == "stl" {
+        // A binary STL's triangles follow from its size: refuse too many before reading them.
+        let head = std::fs::File::open(path).and_then(|f| {
+            let len = f.metadata()?.len();
+            let mut head = Vec::with_capacity(512);
+            std::io::Read::read_to_end(&mut std::io::Read::take(f, 512), &mut head)?;
+            Ok((len, head))
+        });
+        if let Ok((len, head)) = head
+            && binary_stl_triangles(&head).is_some()
+        {
+            let n = usize::try_from(len.saturating_sub(84) / 50).unwrap_or(usize::MAX);
+            let max = input_limits().max_mesh_triangles;
+            if n > max {
+                return Err(format!(
+                    "the mesh has {n} triangles, more than the limit of {max} (simplify it, or raise --max-mesh-triangles)"
+                ));
+            }
+        }
+    }
     let bytes = read_bytes_limited(path, InputKind::Mesh).map_err(|e| e.to_string())?;
     parse_mesh(&bytes, &ext, scale)
 }
@@ -57,7 +77,8 @@ fn mesh_extension(path: &Path) -> Result<String, String> {
     Ok(ext)
 }
 
-/// Triangles a binary STL of `len` bytes holds (50 bytes each after an 84-byte header).
+/// Triangles a binary STL holds (50 bytes each after an 84-byte header), from its first bytes
+/// (`None` for an ASCII STL, which starts with `solid`, or a file too short to be binary).
 fn binary_stl_triangles(bytes: &[u8]) -> Option<usize> {
     let ascii = bytes.iter().take(512).skip_while(|b| b.is_ascii_whitespace()).take(5).eq(b"solid".iter());
     (!ascii && bytes.len() >= 84).then(|| (bytes.len() - 84) / 50)

@@ -1553,23 +1553,3 @@ fn log_text(g: &G, fx: &Fixture) -> String {
     }
     lines.join("\n") + "\n"
 }
-
-#[cfg(test)]
-mod dump {
-    #[test]
-    #[ignore]
-    fn dump_inputs() {
-        let dir = std::env::temp_dir().join("fuzz-dump-fixture");
-        let fx = super::Fixture::new(&dir).unwrap();
-        let loader: usize = std::env::var("L").unwrap().parse().unwrap();
-        for i in 0..6 {
-            let b = super::input(&fx, loader, 1, i);
-            let f = dir.join(super::file_name(super::LOADERS[loader], i));
-            println!(
-                "==== {i}: {:?}\n{}",
-                super::load(&fx, super::LOADERS[loader], &b, &f),
-                String::from_utf8_lossy(&b)
-            );
-        }
-    }
-}
