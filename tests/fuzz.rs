@@ -16,12 +16,9 @@ fn every_loader_survives_generated_inputs() {
     let dir = common::TempDir::new("fuzz");
     let inputs: u64 = std::env::var("FUZZ_INPUTS").ok().and_then(|s| s.parse().ok()).unwrap_or(2000);
     let seed: u64 = std::env::var("FUZZ_SEED").ok().and_then(|s| s.parse().ok()).unwrap_or(1);
-    // The loaders that verify what they load (certified collision checks) get a tenth.
-    let expensive = ["plan", "trajectory", "log"];
     let mut reports = Vec::new();
     for loader in LOADERS {
-        let n = if expensive.contains(&loader) { inputs / 10 } else { inputs };
-        let settings = FuzzSettings { loaders: vec![loader.to_string()], inputs: n, seed, dir: dir.join(loader) };
+        let settings = FuzzSettings { loaders: vec![loader.to_string()], inputs, seed, dir: dir.join(loader) };
         let report = fuzz(&settings, |_| {}).expect("fuzz ran");
         eprint!("{}", render(&report));
         reports.extend(report.loaders);
