@@ -150,7 +150,7 @@ fn items(args: &BatchPlanArgs) -> Result<(Vec<Item>, BatchPlanSettings), AppErro
             args.input.display()
         )));
     }
-    let text = embodied_system::error::read_input(&args.input)?;
+    let text = embodied_system::error::read_input(&args.input, embodied_models::formats::limits::InputKind::Text)?;
     let base = args.input.parent().unwrap_or(Path::new("."));
     let mut items = Vec::new();
     for line in text.lines() {

@@ -39,6 +39,18 @@ struct Cli {
     /// Drop a collision mesh found nowhere (with a warning) instead of refusing the URDF.
     #[arg(long, global = true)]
     allow_missing_meshes: bool,
+    /// Largest input file read, MB (text files and meshes; run logs: 16 times this). Default 256.
+    #[arg(long, global = true, value_name = "MB")]
+    max_input_mb: Option<u64>,
+    /// Most values (array elements, entries, XML elements) a text file may hold. Default 10^7.
+    #[arg(long, global = true, value_name = "N")]
+    max_input_values: Option<usize>,
+    /// Most triangles a mesh may have. Default 5,000,000.
+    #[arg(long, global = true, value_name = "N")]
+    max_mesh_triangles: Option<usize>,
+    /// Most links a URDF may have. Default 10,000.
+    #[arg(long, global = true, value_name = "N")]
+    max_links: Option<usize>,
 }
 
 #[derive(Subcommand, Debug)]
@@ -225,6 +237,32 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
+    /// Feed every file loader structure-aware random inputs (generated documents with the
+    /// formats' keys and tags, random values and nesting, cuts and byte edits; edits of
+    /// well-formed files): counts per loader of inputs accepted, refused and panicking, the
+    /// slowest input and the peak memory. Exit status 1 if an input panicked, took longer than
+    /// --max-input-s or was refused with an error naming no file.
+    Fuzz {
+        /// One loader, or `all`: scenario, urdf, srdf, moveit-scene, moveit-request,
+        /// joint-limits, stl, obj, collada, plan, trajectory, log, log-view.
+        #[arg(long, default_value = "all")]
+        loader: String,
+        /// Inputs per loader.
+        #[arg(long, default_value_t = 1000)]
+        inputs: u64,
+        /// Seed: input i of a loader is the same for the same seed.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// An input slower than this fails the run, s.
+        #[arg(long, default_value_t = 1.0)]
+        max_input_s: f64,
+        /// Folder for the files the inputs refer to (default: the system's temporary folder).
+        #[arg(long)]
+        dir: Option<PathBuf>,
+        /// Print one JSON object instead of the table.
+        #[arg(long)]
+        json: bool,
+    },
     /// List the built-in scenarios (name and one-line description).
     Scenarios {
         /// Print a JSON array of {"name", "description", "agents", "obstacles"}.
@@ -322,6 +360,38 @@ enum BenchCommand {
         /// A scenario with a [carry] table.
         #[arg(default_value = "two-irp6-carry")]
         scenario: String,
+        #[arg(long)]
+        json: bool,
+    },
+    /// Many agents on one runtime, a share of them deliberative, all asking one bounded planning
+    /// queue (earliest deadline first or first come first served) for their plans: the
+    /// real-time factor, the step's wall time, requests answered in time or halted for, waits.
+    /// Exit status 1 if a request went unanswered without a halt or an agent never got a plan.
+    Load {
+        /// Agents in all.
+        #[arg(long, default_value_t = 1000)]
+        agents: usize,
+        /// Share of them that deliberate (0 to 1).
+        #[arg(long, default_value_t = 0.5)]
+        deliberative_share: f64,
+        /// Planner workers serving the queue.
+        #[arg(long, default_value_t = 2)]
+        workers: usize,
+        /// Queue order: edf (earliest deadline first) or fifo.
+        #[arg(long, default_value = "edf", value_parser = ["edf", "fifo"])]
+        policy: String,
+        /// Simulated seconds.
+        #[arg(long, default_value_t = 3.0)]
+        duration: f64,
+        /// When a plan is needed, ms after its request.
+        #[arg(long, default_value_t = 50.0)]
+        deadline_ms: f64,
+        /// When a request is given up, ms after it.
+        #[arg(long, default_value_t = 500.0)]
+        give_up_ms: f64,
+        /// Step the agents one after the other instead of on the rayon pool.
+        #[arg(long)]
+        sequential: bool,
         #[arg(long)]
         json: bool,
     },
@@ -733,6 +803,45 @@ fn run(cli: Cli) -> Result<(), AppError> {
             let report = embodied::mbm::merge_mbm(merged)?;
             print_mbm(&report, json, out.as_deref(), false)
         }
+        Command::Bench(BenchCommand::Load {
+            agents,
+            deliberative_share,
+            workers,
+            policy,
+            duration,
+            deadline_ms,
+            give_up_ms,
+            sequential,
+            json,
+        }) => {
+            use embodied_executor::deliberation::QueuePolicy;
+            let settings = embodied::load::LoadSettings {
+                agents,
+                deliberative_share,
+                workers,
+                policy: if policy == "fifo" { QueuePolicy::Fifo } else { QueuePolicy::EarliestDeadline },
+                duration_s: duration,
+                deadline_ms,
+                give_up_ms,
+                parallel: !sequential,
+                ..embodied::load::LoadSettings::default()
+            };
+            let bar = spinner("running");
+            let report = embodied::load::run_load(&settings);
+            bar.finish_and_clear();
+            let report = report?;
+            if json {
+                outln!("{}", to_json(&report)?);
+            } else {
+                out!("{}", embodied::load::render_load(&report));
+            }
+            if report.unanswered_without_halt > 0 || report.starved_agents > 0 {
+                return Err(AppError::Failed(
+                    "a request went unanswered without a halt, or an agent got no plan".into(),
+                ));
+            }
+            Ok(())
+        }
         Command::Bench(BenchCommand::Qp { scenario, json }) => {
             let bar = spinner("solving every held step's QP twice");
             let report = embodied::bench_qp::bench_qp(&scenario);
@@ -843,6 +952,40 @@ fn run(cli: Cli) -> Result<(), AppError> {
             }
             Ok(())
         }
+        Command::Fuzz { loader, inputs, seed, max_input_s, dir, json } => {
+            let loaders: Vec<String> = if loader == "all" {
+                embodied::fuzz::LOADERS.iter().map(|l| (*l).to_string()).collect()
+            } else {
+                loader.split(',').map(str::to_string).collect()
+            };
+            let dir = dir.unwrap_or_else(|| std::env::temp_dir().join(format!("embodied-fuzz-{}", std::process::id())));
+            let settings = embodied::fuzz::FuzzSettings { loaders, inputs, seed, dir };
+            let report = embodied::fuzz::fuzz(&settings, |r| {
+                eprintln!(
+                    "{}: {} inputs, {} accepted, {} refused, {} panics, slowest {:.1} ms (input {}), peak {:.0} MB, {:.1} s",
+                    r.loader,
+                    r.inputs,
+                    r.accepted,
+                    r.refused,
+                    r.panics,
+                    r.slowest_s * 1e3,
+                    r.slowest_input,
+                    r.peak_rss_mb,
+                    r.time_s
+                );
+            })?;
+            if json {
+                outln!("{}", to_json(&report)?);
+            } else {
+                out!("{}", embodied::fuzz::render(&report));
+            }
+            if report.failed(max_input_s) {
+                return Err(AppError::Failed(format!(
+                    "a loader panicked, took longer than {max_input_s} s or named no file (see the report)"
+                )));
+            }
+            Ok(())
+        }
         Command::Scenarios { json } => {
             let mut list = Vec::new();
             for (name, _) in embodied::scenario::BUILTIN_SCENARIOS {
@@ -880,6 +1023,22 @@ fn main() -> ExitCode {
         allow_missing_meshes: cli.allow_missing_meshes,
     });
     embodied_models::formats::set_warning_sink(|w| eprintln!("{w}"));
+    let mut limits = embodied_models::formats::limits::InputLimits::default();
+    if let Some(mb) = cli.max_input_mb {
+        limits.max_text_bytes = mb.saturating_mul(embodied_models::formats::limits::MIB);
+        limits.max_mesh_bytes = limits.max_text_bytes;
+        limits.max_log_bytes = limits.max_text_bytes.saturating_mul(16);
+    }
+    if let Some(n) = cli.max_input_values {
+        limits.max_values = n;
+    }
+    if let Some(n) = cli.max_mesh_triangles {
+        limits.max_mesh_triangles = n;
+    }
+    if let Some(n) = cli.max_links {
+        limits.max_links = n;
+    }
+    embodied_models::formats::limits::set_input_limits(limits);
     match run(cli) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {

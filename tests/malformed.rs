@@ -455,3 +455,107 @@ fn edited_scenarios_run() {
         run_scenario(&args).map(|_| ()).map_err(|e| format!("{}: {e}", file.display()))
     });
 }
+
+/// A sparse file of `len` bytes (no disk space used), holding `head` at its start.
+fn sparse(path: &Path, head: &[u8], len: u64) {
+    use std::io::Write;
+    let mut f = std::fs::File::create(path).expect("created");
+    f.write_all(head).expect("written");
+    f.set_len(len).expect("sized");
+}
+
+/// A 1 GB mesh is refused from its size before a byte of it is read, with an error naming the
+/// URDF, the mesh and the limit.
+#[test]
+fn a_one_gigabyte_mesh_is_refused_before_reading() {
+    let dir = TempDir::new("limits-mesh");
+    sparse(&dir.join("huge.obj"), b"v 0 0 0\n", 1_000_000_000);
+    let urdf = "<robot name=\"m\"><link name=\"a\"><collision><geometry><mesh filename=\"huge.obj\"/></geometry></collision></link></robot>";
+    let start = std::time::Instant::now();
+    let e = parse_urdf(urdf, &dir.join("m.urdf"), &UrdfOptions::default()).unwrap_err().to_string();
+    assert!(e.contains("m.urdf") && e.contains("huge.obj"), "{e}");
+    assert!(e.contains("1.00 GB is larger than the limit of 268.4 MB for a mesh"), "{e}");
+    // Refused from the metadata: nothing near a gigabyte was read (a loose bound, not a timing target).
+    assert!(start.elapsed().as_secs_f64() < 5.0);
+}
+
+/// A binary STL whose size says it holds more triangles than the limit is refused before its
+/// triangles are read (the limit counts from the size: 50 bytes a triangle).
+#[test]
+fn a_binary_stl_with_too_many_triangles_is_refused() {
+    let dir = TempDir::new("limits-stl");
+    let n: u64 = 5_000_001;
+    let mut head = vec![0u8; 80];
+    head.extend_from_slice(&(n as u32).to_le_bytes());
+    sparse(&dir.join("dense.stl"), &head, 84 + 50 * n);
+    let urdf = "<robot name=\"m\"><link name=\"a\"><collision><geometry><mesh filename=\"dense.stl\"/></geometry></collision></link></robot>";
+    let e = parse_urdf(urdf, &dir.join("m.urdf"), &UrdfOptions::default()).unwrap_err().to_string();
+    assert!(e.contains("dense.stl") && e.contains("5000001 triangles, more than the limit of 5000000"), "{e}");
+}
+
+/// A plan file with ten million waypoints is refused from a count of its values before it is
+/// parsed; so is a JointTrajectory with ten million positions.
+#[test]
+fn ten_million_element_arrays_are_refused_before_parsing() {
+    let mut plan = String::from("{\"format\": \"embodied-plan/1\", \"plans\": [{\"path\": [");
+    plan.push_str(&"[0],".repeat(10_000_000));
+    plan.push_str("[0]]}]}");
+    let e = parse_plan(&plan, Path::new("big-plan.json")).unwrap_err().to_string();
+    assert!(e.starts_with("big-plan.json:1:1:") && e.contains("more than the limit of 10000000"), "{e}");
+    let mut traj = String::from("joint_names: [a]\npoints:\n  - positions: [");
+    traj.push_str(&"0,".repeat(10_000_001));
+    traj.push_str("0]\n    time_from_start: 1\n");
+    let e = embodied_planner::moveit::parse_joint_trajectory(&traj, Path::new("big.yaml")).unwrap_err().to_string();
+    assert!(e.starts_with("big.yaml:1:1:") && e.contains("more than the limit of 10000000"), "{e}");
+}
+
+/// A URDF with a million links is refused with the link limit, before a robot is built.
+#[test]
+fn a_urdf_with_a_million_links_is_refused() {
+    let mut urdf = String::from("<robot name=\"r\">");
+    for k in 0..1_000_000 {
+        urdf.push_str(&format!("<link name=\"l{k}\"/>"));
+    }
+    urdf.push_str("</robot>");
+    let options = UrdfOptions { load_meshes: false, ..UrdfOptions::default() };
+    let e = parse_urdf(&urdf, Path::new("many.urdf"), &options).unwrap_err().to_string();
+    assert!(e.starts_with("many.urdf:1:") && e.contains("1000000 links, more than the limit of 10000"), "{e}");
+}
+
+/// A run log or a plan file larger than its limit is refused from its size, by `verify`.
+#[test]
+fn oversized_logs_and_plans_are_refused_by_the_command_line() {
+    let dir = TempDir::new("limits-cli");
+    let plan = dir.join("plan.json");
+    sparse(&plan, b"{", 300_000_000);
+    let (code, _, err) = common::embodied(&["verify", "polycrank-transfer", plan.to_str().expect("path")]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("plan.json") && err.contains("300.0 MB is larger than the limit of 268.4 MB"), "{err}");
+    // The limit can be raised (then the file is read, and refused as the JSON it is not).
+    let (code, _, err) =
+        common::embodied(&["--max-input-mb", "400", "verify", "polycrank-transfer", plan.to_str().expect("path")]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("not a plan file"), "{err}");
+    let log = dir.join("run.jsonl");
+    sparse(&log, b"{", 5_000_000_000);
+    let (code, _, err) = common::embodied(&["verify", "polycrank-transfer", "--log", log.to_str().expect("path")]);
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.contains("run.jsonl") && err.contains("5.00 GB is larger than the limit of 4.29 GB for a run log"),
+        "{err}"
+    );
+}
+
+/// Found by `embodied fuzz --loader log --seed 2000` (input 45850, cut to its first 4,000
+/// characters): a log header with `step_s = 1e308` made the times of standing obstacles
+/// `0 * inf = NaN`, and the clearance check grew a cylinder by NaN, which parry refuses with a
+/// panic. The header's control period is now checked, and a standing obstacle never moves.
+#[test]
+fn a_log_with_an_absurd_control_period_is_refused() {
+    let scenario = load_scenario("polycrank-transfer").expect("built-in scenario");
+    let file = root().join("tests/fixtures/fuzz/log-step-1e308.jsonl");
+    let e = verify_log(&scenario, &file, &CheckSettings::default()).unwrap_err().to_string();
+    assert!(e.contains("log-step-1e308.jsonl:1:1: header.step_s") && e.contains("(0, 1] s"), "{e}");
+    let grown = embodied_system::clearance::grown(&embodied_models::Shape::cylinder(0.1, 0.5), f64::NAN);
+    assert_eq!(format!("{grown:?}"), format!("{:?}", embodied_models::Shape::cylinder(0.1, 0.5)));
+}

@@ -17,6 +17,8 @@
 //!   request's deadline, its path time-parameterised into an
 //!   [`embodied_planner::trajectory::Trajectory`]; plans are checked by the
 //!   [`embodied_planner::verify::Verifier`] before they may drive an effector.
+//! * [`PlanQueue`]: a shared planning service for many agents, bounded workers and a fair
+//!   queue (earliest deadline first or first come first served), in simulated time.
 //! * [`UnmappedObstacle`]: the virtual sensor that reports obstacles missing from the map.
 //! * [`deliberative_agent`]: a scenario agent with a goal, as a deliberative agent.
 //!
@@ -28,12 +30,14 @@
 
 pub mod follower;
 pub mod planning;
+pub mod queue;
 pub mod sensing;
 pub mod worker;
 
 pub use embodied_planner::trajectory::Trajectory;
 pub use follower::{AsDeliberation, DeliberationSettings, DeliberativeState, PlanFollower, deliberative_agent};
 pub use planning::PlanMotion;
+pub use queue::{PlanQueue, QueuePolicy, QueueStats, SharedQueue};
 pub use sensing::UnmappedObstacle;
 pub use worker::{
     Deliberator, MotionPlanner, PlanBudget, PlanClock, PlanDelivery, PlanFailure, PlanOutcome, PlanRequest,

@@ -248,7 +248,7 @@ pub fn read_shards(files: &[PathBuf]) -> Result<MergedShards, SystemError> {
     let mut seen: BTreeMap<(usize, usize), (PathBuf, usize)> = BTreeMap::new();
     let mut lines = Vec::new();
     for file in files {
-        let text = crate::error::read_input(file)?;
+        let text = crate::error::read_input(file, embodied_models::formats::limits::InputKind::Log)?;
         let mut rows = text.lines().enumerate().filter(|(_, l)| !l.trim().is_empty());
         let Some((h_at, h_text)) = rows.next() else {
             return Err(parse_error(file, 1, "empty file: expected a batch header line"));

@@ -40,6 +40,10 @@ struct Timed {
 impl Timed {
     /// Its displacement from its scenario pose at world step `k` (it moves from its appearance).
     fn offset(&self, k: u64, dt: f64) -> Vector3<f64> {
+        if self.velocity == Vector3::zeros() {
+            // A standing obstacle stays where it is (also for absurd times: 0 * inf is NaN).
+            return Vector3::zeros();
+        }
         self.velocity * (k.saturating_sub(self.appear_step) as f64 * dt)
     }
 }
@@ -89,7 +93,8 @@ impl ObstacleTimeline {
 
 /// `shape` grown by `margin` (m): a shape that holds every point within `margin` of it.
 pub fn grown(shape: &Shape, margin: f64) -> Shape {
-    if margin <= 0.0 {
+    // Not a positive number (NaN included): nothing to grow by.
+    if margin.is_nan() || margin <= 0.0 {
         return shape.clone();
     }
     match shape {

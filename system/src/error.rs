@@ -1,6 +1,8 @@
 //! The crate's one error type: each error names the file, the place and what was expected.
 
 use std::io::Read;
+
+use embodied_models::formats::limits::{self, InputKind};
 use std::path::{Path, PathBuf};
 
 /// What can go wrong when a system is read, assembled, run, planned or checked.
@@ -79,13 +81,26 @@ impl SystemError {
     }
 }
 
-/// The text of a file argument; `-` reads standard input.
-pub fn read_input(path: &Path) -> Result<String, SystemError> {
+/// The text of a file argument; `-` reads standard input. A file (or standard input) larger than
+/// the limit for `kind` ([`embodied_models::formats::limits`]) is refused before it is read.
+pub fn read_input(path: &Path, kind: InputKind) -> Result<String, SystemError> {
     if path == Path::new("-") {
-        let mut text = String::new();
-        std::io::stdin().read_to_string(&mut text).map_err(|e| SystemError::io("<stdin>", e))?;
-        Ok(text)
+        let limit = match kind {
+            InputKind::Log => limits::input_limits().max_log_bytes,
+            InputKind::Mesh => limits::input_limits().max_mesh_bytes,
+            InputKind::Text => limits::input_limits().max_text_bytes,
+        };
+        let mut bytes = Vec::new();
+        std::io::stdin()
+            .lock()
+            .take(limit.saturating_add(1))
+            .read_to_end(&mut bytes)
+            .map_err(|e| SystemError::io("<stdin>", e))?;
+        limits::check_size(bytes.len() as u64, kind).map_err(|e| SystemError::io("<stdin>", e))?;
+        String::from_utf8(bytes).map_err(|_| {
+            SystemError::io("<stdin>", std::io::Error::new(std::io::ErrorKind::InvalidData, "not UTF-8 text"))
+        })
     } else {
-        std::fs::read_to_string(path).map_err(|e| SystemError::io(path, e))
+        limits::read_text_limited(path, kind).map_err(|e| SystemError::io(path, e))
     }
 }

@@ -41,6 +41,8 @@ pub mod clearance;
 pub mod deadlines;
 pub mod error;
 pub mod faults;
+pub mod fuzz;
+pub mod load;
 pub mod log;
 pub mod mbm;
 pub mod ompl_log;

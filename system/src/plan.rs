@@ -235,12 +235,14 @@ pub fn plan_scenario(scenario: &Scenario, deadline_ms: Option<f64>) -> Result<Pl
 
 /// Read a plan file back, checking its format tag.
 pub fn read_plan(path: &std::path::Path) -> Result<PlanFile, SystemError> {
-    let text = crate::error::read_input(path)?;
+    let text = crate::error::read_input(path, embodied_models::formats::limits::InputKind::Text)?;
     parse_plan(&text, path)
 }
 
 /// Parse a plan file's text, checking its format tag; `path` names it in errors.
 pub fn parse_plan(text: &str, path: &std::path::Path) -> Result<PlanFile, SystemError> {
+    embodied_models::formats::limits::check_values(text, embodied_models::formats::limits::Syntax::Data)
+        .map_err(|message| SystemError::Parse { file: path.to_path_buf(), line: 1, column: 1, message })?;
     let plan: PlanFile = serde_json::from_str(text).map_err(|e| SystemError::Parse {
         file: path.to_path_buf(),
         line: e.line(),

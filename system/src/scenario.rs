@@ -875,7 +875,7 @@ pub fn load_scenario(arg: &str) -> Result<Scenario, SystemError> {
     }
     let path = PathBuf::from(arg);
     if arg == "-" {
-        let text = crate::error::read_input(&path)?;
+        let text = crate::error::read_input(&path, embodied_models::formats::limits::InputKind::Text)?;
         return parse_scenario(&text, Path::new("<stdin>"), Path::new("."));
     }
     if !path.exists() {
@@ -885,7 +885,9 @@ pub fn load_scenario(arg: &str) -> Result<Scenario, SystemError> {
             names.join(", ")
         )));
     }
-    let text = std::fs::read_to_string(&path).map_err(|e| SystemError::io(&path, e))?;
+    let text =
+        embodied_models::formats::limits::read_text_limited(&path, embodied_models::formats::limits::InputKind::Text)
+            .map_err(|e| SystemError::io(&path, e))?;
     let dir = path.parent().map(Path::to_path_buf).unwrap_or_else(|| PathBuf::from("."));
     parse_scenario(&text, &path, &dir)
 }
@@ -899,6 +901,8 @@ fn sha256_hex(text: &str) -> String {
 /// Parse a scenario from TOML text; `file` names it in errors, `dir` anchors relative paths.
 pub fn parse_scenario(text: &str, file: &Path, dir: &Path) -> Result<Scenario, SystemError> {
     let ctx = Ctx { file, text };
+    embodied_models::formats::limits::check_values(text, embodied_models::formats::limits::Syntax::Data)
+        .map_err(|m| ctx.err(0..0, m))?;
     let raw: RawScenario = toml::from_str(text).map_err(|e| {
         let span = e.span().unwrap_or(0..0);
         ctx.err(span, e.message().trim().to_string())

@@ -494,6 +494,10 @@ struct AgentState<'a> {
     qs: Vec<Vec<f64>>,
 }
 
+/// Longest control period a log header may state, s: a longer one is not a control step (and
+/// times of `step * step_s` would overflow towards infinity).
+pub const MAX_STEP_S: f64 = 1.0;
+
 fn parse_err(file: &Path, line: usize, column: usize, message: String) -> SystemError {
     SystemError::Parse { file: file.to_path_buf(), line, column, message }
 }
@@ -501,7 +505,20 @@ fn parse_err(file: &Path, line: usize, column: usize, message: String) -> System
 /// Check a run log against `scenario` (see the module documentation).
 pub fn verify_log(scenario: &Scenario, file: &Path, settings: &CheckSettings) -> Result<LogVerification, SystemError> {
     let start = Instant::now();
-    let text = crate::error::read_input(file)?;
+    let text = crate::error::read_input(file, embodied_models::formats::limits::InputKind::Log)?;
+    let mut v = verify_log_text(scenario, &text, file, settings)?;
+    v.time_s = start.elapsed().as_secs_f64();
+    Ok(v)
+}
+
+/// [`verify_log`] of a log's text; `file` names it in errors.
+pub fn verify_log_text(
+    scenario: &Scenario,
+    text: &str,
+    file: &Path,
+    settings: &CheckSettings,
+) -> Result<LogVerification, SystemError> {
+    let start = Instant::now();
     let lines: Vec<&str> = text.split('\n').collect();
     let last_nonempty = lines.iter().rposition(|l| !l.trim().is_empty());
     let header_line = lines.first().copied().unwrap_or("");
@@ -524,8 +541,13 @@ pub fn verify_log(scenario: &Scenario, file: &Path, settings: &CheckSettings) ->
         warnings.push(format!("scenario `{}` changed since the run: checked against it as it is now", scenario.name));
     }
     let step_s = header.get("step_s").and_then(Value::as_f64).unwrap_or(f64::NAN);
-    if !(step_s.is_finite() && step_s > 0.0) {
-        return Err(parse_err(file, 1, 1, "header.step_s: missing or not a positive number".into()));
+    if !(step_s > 0.0 && step_s <= MAX_STEP_S) {
+        return Err(parse_err(
+            file,
+            1,
+            1,
+            format!("header.step_s: missing or not a control period in (0, {MAX_STEP_S}] s"),
+        ));
     }
     let Some(header_agents) = header.get("agents").and_then(Value::as_object) else {
         return Err(parse_err(file, 1, 1, "header.agents: missing or not an object".into()));
@@ -945,14 +967,18 @@ pub fn verify_log_environment(
 ) -> Result<LogEnvironment, SystemError> {
     use embodied_models::collision::{CollisionModel, Environment, Obstacle};
     use embodied_models::nalgebra::Isometry3;
-    let text = std::fs::read_to_string(file).map_err(|e| SystemError::io(file, e))?;
+    let text =
+        embodied_models::formats::limits::read_text_limited(file, embodied_models::formats::limits::InputKind::Log)
+            .map_err(|e| SystemError::io(file, e))?;
     let step_s = text
         .lines()
         .next()
         .and_then(|l| serde_json::from_str::<Value>(l).ok())
         .and_then(|h| h.get("header")?.get("step_s")?.as_f64())
-        .filter(|s| s.is_finite() && *s > 0.0)
-        .ok_or_else(|| parse_err(file, 1, 1, "header.step_s: missing or not a positive number".into()))?;
+        .filter(|s| *s > 0.0 && *s <= MAX_STEP_S)
+        .ok_or_else(|| {
+            parse_err(file, 1, 1, format!("header.step_s: missing or not a control period in (0, {MAX_STEP_S}] s"))
+        })?;
     let map = scenario.initial_environment();
     let models: Vec<CollisionModel> =
         scenario.agents.iter().map(|a| CollisionModel::new(&a.robot, map.clone())).collect();

@@ -225,6 +225,21 @@ impl DeliberativeState {
             scratch: JointCommand::hold(&vec![0.0; dof]),
         }
     }
+    /// A new goal from `step` on: the plan being followed (if any) is dropped, the agent halts
+    /// along it and asks for a plan to the new goal.
+    pub fn set_goal(&mut self, goal: Goal, step: u64, dt: f64) {
+        self.goal = goal;
+        if self.plan.is_some() {
+            drop_plan(self, step, dt);
+        }
+        self.join = None;
+        self.deliberator.cancel();
+        self.goal_reached = false;
+        self.abandoned = false;
+        self.attempts = 0;
+        self.next_request_at = step;
+    }
+
     /// Version of the agent's world model (increases with every sensed change).
     pub fn world_version(&self) -> u64 {
         self.world_version

@@ -93,6 +93,16 @@ struct Job {
     lost: bool,
 }
 
+/// A deliberator's place in a shared [`PlanQueue`](super::queue::PlanQueue).
+struct QueueSeat {
+    queue: super::queue::SharedQueue,
+    key: usize,
+}
+
+fn lock(queue: &super::queue::SharedQueue) -> std::sync::MutexGuard<'_, super::queue::PlanQueue> {
+    queue.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
+}
+
 struct WorkerResult {
     outcome: PlanOutcome,
     work: u64,
@@ -121,12 +131,22 @@ pub struct Deliberator {
     job: Option<Job>,
     /// Fault injection: this many upcoming deliveries are lost in transit.
     lose: u32,
+    /// The shared planning queue the requests go to, if any (else a thread per request).
+    seat: Option<QueueSeat>,
 }
 
 impl Deliberator {
     /// A deliberator that runs `planner`, checks every plan with `verifier` and counts time by `clock`.
     pub fn new(planner: Arc<dyn MotionPlanner>, verifier: PlanVerifier, clock: PlanClock) -> Self {
-        Self { planner, verifier: Arc::new(verifier), clock, next_id: 1, job: None, lose: 0 }
+        Self { planner, verifier: Arc::new(verifier), clock, next_id: 1, job: None, lose: 0, seat: None }
+    }
+
+    /// Send every request to the shared `queue` (as agent `key`, unique among its users)
+    /// instead of planning on a thread of its own: bounded workers, a fair order, planning
+    /// time simulated ([`super::queue`]).
+    pub fn use_queue(&mut self, queue: super::queue::SharedQueue, key: usize) {
+        self.cancel();
+        self.seat = Some(QueueSeat { queue, key });
     }
 
     /// How planning time is counted.
@@ -180,6 +200,26 @@ impl Deliberator {
         let planner = self.planner.clone();
         let verifier = self.verifier.clone();
         let id = request.id;
+        if let Some(seat) = &self.seat {
+            let (step, needed_at) = (job.requested_at, job.needed_at);
+            let give_up = request.budget.give_up_steps;
+            let work: super::queue::Work = Box::new(move || {
+                let result =
+                    std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| planner.plan(&request, &deadline)));
+                match result {
+                    Err(payload) => (PlanOutcome::Panicked(panic_message(payload.as_ref())), 0),
+                    Ok(Err(failure)) => {
+                        let n = failure.work();
+                        (PlanOutcome::Failed(failure), n)
+                    }
+                    Ok(Ok(planned)) => (verify(&verifier, &request, planned.trajectory), planned.work),
+                }
+            });
+            lock(&seat.queue).submit(seat.key, id, step, needed_at, give_up, work);
+            drop(tx);
+            self.job = Some(job);
+            return id;
+        }
         // Planning time runs from the request (thread start-up included).
         let started = Instant::now();
         std::thread::spawn(move || {
@@ -205,6 +245,9 @@ impl Deliberator {
     pub fn cancel(&mut self) {
         if let Some(job) = self.job.take() {
             job.cancel.store(true, Ordering::Relaxed);
+            if let Some(seat) = &self.seat {
+                lock(&seat.queue).withdraw(seat.key, job.id);
+            }
         }
     }
 
@@ -215,13 +258,17 @@ impl Deliberator {
         if job.lost {
             return None;
         }
-        let result = match self.clock {
-            PlanClock::WallClock => match job.rx.try_recv() {
+        let result = match (&self.seat, self.clock) {
+            (Some(seat), _) => {
+                let f = lock(&seat.queue).take(seat.key, job.id, step)?;
+                WorkerResult { outcome: f.outcome, work: f.work, elapsed: f.elapsed }
+            }
+            (None, PlanClock::WallClock) => match job.rx.try_recv() {
                 Ok(r) => r,
                 Err(TryRecvError::Empty) => return None,
                 Err(TryRecvError::Disconnected) => lost_worker(),
             },
-            PlanClock::Simulated { steps_per_unit, fixed_steps } => {
+            (None, PlanClock::Simulated { steps_per_unit, fixed_steps }) => {
                 if job.held.is_none() {
                     let mut r = job.rx.recv().unwrap_or_else(|_| lost_worker());
                     let mut latency =

@@ -48,7 +48,8 @@ pub struct JointLimitsFile {
 
 /// Read and parse a `joint_limits.yaml`.
 pub fn load_joint_limits(path: &Path) -> Result<JointLimitsFile, YamlError> {
-    let text = std::fs::read_to_string(path).map_err(|source| YamlError::Io { file: path.to_path_buf(), source })?;
+    let text = super::limits::read_text_limited(path, super::limits::InputKind::Text)
+        .map_err(|source| YamlError::Io { file: path.to_path_buf(), source })?;
     parse_joint_limits(&text, path)
 }
 

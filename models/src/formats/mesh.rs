@@ -20,6 +20,7 @@ use std::sync::Arc;
 use nalgebra::{Point3, Vector3};
 use parry3d_f64::transformation::vhacd::{VHACD, VHACDParameters};
 
+use super::limits::{InputKind, input_limits, read_bytes_limited};
 use crate::geometry::ConvexHull;
 
 /// A triangle mesh in its file's frame, scaled.
@@ -36,8 +37,36 @@ pub const MESH_EXTENSIONS: [&str; 3] = ["stl", "dae", "obj"];
 
 /// Read a mesh file (STL, Collada or OBJ, by extension, case-insensitive) and scale it.
 ///
-/// The error is a sentence saying what is wrong with the file (the caller names the file).
+/// A file larger than [`InputLimits::max_mesh_bytes`](super::limits::InputLimits) is refused
+/// before it is read. The error is a sentence saying what is wrong with the file (the caller
+/// names the file).
 pub fn read_mesh(path: &Path, scale: Vector3<f64>) -> Result<TriMesh, String> {
+    let ext = mesh_extension(path)?;
+    if ext == "stl" {
+        // A binary STL's triangles follow from its size: refuse too many before reading them.
+        let head = std::fs::File::open(path).and_then(|f| {
+            let len = f.metadata()?.len();
+            let mut head = Vec::with_capacity(512);
+            std::io::Read::read_to_end(&mut std::io::Read::take(f, 512), &mut head)?;
+            Ok((len, head))
+        });
+        if let Ok((len, head)) = head
+            && binary_stl_triangles(&head).is_some()
+        {
+            let n = usize::try_from(len.saturating_sub(84) / 50).unwrap_or(usize::MAX);
+            let max = input_limits().max_mesh_triangles;
+            if n > max {
+                return Err(format!(
+                    "the mesh has {n} triangles, more than the limit of {max} (simplify it, or raise --max-mesh-triangles)"
+                ));
+            }
+        }
+    }
+    let bytes = read_bytes_limited(path, InputKind::Mesh).map_err(|e| e.to_string())?;
+    parse_mesh(&bytes, &ext, scale)
+}
+
+fn mesh_extension(path: &Path) -> Result<String, String> {
     let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
     if !MESH_EXTENSIONS.contains(&ext.as_str()) {
         return Err(format!(
@@ -45,12 +74,46 @@ pub fn read_mesh(path: &Path, scale: Vector3<f64>) -> Result<TriMesh, String> {
             MESH_EXTENSIONS.iter().map(|e| format!(".{e}")).collect::<Vec<_>>().join(", ")
         ));
     }
+    Ok(ext)
+}
+
+/// Triangles a binary STL holds (50 bytes each after an 84-byte header), from its first bytes
+/// (`None` for an ASCII STL, which starts with `solid`, or a file too short to be binary).
+fn binary_stl_triangles(bytes: &[u8]) -> Option<usize> {
+    let ascii = bytes.iter().take(512).skip_while(|b| b.is_ascii_whitespace()).take(5).eq(b"solid".iter());
+    (!ascii && bytes.len() >= 84).then(|| (bytes.len() - 84) / 50)
+}
+
+/// Parse a mesh from its bytes; `ext` (`stl`, `dae` or `obj`) says which format. An OBJ file's
+/// material library is not read. More triangles than
+/// [`InputLimits::max_mesh_triangles`](super::limits::InputLimits) are refused, counted before
+/// parsing where the format allows (binary STL, OBJ).
+pub fn parse_mesh(bytes: &[u8], ext: &str, scale: Vector3<f64>) -> Result<TriMesh, String> {
+    let ext = ext.to_ascii_lowercase();
+    let max = input_limits().max_mesh_triangles;
+    let refuse = |n: usize| {
+        format!("the mesh has {n} triangles, more than the limit of {max} (simplify it, or raise --max-mesh-triangles)")
+    };
+    let claimed = match ext.as_str() {
+        "stl" => binary_stl_triangles(bytes),
+        // Every face is a line starting with `f`; a polygon of k corners is k - 2 triangles, so
+        // this is a lower bound of what the reader would build.
+        "obj" => Some(bytes.windows(2).filter(|w| w[0] == b'\n' && w[1] == b'f').count()),
+        _ => None,
+    };
+    if let Some(n) = claimed.filter(|&n| n > max) {
+        return Err(refuse(n));
+    }
     let load = || {
         let loader = mesh_loader::Loader::default();
+        let path = Path::new("mesh");
         match ext.as_str() {
-            "stl" => loader.load_stl(path),
-            "dae" => loader.load_collada(path),
-            _ => loader.load_obj(path),
+            "stl" => loader.load_stl_from_slice(bytes, path),
+            "dae" => loader.load_collada_from_slice(bytes, path),
+            "obj" => loader.load_obj_from_slice_with_reader(bytes, path, |p: &Path| {
+                Err(std::io::Error::other(format!("{}: material libraries are not read", p.display())))
+            }),
+            other => Err(std::io::Error::other(format!("`.{other}` meshes are not supported"))),
         }
     };
     // mesh-loader 0.1.13 panics on some malformed Collada files (a reference to a source the
@@ -64,6 +127,10 @@ pub fn read_mesh(path: &Path, scale: Vector3<f64>) -> Result<TriMesh, String> {
             ));
         }
     };
+    let triangles: usize = scene.meshes.iter().map(|m| m.faces.len()).sum();
+    if triangles > max {
+        return Err(refuse(triangles));
+    }
     let mut out = TriMesh::default();
     for mesh in &scene.meshes {
         let base = u32::try_from(out.vertices.len()).map_err(|_| "the mesh has too many vertices".to_string())?;

@@ -6,12 +6,14 @@
 //! - [`moveit`]: MoveIt planning scenes and motion plan requests (YAML);
 //! - [`joint_limits`]: MoveIt's `joint_limits.yaml` (acceleration limits URDF lacks);
 //! - [`trajectory`]: `trajectory_msgs/JointTrajectory` in YAML or JSON, in and out;
+//! - [`limits`]: how big an input may be, checked before it is read;
 //! - `xml` and [`yaml`]: reading with positions, so every error names `file:line:column`.
 //!
 //! None of these modules uses another except the position helpers; this module joins a URDF and
 //! its SRDF ([`load_description`]).
 
 pub mod joint_limits;
+pub mod limits;
 pub mod mesh;
 pub mod moveit;
 pub mod srdf;
@@ -114,5 +116,6 @@ pub fn parse_urdf_with_srdf(text: &str, file: &Path, options: &UrdfOptions, srdf
 }
 
 fn read_text(path: &Path) -> Result<String, ModelError> {
-    std::fs::read_to_string(path).map_err(|source| ModelError::Io { file: path.to_path_buf(), source })
+    limits::read_text_limited(path, limits::InputKind::Text)
+        .map_err(|source| ModelError::Io { file: path.to_path_buf(), source })
 }

@@ -364,7 +364,8 @@ pub fn load_request(path: &Path) -> Result<MotionRequest, MoveitError> {
 }
 
 fn read(path: &Path) -> Result<String, MoveitError> {
-    std::fs::read_to_string(path).map_err(|source| MoveitError::Io { file: path.to_path_buf(), source })
+    super::limits::read_text_limited(path, super::limits::InputKind::Text)
+        .map_err(|source| MoveitError::Io { file: path.to_path_buf(), source })
 }
 
 /// Parse planning-scene YAML; `file` names the source in error messages.

@@ -122,7 +122,8 @@ pub struct VirtualJoint {
 
 /// Read and parse an SRDF file.
 pub fn load_srdf(path: &Path) -> Result<Srdf, ModelError> {
-    let text = std::fs::read_to_string(path).map_err(|source| ModelError::Io { file: path.to_path_buf(), source })?;
+    let text = super::limits::read_text_limited(path, super::limits::InputKind::Text)
+        .map_err(|source| ModelError::Io { file: path.to_path_buf(), source })?;
     parse_srdf(&text, path)
 }
 

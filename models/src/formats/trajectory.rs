@@ -60,7 +60,8 @@ pub struct LocatedTrajectory {
 
 /// Read a trajectory file (YAML or JSON).
 pub fn load_joint_trajectory(path: &Path) -> Result<LocatedTrajectory, YamlError> {
-    let text = std::fs::read_to_string(path).map_err(|source| YamlError::Io { file: path.to_path_buf(), source })?;
+    let text = super::limits::read_text_limited(path, super::limits::InputKind::Text)
+        .map_err(|source| YamlError::Io { file: path.to_path_buf(), source })?;
     parse_located(&text, path)
 }
 

@@ -209,7 +209,8 @@ pub fn read_urdf_text(path: &Path) -> Result<String, ModelError> {
 }
 
 fn read_text(path: &Path) -> Result<String, ModelError> {
-    std::fs::read_to_string(path).map_err(|source| ModelError::Io { file: path.to_path_buf(), source })
+    super::limits::read_text_limited(path, super::limits::InputKind::Text)
+        .map_err(|source| ModelError::Io { file: path.to_path_buf(), source })
 }
 
 /// `<origin xyz rpy>` of `parent` (identity if absent). URDF rpy: R = Rz(yaw) Ry(pitch) Rx(roll).
@@ -502,6 +503,14 @@ fn build(text: &str, file: &Path, options: &UrdfOptions, srdf: Option<&Semantics
     let root = x.doc.root_element();
     if root.tag_name().name() != "robot" {
         return Err(x.err(root, format!("expected a <robot> root element, found <{}>", root.tag_name().name())));
+    }
+    let max_links = super::limits::input_limits().max_links;
+    if let Some(extra) = children(root, "link").nth(max_links) {
+        let n = children(root, "link").count();
+        return Err(x.err(
+            extra,
+            format!("the robot has {n} links, more than the limit of {max_links} (raise it with --max-links)"),
+        ));
     }
     let mut warnings = Vec::new();
     let robot_name = match root.attribute("name").filter(|n| !n.trim().is_empty()) {

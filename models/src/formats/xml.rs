@@ -16,6 +16,9 @@ pub(crate) struct Xml<'i> {
 
 impl<'i> Xml<'i> {
     pub(crate) fn parse(text: &'i str, file: &Path) -> Result<Self, ModelError> {
+        if let Err(message) = super::limits::check_values(text, super::limits::Syntax::Xml) {
+            return Err(ModelError::Parse { file: file.to_path_buf(), line: 1, column: 1, message });
+        }
         match Document::parse(text) {
             Ok(doc) => Ok(Self { doc, file: file.to_path_buf() }),
             Err(e) => {

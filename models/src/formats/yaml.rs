@@ -83,6 +83,9 @@ pub struct Doc<'a> {
 impl<'a> Doc<'a> {
     /// Parse `text`; `file` names it in errors.
     pub fn load(text: &str, file: &'a Path) -> Result<Self, YamlError> {
+        if let Err(message) = super::limits::check_values(text, super::limits::Syntax::Data) {
+            return Err(YamlError::Parse { file: file.to_path_buf(), line: 1, column: 1, message });
+        }
         match Node::load_from_str(text) {
             Ok(docs) => Ok(Self { file, docs }),
             Err(e) => {

@@ -669,7 +669,7 @@ pub fn write_html(path: &Path, scene: &ViewScene) -> Result<(), AppError> {
 /// `embodied view INPUT`: the scene of a run log or a plan file. The scenario is `scenario`, or
 /// the built-in one the input names.
 pub fn view_file(input: &Path, scenario: Option<&str>) -> Result<ViewScene, AppError> {
-    let text = crate::error::read_input(input)?;
+    let text = crate::error::read_input(input, embodied_models::formats::limits::InputKind::Log)?;
     let first = text.lines().next().unwrap_or("");
     let is_log = serde_json::from_str::<serde_json::Value>(first).is_ok_and(|v| v.get("header").is_some());
     let load = |named: &str, hash: Option<&str>| -> Result<Scenario, AppError> {

@@ -1,0 +1,300 @@
+//! A shared planning service for many agents: a bounded number of planner workers and a fair
+//! queue in front of them.
+//!
+//! Without it every [`Deliberator`](super::Deliberator) plans on a thread of its own, which is
+//! right for a handful of agents and wrong for a thousand asking at once on two cores. With a
+//! [`PlanQueue`], a deliberator ([`Deliberator::with_queue`](super::Deliberator::with_queue))
+//! puts its request in the queue instead; `workers` planners serve the queue, each request in
+//! turn by the queue's [`QueuePolicy`] (earliest deadline first, or first come first served),
+//! ties broken by the request step, then the agent, so no agent can be passed over for ever.
+//!
+//! Time is the run's simulated time, as in [`PlanClock::Simulated`]: a request waits in the
+//! queue until a worker is free, then takes `fixed_steps + ceil(work * steps_per_unit)` steps
+//! of that worker. A request whose waiting and planning would end after its give-up step is
+//! delivered as out of time at that step (its agent has been halting safely since its deadline
+//! passed); one still waiting at its give-up step is never planned. The outcome is the same
+//! whatever the thread timing, so a run replays bit for bit. Requests made during step `i` are
+//! served from step `i + 1` on, so the order in which agents stepping in parallel ask does not
+//! matter.
+
+use std::sync::{Arc, Mutex};
+use std::time::Instant;
+
+use embodied_planner::request::PlanFailure;
+
+use super::worker::{PlanClock, PlanOutcome};
+
+/// The order in which waiting requests are served.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub enum QueuePolicy {
+    /// Earliest deadline first (then the earlier request, then the lower agent key).
+    EarliestDeadline,
+    /// First come, first served (then the lower agent key).
+    Fifo,
+}
+
+/// What a planning job computes: its outcome and the work it took.
+pub(crate) type Work = Box<dyn FnOnce() -> (PlanOutcome, u64) + Send>;
+
+struct Waiting {
+    key: usize,
+    id: u64,
+    submitted: u64,
+    deadline: u64,
+    give_up: Option<u64>,
+    work: Work,
+}
+
+/// A result waiting to land.
+pub(crate) struct Finished {
+    pub(crate) key: usize,
+    pub(crate) id: u64,
+    pub(crate) done_at: u64,
+    pub(crate) outcome: PlanOutcome,
+    pub(crate) work: u64,
+    pub(crate) elapsed: std::time::Duration,
+}
+
+/// Figures of a queue's service so far.
+#[derive(Debug, Clone, Default, PartialEq, serde::Serialize)]
+pub struct QueueStats {
+    /// Requests put in the queue.
+    pub requests: u64,
+    /// Requests a worker planned.
+    pub planned: u64,
+    /// Requests withdrawn by their agent before they were planned (superseded).
+    pub withdrawn: u64,
+    /// Requests answered (planned or out of time) by their deadline step.
+    pub answered_in_time: u64,
+    /// Requests answered after their deadline (their agents halted meanwhile).
+    pub answered_late: u64,
+    /// Of those, requests given up as out of time: still waiting, or still planning, at their
+    /// give-up step.
+    pub expired: u64,
+    /// Steps each planned or expired request waited for a worker.
+    pub waits: Vec<u64>,
+    /// Most requests waiting at once.
+    pub max_waiting: usize,
+    /// Wall-clock time spent planning, s.
+    pub planning_wall_s: f64,
+}
+
+impl QueueStats {
+    /// The `p`-quantile (0..=1) of the waits, steps (0 without waits).
+    pub fn wait_quantile(&self, p: f64) -> u64 {
+        if self.waits.is_empty() {
+            return 0;
+        }
+        let mut w = self.waits.clone();
+        w.sort_unstable();
+        let k = ((w.len() - 1) as f64 * p.clamp(0.0, 1.0)).round() as usize;
+        w[k]
+    }
+}
+
+/// A bounded set of planner workers with a fair queue, shared by many deliberators.
+pub struct PlanQueue {
+    policy: QueuePolicy,
+    steps_per_unit: f64,
+    fixed_steps: u64,
+    /// The step at which each worker is free again.
+    free_at: Vec<u64>,
+    waiting: Vec<Waiting>,
+    finished: Vec<Finished>,
+    stats: QueueStats,
+}
+
+/// A queue shared by the deliberators of many agents.
+pub type SharedQueue = Arc<Mutex<PlanQueue>>;
+
+impl PlanQueue {
+    /// A queue served by `workers` planners (at least one), by `policy`, planning time counted
+    /// as `clock` counts it (a wall clock counts as the simulated default, 2 µs per unit of
+    /// work at 1 ms steps: a queue needs reproducible time).
+    pub fn new(workers: usize, policy: QueuePolicy, clock: PlanClock) -> Self {
+        let (steps_per_unit, fixed_steps) = match clock {
+            PlanClock::Simulated { steps_per_unit, fixed_steps } => (steps_per_unit.max(0.0), fixed_steps),
+            PlanClock::WallClock => (0.002, 0),
+        };
+        Self {
+            policy,
+            steps_per_unit,
+            fixed_steps,
+            free_at: vec![0; workers.max(1)],
+            waiting: Vec::new(),
+            finished: Vec::new(),
+            stats: QueueStats::default(),
+        }
+    }
+
+    /// The queue, shareable.
+    pub fn shared(self) -> SharedQueue {
+        Arc::new(Mutex::new(self))
+    }
+
+    /// Figures of the service so far.
+    pub fn stats(&self) -> &QueueStats {
+        &self.stats
+    }
+
+    /// Requests waiting for a worker.
+    pub fn waiting(&self) -> usize {
+        self.waiting.len()
+    }
+
+    pub(crate) fn submit(
+        &mut self,
+        key: usize,
+        id: u64,
+        submitted: u64,
+        deadline: u64,
+        give_up: Option<u64>,
+        work: Work,
+    ) {
+        self.stats.requests += 1;
+        self.waiting.push(Waiting { key, id, submitted, deadline, give_up, work });
+        self.stats.max_waiting = self.stats.max_waiting.max(self.waiting.len());
+    }
+
+    /// Withdraw agent `key`'s request `id` (superseded): not planned if it still waits, never
+    /// delivered if it is done.
+    pub(crate) fn withdraw(&mut self, key: usize, id: u64) {
+        let before = self.waiting.len();
+        self.waiting.retain(|w| !(w.key == key && w.id == id));
+        if self.waiting.len() < before {
+            self.stats.withdrawn += 1;
+        }
+        self.finished.retain(|f| !(f.key == key && f.id == id));
+    }
+
+    fn next_index(&self, now: u64) -> Option<usize> {
+        let ready = self.waiting.iter().enumerate().filter(|(_, w)| w.submitted < now);
+        match self.policy {
+            QueuePolicy::EarliestDeadline => {
+                ready.min_by_key(|(_, w)| (w.deadline, w.submitted, w.key, w.id)).map(|(k, _)| k)
+            }
+            QueuePolicy::Fifo => ready.min_by_key(|(_, w)| (w.submitted, w.key, w.id)).map(|(k, _)| k),
+        }
+    }
+
+    /// Serve the queue up to and including `step`: every worker free by then takes the next
+    /// request (by the policy) that was made before the step it starts at.
+    pub fn advance(&mut self, step: u64) {
+        loop {
+            let Some((worker, &free)) = self.free_at.iter().enumerate().min_by_key(|(_, f)| **f) else { return };
+            let Some(first) = self.waiting.iter().map(|w| w.submitted + 1).min() else { return };
+            let now = free.max(first);
+            if now > step {
+                return;
+            }
+            let Some(k) = self.next_index(now) else { return };
+            let job = self.waiting.swap_remove(k);
+            let answer = |s: &mut QueueStats, done_at: u64| {
+                if done_at <= job.deadline {
+                    s.answered_in_time += 1;
+                } else {
+                    s.answered_late += 1;
+                }
+            };
+            self.stats.waits.push(now - job.submitted);
+            if let Some(g) = job.give_up
+                && now >= job.submitted + g
+            {
+                // Waited until its give-up step: never planned, the worker stays free.
+                let done_at = job.submitted + g;
+                answer(&mut self.stats, done_at);
+                self.stats.expired += 1;
+                self.finished.push(Finished {
+                    key: job.key,
+                    id: job.id,
+                    done_at,
+                    outcome: PlanOutcome::Failed(PlanFailure::OutOfTime {
+                        work: 0,
+                        reason: format!("waited {g} steps in the planning queue"),
+                    }),
+                    work: 0,
+                    elapsed: std::time::Duration::ZERO,
+                });
+                continue;
+            }
+            let started = Instant::now();
+            let (mut outcome, mut work) = (job.work)();
+            let elapsed = started.elapsed();
+            self.stats.planning_wall_s += elapsed.as_secs_f64();
+            self.stats.planned += 1;
+            let latency = self.fixed_steps.saturating_add((work as f64 * self.steps_per_unit).ceil() as u64).max(1);
+            let mut done_at = now + latency;
+            if let Some(g) = job.give_up
+                && done_at > job.submitted + g
+            {
+                // Still planning at its give-up step: stopped there, out of time.
+                let left = (job.submitted + g).saturating_sub(now).saturating_sub(self.fixed_steps);
+                work =
+                    if self.steps_per_unit > 0.0 { (left as f64 / self.steps_per_unit).floor() as u64 } else { work };
+                outcome = PlanOutcome::Failed(PlanFailure::OutOfTime {
+                    work,
+                    reason: format!("simulated planning time over {g} steps (queue included)"),
+                });
+                done_at = job.submitted + g;
+                self.stats.expired += 1;
+            }
+            self.free_at[worker] = done_at;
+            answer(&mut self.stats, done_at);
+            self.finished.push(Finished { key: job.key, id: job.id, done_at, outcome, work, elapsed });
+        }
+    }
+
+    /// Agent `key`'s answer to request `id`, if it has landed by `step` (the queue is served
+    /// up to `step` first).
+    pub(crate) fn take(&mut self, key: usize, id: u64, step: u64) -> Option<Finished> {
+        self.advance(step);
+        let k = self.finished.iter().position(|f| f.key == key && f.id == id && f.done_at <= step)?;
+        Some(self.finished.swap_remove(k))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn job(work: u64) -> Work {
+        Box::new(move || (PlanOutcome::Rejected("test".into()), work))
+    }
+
+    #[test]
+    fn earliest_deadline_is_served_first_and_late_requests_expire() {
+        // One worker, 1 step per unit of work: each job of 10 units takes 10 steps.
+        let clock = PlanClock::Simulated { steps_per_unit: 1.0, fixed_steps: 0 };
+        let mut q = PlanQueue::new(1, QueuePolicy::EarliestDeadline, clock);
+        q.submit(0, 1, 0, 100, Some(100), job(10));
+        q.submit(1, 1, 0, 20, Some(25), job(10));
+        q.submit(2, 1, 0, 50, Some(15), job(10));
+        q.advance(1);
+        // Agent 1 (deadline 20) first: from step 1 to 11.
+        assert!(q.take(1, 1, 10).is_none());
+        let a = q.take(1, 1, 11).expect("agent 1 answered at step 11");
+        assert_eq!(a.done_at, 11);
+        // Agent 2 (deadline 50, give-up after 15 steps) would run 11..21 > 15: out of time at 15.
+        let b = q.take(2, 1, 15).expect("agent 2 given up at step 15");
+        assert!(matches!(b.outcome, PlanOutcome::Failed(PlanFailure::OutOfTime { .. })));
+        // Agent 0 starts at 15.
+        let c = q.take(0, 1, 25).expect("agent 0 answered at step 25");
+        assert_eq!(c.done_at, 25);
+        let s = q.stats();
+        assert_eq!((s.requests, s.planned, s.expired, s.answered_in_time, s.answered_late), (3, 3, 1, 3, 0));
+        assert_eq!(s.waits, vec![1, 11, 15]);
+    }
+
+    #[test]
+    fn requests_of_the_current_step_wait_for_the_next() {
+        let clock = PlanClock::Simulated { steps_per_unit: 0.0, fixed_steps: 0 };
+        let mut q = PlanQueue::new(2, QueuePolicy::Fifo, clock);
+        q.submit(3, 7, 5, 10, None, job(1));
+        assert!(q.take(3, 7, 5).is_none());
+        assert_eq!(q.take(3, 7, 7).map(|f| f.done_at), Some(7));
+        q.submit(4, 8, 9, 10, None, job(1));
+        q.withdraw(4, 8);
+        assert!(q.take(4, 8, 20).is_none());
+        assert_eq!(q.stats().withdrawn, 1);
+    }
+}
