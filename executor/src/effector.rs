@@ -193,6 +193,15 @@ impl Effector for ServoModel {
     }
 }
 
+/// The largest deviation (rad or m) of a joint's measured position from the position its last
+/// limited command asked for that still counts as following it: a tenth of what one step at the
+/// joint's acceleration limit changes (`0.1 a dt^2`). A healthy effector is exact to rounding
+/// (1e-16 relative); an effector that does not follow its command deviates by up to `2 a dt^2`
+/// per step, more if it slips.
+pub fn tracking_bound(lim: &JointLimits, dt: f64) -> f64 {
+    0.1 * lim.max_acceleration * dt * dt
+}
+
 /// The velocity joint `i` at `q` should take to follow `command` (see [`ServoModel`]); zero for
 /// non-finite targets.
 #[inline]
@@ -232,6 +241,7 @@ pub struct SafetyLimiter<E> {
     inner: E,
     limited: JointCommand,
     gain: f64,
+    commanded: bool,
 }
 
 impl<E: Effector> SafetyLimiter<E> {
@@ -242,6 +252,7 @@ impl<E: Effector> SafetyLimiter<E> {
             inner,
             limited: JointCommand { mode: CommandMode::Position, q: vec![0.0; n], qd: vec![0.0; n] },
             gain: 50.0,
+            commanded: false,
         }
     }
     /// Position-loop gain in 1/s used to turn position targets into velocities (default 50).
@@ -252,6 +263,12 @@ impl<E: Effector> SafetyLimiter<E> {
     /// The command that last reached the wrapped effector.
     pub fn last_limited(&self) -> &JointCommand {
         &self.limited
+    }
+    /// The positions the last command asked the wrapped effector to reach in its step (`None`
+    /// before the first command). A healthy effector reaches them exactly (to rounding): the
+    /// command is the consistent one-step command of a velocity inside the limits.
+    pub fn commanded_position(&self) -> Option<&[f64]> {
+        self.commanded.then_some(&self.limited.q[..])
     }
     /// The wrapped effector.
     pub fn inner(&self) -> &E {
@@ -317,6 +334,7 @@ impl<E: Effector> Effector for SafetyLimiter<E> {
         self.limit_into(command, dt, &mut limited);
         self.inner.execute_limited(&limited, dt);
         self.limited = limited;
+        self.commanded = true;
     }
 }
 
