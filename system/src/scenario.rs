@@ -28,6 +28,9 @@ pub const BUILTIN_SCENARIOS: &[(&str, &str)] = &[
     ("two-irp6-stack", include_str!("../scenarios/two-irp6-stack.toml")),
     ("polycrank-sort", include_str!("../scenarios/polycrank-sort.toml")),
     ("rnt-faults", include_str!("../scenarios/rnt-faults.toml")),
+    ("rnt-motion-faults", include_str!("../scenarios/rnt-motion-faults.toml")),
+    ("two-irp6-link-faults", include_str!("../scenarios/two-irp6-link-faults.toml")),
+    ("two-irp6-carry-qp-fault", include_str!("../scenarios/two-irp6-carry-qp-fault.toml")),
 ];
 
 /// The scenario `embodied run` uses when given none.
