@@ -660,11 +660,15 @@ fn limits_of<E: Effector>(e: &E, j: usize) -> Option<JointLimits> {
     e.limits().get(j).copied()
 }
 
+/// The ends of a link: from, to.
+pub type LinkEnds = (AgentId, AgentId);
+
 /// The link faults of a system: windows per fault, opened step by step by [`LinkFaultState::advance`]
 /// and asked by the transmitter for every message ([`LinkFaults`]).
 pub struct LinkFaultState {
-    /// Per fault: its windows and the ends of its link (`None`: every link).
-    faults: Vec<(Windows, Option<(AgentId, AgentId)>, Option<usize>)>,
+    /// Per fault: its windows, the ends of its link (`None`: every link) and the index of its
+    /// current window's injection.
+    faults: Vec<(Windows, Option<LinkEnds>, Option<usize>)>,
     dt: f64,
     coordinator: usize,
     sent: u64,
@@ -675,7 +679,7 @@ impl LinkFaultState {
     /// Link faults (index, spec, seed, link ends) of a system whose coordinator is scenario agent
     /// count `coordinator`.
     pub fn new(
-        faults: Vec<(usize, FaultSpec, u64, Option<(AgentId, AgentId)>)>,
+        faults: Vec<(usize, FaultSpec, u64, Option<LinkEnds>)>,
         dt: f64,
         coordinator: usize,
         injections: Injections,
