@@ -198,6 +198,10 @@ impl<C: Send> Agent<C> {
             inputs.q.copy_from_slice(q);
             inputs.qd.copy_from_slice(qd);
         }
+        if let Some(c) = self.effector.as_ref().and_then(|e| e.commanded_position()) {
+            inputs.q_commanded.clear();
+            inputs.q_commanded.extend_from_slice(c);
+        }
         self.receptors.sample(world, q, qd, &mut self.readings);
         for (k, (sensor, _)) in self.sensors.iter_mut().enumerate() {
             let image = &mut inputs.sensors[k];

@@ -194,6 +194,15 @@ impl Effector for ServoModel {
     }
 }
 
+/// The largest deviation (rad or m) of a joint's measured position from the position its last
+/// limited command asked for that still counts as following it: a tenth of what one step at the
+/// joint's acceleration limit changes (`0.1 a dt^2`). A healthy effector is exact to rounding
+/// (1e-16 relative); an effector that does not follow its command deviates by up to `2 a dt^2`
+/// per step, more if it slips.
+pub fn tracking_bound(lim: &JointLimits, dt: f64) -> f64 {
+    0.1 * lim.max_acceleration * dt * dt
+}
+
 /// The velocity joint `i` at `q` should take to follow `command` (see [`ServoModel`]); zero for
 /// non-finite targets.
 #[inline]
@@ -235,6 +244,7 @@ pub struct SafetyLimiter<E> {
     gain: f64,
     /// Screws driving joints through triangles: their speed limits hold too.
     actuators: Vec<ScrewTriangle>,
+    commanded: bool,
 }
 
 impl<E: Effector> SafetyLimiter<E> {
@@ -246,6 +256,7 @@ impl<E: Effector> SafetyLimiter<E> {
             limited: JointCommand { mode: CommandMode::Position, q: vec![0.0; n], qd: vec![0.0; n] },
             gain: 50.0,
             actuators: Vec::new(),
+            commanded: false,
         }
     }
     /// Also keep every actuator (screw) within its speed limit: a command whose screw speeds
@@ -267,6 +278,12 @@ impl<E: Effector> SafetyLimiter<E> {
     /// The command that last reached the wrapped effector.
     pub fn last_limited(&self) -> &JointCommand {
         &self.limited
+    }
+    /// The positions the last command asked the wrapped effector to reach in its step (`None`
+    /// before the first command). A healthy effector reaches them exactly (to rounding): the
+    /// command is the consistent one-step command of a velocity inside the limits.
+    pub fn commanded_position(&self) -> Option<&[f64]> {
+        self.commanded.then_some(&self.limited.q[..])
     }
     /// The wrapped effector.
     pub fn inner(&self) -> &E {
@@ -355,6 +372,7 @@ impl<E: Effector> Effector for SafetyLimiter<E> {
         self.limit_into(command, dt, &mut limited);
         self.inner.execute_limited(&limited, dt);
         self.limited = limited;
+        self.commanded = true;
     }
 }
 

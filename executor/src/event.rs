@@ -269,6 +269,20 @@ pub enum Event {
     },
     /// A faulty sensor reads well again.
     SensorRecovered,
+    /// The effector did not follow its last command: a joint's measured position is off the
+    /// position the command asked for by more than the bound (a healthy effector follows a
+    /// limited command exactly, to rounding).
+    TrackingError {
+        /// The joint furthest off.
+        joint: usize,
+        /// How far off, rad or m.
+        error: f64,
+        /// The bound, rad or m.
+        bound: f64,
+    },
+    /// The effector follows its commands again (at rest, every joint within its bound for the
+    /// agent's tolerance of steps).
+    EffectorRecovered,
     /// The plan's goal was reached.
     GoalReached {
         /// Plan id, when a deliberator made the plan.
@@ -281,6 +295,14 @@ pub enum Event {
     Granted {
         /// The agent granted.
         agent: String,
+    },
+    /// The coordinator sent agent `agent`'s grant again: no acknowledgement came (the grant or
+    /// the acknowledgement was lost or is late in transit).
+    GrantResent {
+        /// The agent granted.
+        agent: String,
+        /// How many times it was sent so far.
+        times: u32,
     },
     /// Told by the coordinator that `agent` occupies `configurations` configurations.
     Told {
@@ -456,9 +478,12 @@ impl Event {
             Event::SensorNonFinite => "sensor_non_finite",
             Event::SensorImplausible { .. } => "sensor_implausible",
             Event::SensorRecovered => "sensor_recovered",
+            Event::TrackingError { .. } => "tracking_error",
+            Event::EffectorRecovered => "effector_recovered",
             Event::GoalReached { .. } => "goal_reached",
             Event::GrantReceived => "grant_received",
             Event::Granted { .. } => "granted",
+            Event::GrantResent { .. } => "grant_resent",
             Event::Told { .. } => "told",
             Event::TaskDone { .. } => "task_done",
             Event::AgentFailed { .. } => "agent_failed",
@@ -572,6 +597,10 @@ impl fmt::Display for Event {
                 None => write!(f, "{kind}"),
             },
             Event::Granted { agent } => write!(f, "{kind} -> {agent}"),
+            Event::GrantResent { agent, times } => write!(f, "{kind} -> {agent} (sent {times} times)"),
+            Event::TrackingError { joint, error, bound } => {
+                write!(f, "{kind}: joint {joint} off its command by {error:.3e} (bound {bound:.3e})")
+            }
             Event::Told { agent, configurations } => {
                 write!(f, "{kind}: `{agent}` occupies {configurations} configuration(s)")
             }
@@ -627,6 +656,7 @@ impl fmt::Display for Event {
             Event::PlanSuspended
             | Event::SensorNonFinite
             | Event::SensorRecovered
+            | Event::EffectorRecovered
             | Event::GrantReceived
             | Event::AllDone
             | Event::Grasp
@@ -679,6 +709,9 @@ mod tests {
             Event::ContactMade { force_n: 2.0 },
             Event::ForceRegulated { force_n: 20.0, setpoint_n: 20.0, depth_mm: 1.0 },
             Event::PassFinished { pass: 0, passes: 5, mean_force_n: 20.0 },
+            Event::TrackingError { joint: 1, error: 1e-3, bound: 1e-6 },
+            Event::EffectorRecovered,
+            Event::GrantResent { agent: "a".into(), times: 2 },
         ];
         for e in all {
             let v: serde_json::Value = serde_json::to_value(&e).expect("serialisable");

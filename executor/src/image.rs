@@ -32,8 +32,17 @@ pub enum Message {
         /// The numbers.
         data: [f64; WORDS],
     },
-    /// The coordinator grants the receiver its motion.
-    Grant,
+    /// The coordinator grants the receiver its motion. `told` is how many other agents'
+    /// [`Message::Occupancy`] the coordinator sent before it: the grant counts only once the
+    /// receiver has heard of that many (a grant must not outrun what it depends on when
+    /// messages are lost).
+    Grant {
+        /// Other agents whose occupancy the receiver must know first.
+        told: usize,
+    },
+    /// The receiver of a [`Message::Grant`] acknowledges it (the coordinator sends the grant
+    /// again until it hears from the agent).
+    GrantAck,
     /// The sender finished its task (`failed`: without reaching its goal).
     Done {
         /// Whether the task failed.
@@ -230,6 +239,8 @@ pub struct InputImages {
     pub(crate) limits: Vec<JointLimits>,
     pub(crate) sensors: Vec<SensorImage>,
     pub(crate) inbox: Vec<Envelope>,
+    /// Where the last limited command asked the effector to be now (empty before the first).
+    pub(crate) q_commanded: Vec<f64>,
 }
 
 impl InputImages {
@@ -246,6 +257,7 @@ impl InputImages {
             // Grown on the first delivery and kept: an agent that never receives messages keeps
             // no 1.4 kB buffer between its hot data (1,000 agents stay in cache).
             inbox: Vec::new(),
+            q_commanded: Vec::new(),
         }
     }
     /// This agent.
@@ -259,6 +271,12 @@ impl InputImages {
     /// Control period in seconds.
     pub fn dt(&self) -> f64 {
         self.dt
+    }
+    /// Effector image: the positions the last (limited) command asked the effector to reach by
+    /// now (`None` before the first command and for a coordinator). A healthy effector is
+    /// there to rounding; see [`crate::effector::tracking_bound`].
+    pub fn q_commanded(&self) -> Option<&[f64]> {
+        (!self.q_commanded.is_empty()).then_some(&self.q_commanded[..])
     }
     /// Effector image: measured joint positions (`c^i_e`; empty for a coordinator).
     pub fn q(&self) -> &[f64] {

@@ -98,7 +98,7 @@ pub use deliberation::{
 };
 pub use effector::{
     BrakeHalt, Effector, FollowedPath, PathHalt, SafeHalt, SafetyLimiter, ServoModel, StopMotion, predict_stop,
-    tracking_velocity, velocity_window,
+    tracking_bound, tracking_velocity, velocity_window,
 };
 pub use error::{ExecutorError, Violation};
 pub use event::{Event, HaltReason, ReplanReason, WallTiming};
@@ -110,5 +110,5 @@ pub use motion::{Move, Wait};
 pub use runtime::{Clearance, Parallelism, Runtime, RuntimeConfig, StepMonitor, StepRecord};
 pub use sensor::{Contact, JointState, NearestObstacle, VirtualSensor};
 pub use transition::{Predicate, TransitionFunction, idle};
-pub use transmitter::{ChannelStats, Link, Transmitter};
+pub use transmitter::{ChannelStats, Link, LinkFaults, Transit, Transmitter};
 pub use world::{Body, Obstacle, ObstacleEcho, ReceptorReadings, ReceptorSpec, Solid, World, receptor_noise};

@@ -187,6 +187,11 @@ impl Runtime {
         self.connect(b, a, link)
     }
 
+    /// Inject link faults into every channel ([`crate::transmitter::LinkFaults`]).
+    pub fn set_link_faults(&mut self, faults: Box<dyn crate::transmitter::LinkFaults>) {
+        self.transmitter.set_faults(faults);
+    }
+
     /// Counters of the channel `from -> to`; `None` if there is none.
     pub fn channel_stats(&self, from: AgentId, to: AgentId) -> Option<ChannelStats> {
         self.transmitter.stats(from, to)

@@ -1,5 +1,7 @@
 //! The inter-agent transmission `T` (`c^{i+1}_T ≻ c^i_T` of eq. 10): one-way channels with a
-//! latency in steps and a seeded loss probability.
+//! latency in steps and a seeded loss probability, and optionally injected link faults
+//! ([`LinkFaults`]: messages lost or delayed for a while). A channel delivers in the order of
+//! sending, delayed messages included: a message never overtakes an earlier one.
 
 use std::collections::{HashMap, VecDeque};
 
@@ -33,6 +35,25 @@ pub struct ChannelStats {
     pub delivered: u64,
 }
 
+/// What an injected link fault does to one message.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Transit {
+    /// Delivered, `extra` steps later than the link's latency says.
+    Deliver {
+        /// Extra steps in transit.
+        extra: u64,
+    },
+    /// Lost.
+    Lose,
+}
+
+/// Injected link faults: asked once for every message sent (after the link's own loss), in
+/// the order of sending, so that a seeded implementation replays.
+pub trait LinkFaults: Send {
+    /// What happens to a message `from -> to` sent in step `step`.
+    fn transit(&mut self, from: AgentId, to: AgentId, step: u64) -> Transit;
+}
+
 struct Channel {
     from: AgentId,
     to: AgentId,
@@ -48,6 +69,7 @@ struct Channel {
 pub struct Transmitter {
     channels: Vec<Channel>,
     by_ends: HashMap<(AgentId, AgentId), usize>,
+    faults: Option<Box<dyn LinkFaults>>,
 }
 
 impl Transmitter {
@@ -74,6 +96,10 @@ impl Transmitter {
             }
         }
     }
+    /// Inject link faults into every channel from now on.
+    pub fn set_faults(&mut self, faults: Box<dyn LinkFaults>) {
+        self.faults = Some(faults);
+    }
     /// Whether `from -> to` exists.
     pub fn connected(&self, from: AgentId, to: AgentId) -> bool {
         self.by_ends.contains_key(&(from, to))
@@ -87,9 +113,20 @@ impl Transmitter {
         ch.stats.sent += 1;
         if ch.link.loss > 0.0 && ch.rng.uniform() < ch.link.loss {
             ch.stats.lost += 1;
-        } else {
-            ch.in_flight.push_back((step + 1 + u64::from(ch.link.latency), envelope));
+            return true;
         }
+        let extra = match self.faults.as_mut().map(|f| f.transit(envelope.from, envelope.to, step)) {
+            Some(Transit::Lose) => {
+                ch.stats.lost += 1;
+                return true;
+            }
+            Some(Transit::Deliver { extra }) => extra,
+            None => 0,
+        };
+        // In order: a message is never due before the one sent ahead of it.
+        let due = (step + 1 + u64::from(ch.link.latency)).saturating_add(extra);
+        let due = ch.in_flight.back().map_or(due, |(d, _)| due.max(*d));
+        ch.in_flight.push_back((due, envelope));
         true
     }
     /// Hand every message due by `step` to `deliver(receiver, envelope)`.

@@ -31,6 +31,9 @@ pub const BUILTIN_SCENARIOS: &[(&str, &str)] = &[
     ("two-irp6-stack", include_str!("../scenarios/two-irp6-stack.toml")),
     ("polycrank-sort", include_str!("../scenarios/polycrank-sort.toml")),
     ("rnt-faults", include_str!("../scenarios/rnt-faults.toml")),
+    ("rnt-motion-faults", include_str!("../scenarios/rnt-motion-faults.toml")),
+    ("two-irp6-link-faults", include_str!("../scenarios/two-irp6-link-faults.toml")),
+    ("two-irp6-carry-qp-fault", include_str!("../scenarios/two-irp6-carry-qp-fault.toml")),
 ];
 
 /// The scenario `embodied run` uses when given none.
@@ -81,7 +84,7 @@ struct RawPolish {
 }
 
 /// One `[[faults]]` table: `kind`, exactly one of `at` (s) and `probability` (per step or
-/// request), optional `agent`, `duration` (s) and `seed`.
+/// request), optional `agent`, `duration` (s) and `seed`; link faults `link`, `loss`, `delay`.
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct RawFault {
@@ -96,6 +99,12 @@ struct RawFault {
     duration: Option<f64>,
     #[serde(default)]
     seed: Option<u64>,
+    #[serde(default)]
+    link: Option<Spanned<String>>,
+    #[serde(default)]
+    loss: Option<f64>,
+    #[serde(default)]
+    delay: Option<f64>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -1333,12 +1342,23 @@ fn parse_fault(ctx: &Ctx, spanned: &Spanned<RawFault>, agents: &[AgentSpec]) -> 
         let names: Vec<&str> = agents.iter().map(|a| a.name.as_str()).collect();
         return Err(ctx.err(a.span(), format!("fault: no agent `{}`; expected one of {names:?}", a.get_ref())));
     }
+    if let Some(l) = &f.link {
+        let names: Vec<&str> = agents.iter().map(|a| a.name.as_str()).chain(["coordinator"]).collect();
+        let bad_end = l.get_ref().split_once("->").and_then(|(a, b)| {
+            [a.trim(), b.trim()].into_iter().find(|e| !e.is_empty() && !names.contains(e)).map(str::to_string)
+        });
+        if let Some(end) = bad_end {
+            return Err(ctx.err(l.span(), format!("fault: link end `{end}`: expected one of {names:?}")));
+        }
+    }
     let spec = FaultSpec {
-        kind,
         agent: f.agent.as_ref().map(|a| a.get_ref().clone()),
-        trigger,
         duration: f.duration.unwrap_or(0.0),
         seed: f.seed,
+        link: f.link.as_ref().map(|l| l.get_ref().clone()),
+        loss: f.loss.unwrap_or(crate::faults::DEFAULT_LOSS),
+        delay: f.delay.unwrap_or(crate::faults::DEFAULT_DELAY),
+        ..FaultSpec::new(kind, trigger)
     };
     spec.check().map_err(|e| ctx.err(spanned.span(), format!("fault `{}`: {e}", kind.as_str())))?;
     Ok(spec)

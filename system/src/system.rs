@@ -23,15 +23,17 @@ use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use embodied_executor::closed_chain::ClosedChainConfig;
-use embodied_executor::closed_chain::carry::{CarryRecord, CarrySetup, ClosedChainSummary, carry_agent, finish};
+use embodied_executor::closed_chain::carry::{
+    CarryRecord, CarrySetup, ClosedChainSummary, carry_agent, carry_agent_with_fault, finish,
+};
 use embodied_executor::deliberation::{
     AsDeliberation, DeliberationSettings, DeliberativeState, PlanBudget, PlanClock, PlanFollower, PlanMotion,
     UnmappedObstacle,
 };
 use embodied_executor::{
     Agent, AgentId, Behaviour, Contact, Coordinator, Event, HaltReason, InputImages, Link, Message, OutputImages,
-    Predicate, Primitive, Reactive, ReceptorSpec, ReplanReason, Runtime, RuntimeConfig, SafeHalt, SensorConfig, Status,
-    StepRecord, TransitionFunction, Violation, World,
+    Predicate, Primitive, Reactive, ReceptorSpec, ReplanReason, Runtime, RuntimeConfig, SafeHalt, SensorConfig,
+    ServoModel, Status, StepRecord, TransitionFunction, Violation, World,
 };
 use embodied_models::{Robot, Shape};
 use embodied_planner::carry::plan_carry;
@@ -39,7 +41,10 @@ use embodied_planner::deadline::Deadline;
 use serde::Serialize;
 
 use crate::SystemError;
-use crate::faults::{FaultSpec, FaultyPlanner, FaultySensor, Injection, Injections};
+use crate::faults::{
+    FaultKind, FaultSpec, FaultyEffector, FaultyPlanner, FaultySensor, Injection, Injections, LinkFaultState,
+    SharedLinkFaults, Windows, draw, place_obstacle, qp_fault,
+};
 use crate::log::{LOG_FORMAT, LogHeader, LogStep, LoggedAgent, RunLog};
 use crate::plan::{agent_problem, bodies_as_obstacles, goal_of, motion_settings};
 use crate::scenario::{ClockSpec, Coordination, GoalSpec, Scenario, load_scenario};
@@ -65,7 +70,17 @@ struct RunAgent {
     announced: Option<u64>,
     done_sent: bool,
     force_sensor: Option<usize>,
+    /// Per scenario agent: whether the coordinator told this agent where it is.
+    told: Vec<bool>,
+    /// The last announcement sent to the coordinator (repeated until the run ends: a lost one
+    /// must not stall the others), and the step it was last sent.
+    last_announcement: Option<Arc<[Vec<f64>]>>,
+    repeated_at: u64,
 }
+
+/// Steps after which the coordinator sends an unacknowledged grant again, and an agent repeats
+/// its last announcement and its `done`.
+pub const RESEND_STEPS: u64 = 100;
 
 impl AsDeliberation for RunAgent {
     fn deliberation(&mut self) -> &mut DeliberativeState {
@@ -84,18 +99,34 @@ impl RunAgent {
         out
     }
 
-    /// Read the transmissions: the grant, and other agents' bodies or planned sweeps.
+    /// Read the transmissions: the grant, and other agents' bodies or planned sweeps. A grant
+    /// counts once the occupancies it depends on have arrived (a lost one is sent again with the
+    /// grant); it is acknowledged every time it counts. An occupancy heard before is no news.
     fn read_messages(&mut self, i: &InputImages, o: &mut OutputImages) {
         for env in i.messages() {
             match &env.message {
-                Message::Grant => {
+                Message::Grant { told } => {
+                    let known = self.told.iter().enumerate().filter(|(m, t)| **t && *m != self.index).count();
+                    if known < *told {
+                        continue;
+                    }
                     if !self.go {
                         o.event(Event::GrantReceived);
                     }
                     self.go = true;
+                    if let Some(c) = self.coordinator {
+                        o.send(c, Message::GrantAck);
+                    }
                 }
                 Message::Occupancy { agent, configurations } => {
                     let Some(slot) = self.occupancy.get_mut(*agent) else { continue };
+                    let seen = self.told.get(*agent).copied().unwrap_or(false);
+                    if seen && slot[..] == configurations[..] {
+                        continue;
+                    }
+                    if let Some(t) = self.told.get_mut(*agent) {
+                        *t = true;
+                    }
                     *slot = configurations.clone();
                     let (agent, configurations) = (self.roster.names[*agent].clone(), configurations.len());
                     o.event(Event::Told { agent, configurations });
@@ -147,13 +178,27 @@ impl Behaviour<RunAgent> for Deliberate {
                             .collect()
                     })
                     .unwrap_or_default();
-                o.send(coordinator, Message::Occupancy { agent: c.index, configurations: waypoints.into() });
+                let waypoints: Arc<[Vec<f64>]> = waypoints.into();
+                c.last_announcement = Some(waypoints.clone());
+                c.repeated_at = i.step();
+                o.send(coordinator, Message::Occupancy { agent: c.index, configurations: waypoints });
             }
             let failed = c.delib.abandoned();
             if (c.delib.goal_reached() || failed) && !c.done_sent {
                 c.done_sent = true;
+                c.repeated_at = i.step();
                 o.event(Event::TaskDone { failed });
                 o.send(coordinator, Message::Done { failed });
+            }
+            // Repeat what the coordinator must hear (lost messages must not stall the others).
+            if i.step() >= c.repeated_at + RESEND_STEPS && (c.done_sent || c.last_announcement.is_some()) {
+                c.repeated_at = i.step();
+                if let Some(w) = &c.last_announcement {
+                    o.send(coordinator, Message::Occupancy { agent: c.index, configurations: w.clone() });
+                }
+                if c.done_sent {
+                    o.send(coordinator, Message::Done { failed });
+                }
             }
         } else if c.delib.goal_reached() && !c.done_sent {
             c.done_sent = true;
@@ -218,23 +263,59 @@ struct Grants {
     done: Vec<bool>,
     announced: Vec<bool>,
     all_done: bool,
+    /// Per grant (in grant order): what it told (agent, configurations), when it was last sent,
+    /// how many times, and whether the agent acknowledged it.
+    grants: Vec<GrantSent>,
+}
+
+/// One grant as the coordinator sent it.
+struct GrantSent {
+    told: Vec<(usize, Arc<[Vec<f64>]>)>,
+    sent_at: u64,
+    times: u32,
+    acknowledged: bool,
 }
 
 impl Grants {
-    fn grant(&mut self, o: &mut OutputImages) {
+    fn grant(&mut self, step: u64, o: &mut OutputImages) {
         let (id, k) = self.order[self.granted];
         // What the agents granted before it occupy: where they stand (sequential) or the space
         // their plans sweep (concurrent).
+        let mut told = Vec::new();
         for &(_, m) in &self.order[..self.granted] {
             let configurations: Arc<[Vec<f64>]> = match self.mode {
                 Coordination::Sequential => self.paths[m].last().cloned().into_iter().collect(),
                 Coordination::Concurrent => self.paths[m].clone(),
             };
-            o.send(id, Message::Occupancy { agent: m, configurations });
+            told.push((m, configurations));
         }
-        o.send(id, Message::Grant);
+        let g = GrantSent { told, sent_at: step, times: 1, acknowledged: false };
+        Self::send_grant(id, &g, o);
+        self.grants.push(g);
         o.event(Event::Granted { agent: self.roster.names[k].clone() });
         self.granted += 1;
+    }
+
+    fn send_grant(id: AgentId, g: &GrantSent, o: &mut OutputImages) {
+        for (m, configurations) in &g.told {
+            o.send(id, Message::Occupancy { agent: *m, configurations: configurations.clone() });
+        }
+        o.send(id, Message::Grant { told: g.told.len() });
+    }
+
+    /// Send every grant not acknowledged within [`RESEND_STEPS`] again (the same grant: what it
+    /// told does not change).
+    fn resend(&mut self, step: u64, o: &mut OutputImages) {
+        for (n, g) in self.grants.iter_mut().enumerate() {
+            let (id, k) = self.order[n];
+            if g.acknowledged || self.done[k] || step < g.sent_at + RESEND_STEPS {
+                continue;
+            }
+            g.sent_at = step;
+            g.times += 1;
+            Self::send_grant(id, g, o);
+            o.event(Event::GrantResent { agent: self.roster.names[k].clone(), times: g.times });
+        }
     }
 }
 
@@ -242,12 +323,18 @@ fn coordinator_program() -> Primitive<Grants> {
     Primitive::new("grant", 1, |c: &mut Grants, i: &InputImages, o: &mut OutputImages| {
         for env in i.messages() {
             let Some(k) = c.index_of.get(env.from.0).copied().flatten() else { continue };
+            // Anything from a granted agent acknowledges its grant.
+            if let Some(n) = c.order.iter().position(|(_, m)| *m == k)
+                && let Some(g) = c.grants.get_mut(n)
+            {
+                g.acknowledged = true;
+            }
             match &env.message {
                 Message::Done { failed } => {
-                    c.done[k] = true;
-                    if *failed {
+                    if !c.done[k] && *failed {
                         o.event(Event::AgentFailed { agent: c.roster.names[k].clone() });
                     }
+                    c.done[k] = true;
                 }
                 Message::Occupancy { agent, configurations } if *agent < c.paths.len() => {
                     c.paths[*agent] = configurations.clone();
@@ -265,9 +352,10 @@ fn coordinator_program() -> Primitive<Grants> {
                 },
             };
             if ready {
-                c.grant(o);
+                c.grant(i.step(), o);
             }
         }
+        c.resend(i.step(), o);
         if !c.all_done && c.order.iter().all(|(_, k)| c.done[*k]) {
             c.all_done = true;
             o.event(Event::AllDone);
@@ -527,6 +615,8 @@ pub struct System {
     wall: Duration,
     pace: Option<(Instant, u64)>,
     injections: Injections,
+    link_faults: Option<Arc<Mutex<LinkFaultState>>>,
+    obstacle_faults: Vec<(Windows, Vec<usize>)>,
 }
 
 impl System {
@@ -582,18 +672,18 @@ impl System {
         }
         let injections: Injections = Arc::default();
         // Per scenario agent: its faults (index in the scenario, spec, seed).
-        let faults_of = |k: usize, planner: bool| -> Vec<(usize, FaultSpec, u64)> {
+        let faults_of = |k: usize, which: &dyn Fn(FaultKind) -> bool| -> Vec<(usize, FaultSpec, u64)> {
             let name = &scenario.agents[k].name;
             scenario
                 .faults
                 .iter()
                 .enumerate()
-                .filter(|(_, f)| f.kind.is_planner() == planner && f.agent.as_ref().is_none_or(|a| a == name))
+                .filter(|(_, f)| which(f.kind) && f.agent.as_ref().is_none_or(|a| a == name))
                 .map(|(i, f)| (i, f.clone(), f.seed.unwrap_or(seed).wrapping_add(k as u64)))
                 .collect()
         };
-        let sensing =
-            scenario.obstacles.iter().any(|o| !o.on_map()) || scenario.faults.iter().any(|f| !f.kind.is_planner());
+        let sensing = scenario.obstacles.iter().any(|o| !o.on_map())
+            || scenario.faults.iter().any(|f| f.kind.is_sensor() || f.kind == FaultKind::ObstacleInPath);
         let roster = Arc::new(Roster {
             names: scenario.agents.iter().map(|a| a.name.clone()).collect(),
             robots: scenario.agents.iter().map(|a| a.robot.clone()).collect(),
@@ -638,7 +728,9 @@ impl System {
                 continue;
             }
             if let Some(spec) = scenario.carry.as_ref().filter(|c| c.agent == k) {
-                let (a, record, header, wall_ms) = carry_parts(scenario, spec, dt, clock, options)?;
+                let qp_faults = faults_of(k, &|f| f == FaultKind::QpInfeasible);
+                let qp = (!qp_faults.is_empty()).then(|| qp_fault(k, qp_faults, dt, injections.clone()));
+                let (a, record, header, wall_ms) = carry_parts(scenario, spec, dt, clock, options, qp)?;
                 runtime.add_agent(a);
                 carry = Some((record, header, wall_ms));
                 continue;
@@ -657,7 +749,7 @@ impl System {
             // The map: the obstacles there from the start; the other agents where they stand.
             let model = agent_problem(scenario, k, &[]);
             let mut settings = settings.clone();
-            let planner_faults = faults_of(k, true);
+            let planner_faults = faults_of(k, &|f| f.is_planner());
             if !planner_faults.is_empty() {
                 let inner = PlanMotion::new(model.clone(), settings.motion.clone());
                 let faulty = FaultyPlanner::new(inner, k, planner_faults, dt, injections.clone());
@@ -674,6 +766,9 @@ impl System {
                 announced: None,
                 done_sent: false,
                 force_sensor: None,
+                told: vec![false; scenario.agents.len()],
+                last_announcement: None,
+                repeated_at: 0,
             };
             let known = state.known_obstacles();
             state.delib.set_known_obstacles(known, 0, dt);
@@ -688,11 +783,20 @@ impl System {
                 receptors.force_noise = 0.5;
                 state.force_sensor = Some(sensors);
             }
-            let mut a = Agent::embodied(agent.name.clone(), robot, Some(&agent.start), state, program(force_limit))
-                .map_err(|e| failed(&agent.name, &e))?;
+            let effector_faults = faults_of(k, &|f| f == FaultKind::TrackingError);
+            let mut a = if effector_faults.is_empty() {
+                Agent::embodied(agent.name.clone(), robot, Some(&agent.start), state, program(force_limit))
+            } else {
+                let servo = ServoModel::new(robot.limits(), &agent.start).map_err(|e| failed(&agent.name, &e))?;
+                let faulty = FaultyEffector::new(servo, k, effector_faults, dt, injections.clone());
+                Agent::new(agent.name.clone(), state, program(force_limit))
+                    .with_effector(faulty)
+                    .map(|a| a.with_robot_model(robot, 0))
+            }
+            .map_err(|e| failed(&agent.name, &e))?;
             if sensing {
-                let sensor = UnmappedObstacle { mapped: mapped.clone(), bodies: false };
-                let sensor_faults = faults_of(k, false);
+                let sensor = UnmappedObstacle::new(mapped.clone(), false);
+                let sensor_faults = faults_of(k, &|f| f.is_sensor());
                 if sensor_faults.is_empty() {
                     a = a.with_sensor(sensor, SensorConfig::default());
                 } else {
@@ -735,6 +839,7 @@ impl System {
                 done: vec![false; n],
                 announced: vec![false; n],
                 all_done: false,
+                grants: Vec::new(),
             };
             let id = runtime.add_agent(Coordinator::new("coordinator", grants, coordinator_program()));
             let link = options.link.unwrap_or(Link::IDEAL);
@@ -743,6 +848,56 @@ impl System {
             }
             coordinator = Some(id);
         }
+        // Link faults: on the links named (`from->to`, by agent name or `coordinator`), or all.
+        let link_specs: Vec<(usize, &FaultSpec)> =
+            scenario.faults.iter().enumerate().filter(|(_, f)| f.kind.is_link()).collect();
+        let mut link_faults = None;
+        if let (Some(c), false) = (coordinator, link_specs.is_empty()) {
+            let id_of = |name: &str| {
+                if name == "coordinator" {
+                    Some(c)
+                } else {
+                    scenario.agents.iter().position(|a| a.name == name).map(AgentId)
+                }
+            };
+            let mut faults = Vec::new();
+            for (i, f) in link_specs {
+                let ends = match f.link_ends() {
+                    None => None,
+                    Some(Ok((a, b))) => match (id_of(a), id_of(b)) {
+                        (Some(a), Some(b)) => Some((a, b)),
+                        _ => {
+                            return Err(SystemError::Usage(format!(
+                                "scenario `{}`: fault #{} ({}): link `{a}->{b}`: expected agent names or `coordinator`",
+                                scenario.name,
+                                i + 1,
+                                f.kind.as_str()
+                            )));
+                        }
+                    },
+                    Some(Err(e)) => return Err(SystemError::Usage(format!("scenario `{}`: {e}", scenario.name))),
+                };
+                faults.push((i, f.clone(), f.seed.unwrap_or(seed), ends));
+            }
+            let state =
+                Arc::new(Mutex::new(LinkFaultState::new(faults, dt, scenario.agents.len(), injections.clone())));
+            runtime.set_link_faults(Box::new(SharedLinkFaults(state.clone())));
+            link_faults = Some(state);
+        }
+        // Obstacles entering the path: per fault, its windows and the agents it strikes.
+        let obstacle_faults: Vec<(Windows, Vec<usize>)> = scenario
+            .faults
+            .iter()
+            .enumerate()
+            .filter(|(_, f)| f.kind == FaultKind::ObstacleInPath)
+            .map(|(i, f)| {
+                let agents = (0..scenario.agents.len())
+                    .filter(|&k| scenario.agents[k].goal.is_some())
+                    .filter(|&k| f.agent.as_ref().is_none_or(|a| *a == scenario.agents[k].name))
+                    .collect();
+                (Windows::new(i, f.clone(), f.seed.unwrap_or(seed)), agents)
+            })
+            .collect();
         // Every agent's body is in the world: other agents' detectors see it, and every step
         // records the smallest robot-robot and robot-environment distance.
         runtime.set_monitor(Box::new(crate::clearance::ClearanceMeter::new(scenario, dt)));
@@ -760,7 +915,47 @@ impl System {
             wall: Duration::ZERO,
             pace: None,
             injections,
+            link_faults,
+            obstacle_faults,
         })
+    }
+
+    /// Faults struck at the start of a step: link windows open, obstacles enter paths.
+    fn before_step(&mut self) {
+        let step = self.runtime.current_step();
+        let dt = self.runtime.config().dt;
+        if let Some(l) = &self.link_faults {
+            l.lock().unwrap_or_else(|e| e.into_inner()).advance(step);
+        }
+        for (w, agents) in &mut self.obstacle_faults {
+            if !w.starts(step, dt) {
+                continue;
+            }
+            for &k in agents.iter() {
+                let Some(images) = self.runtime.images(AgentId(k)) else { continue };
+                let agent = &self.scenario.agents[k];
+                let goal = match &agent.goal {
+                    Some(GoalSpec::Configuration(g)) => Some(&g[..]),
+                    _ => None,
+                };
+                let ahead = 0.05 + 0.25 * draw(w.seed, w.index as u64 + 1000, step);
+                let radius = 0.04 + 0.04 * draw(w.seed, w.index as u64 + 2000, step);
+                let at = place_obstacle(&agent.robot, images.q(), images.qd(), goal, ahead, radius);
+                let mut inj = Injection::new(FaultKind::ObstacleInPath, k, step, 1);
+                if let Some(p) = at {
+                    self.runtime.world_mut().add_obstacle(embodied_executor::Obstacle {
+                        name: format!("in-path-{}-{step}", w.index),
+                        position: p,
+                        velocity: [0.0; 3],
+                        radius,
+                        appears_at: step,
+                        vanishes_at: None,
+                    });
+                    inj.obstacle = Some((p, radius));
+                }
+                self.injections.lock().unwrap_or_else(|e| e.into_inner()).push(inj);
+            }
+        }
     }
 
     /// The faults injected so far, in the order they struck.
@@ -825,6 +1020,7 @@ impl System {
     /// a step takes a step's real time, so that deadlines in steps and the planner's
     /// wall-clock deadline mean the same.
     pub fn step(&mut self) -> Result<&StepRecord, SystemError> {
+        self.before_step();
         let started = Instant::now();
         let result = self.runtime.step().map(|_| ());
         self.after_step(started);
@@ -856,6 +1052,7 @@ impl System {
         let dt = self.runtime.config().dt;
         let target = (until_s / dt).round().max(0.0) as u64;
         while self.runtime.current_step() < target {
+            self.before_step();
             let started = Instant::now();
             match self.runtime.step() {
                 Ok(_) => {
@@ -940,6 +1137,7 @@ fn carry_parts(
     dt: f64,
     clock: ClockSpec,
     options: &RunOptions,
+    qp_fault: Option<embodied_executor::closed_chain::carry::QpFault>,
 ) -> Result<CarryParts, SystemError> {
     let agent = &scenario.agents[spec.agent];
     let task = scenario
@@ -974,7 +1172,11 @@ fn carry_parts(
         planning_ms,
         compare: options.qp_compare,
     };
-    let (a, record) = carry_agent(setup).map_err(|e| {
+    let made = match qp_fault {
+        Some(f) => carry_agent_with_fault(setup, f),
+        None => carry_agent(setup),
+    };
+    let (a, record) = made.map_err(|e| {
         SystemError::Failed(format!("scenario `{}`: agent `{}`: carry: {e}", scenario.name, agent.name))
     })?;
     Ok((a, record, header, wall_ms))

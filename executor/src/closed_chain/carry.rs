@@ -132,7 +132,12 @@ pub struct CarryAgent {
     halted: bool,
     done: bool,
     record: Arc<Mutex<CarryRecord>>,
+    qp_fault: Option<QpFault>,
 }
+
+/// An injected fault of the closed-chain QP: asked at every closed-chain step (its index);
+/// `true` makes that step's QP report infeasible, whatever the solver found.
+pub type QpFault = Box<dyn FnMut(u64) -> bool + Send>;
 
 impl CarryAgent {
     fn time(i: &InputImages) -> f64 {
@@ -294,6 +299,12 @@ impl CarryAgent {
         };
         let ns = started.elapsed().as_nanos() as u64;
         let dt = i.dt();
+        let injected = self.qp_fault.as_mut().is_some_and(|f| f(i.step()));
+        let solution = if injected {
+            Err(ExecutorError::QpInfeasible("injected fault: the QP reports infeasible".into()))
+        } else {
+            solution
+        };
         match solution {
             Ok(s) => {
                 let (closure_m, closure_rad) = pose_difference(&reference, &kin.relative_pose());
@@ -365,8 +376,18 @@ pub struct CarrySetup {
     pub compare: bool,
 }
 
+/// [`carry_agent`] whose closed-chain QP has an injected fault: the pair halts (reason
+/// `closed_chain`) the step the QP reports infeasible, as for a real infeasible QP.
+pub fn carry_agent_with_fault(setup: CarrySetup, fault: QpFault) -> Result<CarryParts, ExecutorError> {
+    carry_agent_inner(setup, Some(fault))
+}
+
 /// The carrying agent: its `c_c` ([`CarryAgent`]) and program (halt > closed chain > follow).
 pub fn carry_agent(setup: CarrySetup) -> Result<CarryParts, ExecutorError> {
+    carry_agent_inner(setup, None)
+}
+
+fn carry_agent_inner(setup: CarrySetup, qp_fault: Option<QpFault>) -> Result<CarryParts, ExecutorError> {
     let CarrySetup { name, robot, plan, environment, object_goal, config, planning_ms, compare } = setup;
     let invalid = |reason: &str| ExecutorError::InvalidParameter {
         what: format!("carry of agent '{name}'"),
@@ -412,6 +433,7 @@ pub fn carry_agent(setup: CarrySetup) -> Result<CarryParts, ExecutorError> {
         halted: false,
         done: false,
         record: record.clone(),
+        qp_fault,
     };
     let a = Agent::embodied(name, robot, start.as_deref(), state, program())?;
     Ok((a, record))

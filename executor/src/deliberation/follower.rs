@@ -12,7 +12,7 @@ use nalgebra::Isometry3;
 
 use crate::agent::Agent;
 use crate::behaviour::{Behaviour, Status};
-use crate::effector::{BrakeHalt, PathHalt, SafeHalt, StopMotion, predict_stop};
+use crate::effector::{BrakeHalt, PathHalt, SafeHalt, StopMotion, predict_stop, tracking_bound};
 use crate::error::{ExecutorError, Violation};
 use crate::event::{Event, HaltReason, ReplanReason, WallTiming};
 use crate::image::{InputImages, JointCommand, OutputImages, SensorConfig};
@@ -174,6 +174,9 @@ pub struct DeliberativeState {
     dropped: Option<(Arc<Trajectory>, f64)>,
     halt: Option<Halt>,
     fault: Option<String>,
+    /// The effector did not follow its command (a tracking error), and the steps since it
+    /// last deviated.
+    effector_fault: Option<u64>,
     attempts: u32,
     next_request_at: u64,
     late_reported: bool,
@@ -215,6 +218,7 @@ impl DeliberativeState {
             dropped: None,
             halt: None,
             fault: None,
+            effector_fault: None,
             attempts: 0,
             next_request_at: 0,
             late_reported: false,
@@ -247,6 +251,10 @@ impl DeliberativeState {
     /// Whether a verified plan is being followed.
     pub fn is_following(&self) -> bool {
         self.plan.is_some()
+    }
+    /// Whether a fault (a sensor's or the effector's) keeps the agent halted.
+    pub fn faulty(&self) -> bool {
+        self.fault.is_some() || self.effector_fault.is_some()
     }
     /// Whether the goal has been reached.
     pub fn goal_reached(&self) -> bool {
@@ -376,6 +384,7 @@ impl<C: AsDeliberation + Send> Behaviour<C> for PlanFollower {
             }
         }
         sense(s, inputs, outputs);
+        track_effector(s, inputs, outputs);
         if let Some(d) = s.deliberator.poll(step) {
             deliver(s, d, inputs, outputs);
         }
@@ -389,7 +398,7 @@ impl<C: AsDeliberation + Send> Behaviour<C> for PlanFollower {
             s.attempts += 1;
             s.next_request_at = step;
         }
-        if s.fault.is_some() {
+        if s.faulty() {
             drop_plan(s, step, inputs.dt());
             s.join = None;
             s.deliberator.cancel();
@@ -427,14 +436,14 @@ impl<C: AsDeliberation + Send> Behaviour<C> for PlanFollower {
         }
         // No valid plan: c^{i+1} is computed without it and halts the effector.
         halt(s, inputs, outputs);
-        self.phase = if s.fault.is_some() {
+        self.phase = if s.faulty() {
             "fault"
         } else if s.halt.is_some() {
             "halting"
         } else {
             "waiting"
         };
-        if s.fault.is_none() && !s.goal_reached && !s.abandoned && s.halt.is_none() && at_rest(inputs.qd()) {
+        if !s.faulty() && !s.goal_reached && !s.abandoned && s.halt.is_none() && at_rest(inputs.qd()) {
             maybe_request(s, inputs, outputs);
         }
         Ok(Status::Running)
@@ -523,6 +532,9 @@ fn halt(s: &mut DeliberativeState, inputs: &InputImages, outputs: &mut OutputIma
     let dropped = s.dropped.take();
     if !at_rest(qd) && s.halt.is_none() {
         let stop = match dropped {
+            // An effector that does not follow its command brakes its joints at their limits
+            // (a stuck joint does): every joint at its limit is the stop that then happens.
+            _ if s.effector_fault.is_some() => Stop::Off(StopMotion::JointBrake),
             Some((trajectory, t)) => Stop::Path { trajectory, halt: PathHalt::new(t, 1.0) },
             None => Stop::Off(StopMotion::Straight),
         };
@@ -530,7 +542,7 @@ fn halt(s: &mut DeliberativeState, inputs: &InputImages, outputs: &mut OutputIma
         s.halted_since = Some(inputs.step());
         let speed = qd.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
         let reason = match s.halt_reason.take() {
-            _ if s.fault.is_some() => HaltReason::Fault,
+            _ if s.faulty() => HaltReason::Fault,
             Some(r) => r,
             None => HaltReason::NoValidPlan,
         };
@@ -650,7 +662,7 @@ fn deliver(s: &mut DeliberativeState, d: PlanDelivery, inputs: &InputImages, out
                 || !at_rest(inputs.qd())
             {
                 Some("start state moved".to_string())
-            } else if s.fault.is_some() {
+            } else if s.faulty() {
                 Some("fault".to_string())
             } else {
                 None
@@ -692,6 +704,43 @@ fn deliver(s: &mut DeliberativeState, d: PlanDelivery, inputs: &InputImages, out
             outputs.event(Event::PlannerPanicked { id, message: m.to_string() });
             retry(s);
         }
+    }
+}
+
+/// Compare the measured position with where the last (limited) command asked the effector to
+/// be: a joint off by more than its [`tracking_bound`] is a tracking error (an event and a
+/// fault: the agent halts, every joint braking at its limit). The fault clears once the agent
+/// has been at rest with every joint on its command for `sensor_max_age` steps.
+fn track_effector(s: &mut DeliberativeState, inputs: &InputImages, outputs: &mut OutputImages) {
+    let Some(commanded) = inputs.q_commanded() else { return };
+    let (q, limits, dt) = (inputs.q(), inputs.limits(), inputs.dt());
+    if commanded.len() != q.len() || limits.len() != q.len() {
+        return;
+    }
+    let mut worst: Option<(usize, f64, f64)> = None;
+    for (j, ((a, b), lim)) in q.iter().zip(commanded).zip(limits).enumerate() {
+        let (error, bound) = ((a - b).abs(), tracking_bound(lim, dt));
+        if error > bound && worst.is_none_or(|(_, e, b)| error / bound > e / b) {
+            worst = Some((j, error, bound));
+        }
+    }
+    match (worst, s.effector_fault) {
+        (Some((joint, error, bound)), None) => {
+            s.effector_fault = Some(0);
+            outputs.event(Event::TrackingError { joint, error, bound });
+        }
+        (Some(_), Some(_)) => s.effector_fault = Some(0),
+        (None, Some(quiet)) if at_rest(inputs.qd()) => {
+            if quiet + 1 > s.settings.sensor_max_age {
+                s.effector_fault = None;
+                s.attempts = 0;
+                outputs.event(Event::EffectorRecovered);
+            } else {
+                s.effector_fault = Some(quiet + 1);
+            }
+        }
+        (None, Some(_)) => s.effector_fault = Some(0),
+        (None, None) => {}
     }
 }
 
@@ -840,7 +889,7 @@ fn replan_in_motion(s: &mut DeliberativeState, step: u64, dt: f64, outputs: &mut
 fn prepare_join(s: &DeliberativeState, step: u64, dt: f64) -> Option<(Join, Vec<f64>)> {
     let plan = s.plan.as_ref()?;
     let budget = s.settings.budget.steps;
-    if budget == 0 || s.fault.is_some() || s.abandoned || step < plan.started_at {
+    if budget == 0 || s.faulty() || s.abandoned || step < plan.started_at {
         return None;
     }
     let (traj, plan_id) = (plan.trajectory.clone(), plan.id);
@@ -1034,7 +1083,7 @@ fn deliver_join(
                 Some(format!("world {} != {}", d.world_version, s.world_version))
             } else if !in_time || following.is_none() {
                 Some("start state moved".to_string())
-            } else if s.fault.is_some() {
+            } else if s.faulty() {
                 Some("fault".to_string())
             } else {
                 None
