@@ -54,6 +54,15 @@ fn write_problem(dir: &Path) -> (PathBuf, PathBuf, PathBuf) {
     (srdf, scene, request)
 }
 
+/// `embodied plan` of a MoveIt problem (the corpus UR5), with `extra` arguments.
+fn plan_moveit(srdf: &Path, scene: &Path, request: &Path, extra: &[&str]) -> (i32, String, String) {
+    let s = |p: &Path| p.to_str().expect("utf-8 path").to_string();
+    let (urdf, srdf, scene, request) = (s(&corpus(UR5)), s(srdf), s(scene), s(request));
+    let mut args = vec!["plan", "--urdf", &urdf, "--srdf", &srdf, "--scene", &scene, "--request", &request];
+    args.extend_from_slice(extra);
+    embodied(&args)
+}
+
 #[test]
 fn planned_joint_trajectory_verifies_and_a_cut_corner_is_refused() {
     let dir = TempDir::new("moveit");
@@ -62,21 +71,8 @@ fn planned_joint_trajectory_verifies_and_a_cut_corner_is_refused() {
     let s = |p: &Path| p.to_str().expect("utf-8 path").to_string();
     for ext in ["yaml", "json"] {
         let out = dir.join(format!("traj.{ext}"));
-        let (code, stdout, stderr) = embodied(&[
-            "plan",
-            "--urdf",
-            &s(&urdf),
-            "--srdf",
-            &s(&srdf),
-            "--scene",
-            &s(&scene),
-            "--request",
-            &s(&request),
-            "--format",
-            "joint-trajectory",
-            "-o",
-            &s(&out),
-        ]);
+        let (code, stdout, stderr) =
+            plan_moveit(&srdf, &scene, &request, &["--format", "joint-trajectory", "-o", &s(&out)]);
         assert_eq!(code, 0, "plan failed: {stdout}{stderr}");
         let text = std::fs::read_to_string(&out).expect("written");
         assert!(text.contains("joint_names") && text.contains("time_from_start"), "{text}");
@@ -143,21 +139,8 @@ fn a_pose_goal_is_planned_around_the_post_and_verifies() {
     let urdf = corpus(UR5);
     let s = |p: &Path| p.to_str().expect("utf-8 path").to_string();
     let out = dir.join("traj.yaml");
-    let (code, stdout, stderr) = embodied(&[
-        "plan",
-        "--urdf",
-        &s(&urdf),
-        "--srdf",
-        &s(&srdf),
-        "--scene",
-        &s(&scene),
-        "--request",
-        &s(&request),
-        "--format",
-        "joint-trajectory",
-        "-o",
-        &s(&out),
-    ]);
+    let (code, stdout, stderr) =
+        plan_moveit(&srdf, &scene, &request, &["--format", "joint-trajectory", "-o", &s(&out)]);
     assert_eq!(code, 0, "plan failed: {stdout}{stderr}");
     let text = std::fs::read_to_string(&out).expect("written");
     let jt = embodied_models::formats::trajectory::parse_joint_trajectory(&text, &out).expect("reads back");
@@ -188,17 +171,7 @@ fn a_pose_goal_is_planned_around_the_post_and_verifies() {
     let far = std::fs::read_to_string(&request).expect("request").replacen("x: ", "x: 9", 1);
     let far_request = dir.join("far.yaml");
     std::fs::write(&far_request, far).expect("written");
-    let (code, stdout, stderr) = embodied(&[
-        "plan",
-        "--urdf",
-        &s(&urdf),
-        "--srdf",
-        &s(&srdf),
-        "--scene",
-        &s(&scene),
-        "--request",
-        &s(&far_request),
-    ]);
+    let (code, stdout, stderr) = plan_moveit(&srdf, &scene, &far_request, &[]);
     assert_eq!(code, 1, "{stdout}{stderr}");
     assert!(stderr.contains("goal"), "{stderr}");
 }
