@@ -108,27 +108,35 @@ fn thin_plate_between_free_waypoints_is_caught() {
         let pose = robot.forward_kinematics(q)[ee.link] * robot.links()[ee.link].shapes[0].pose;
         pose.translation.vector
     };
-    let (qa, qb) = p
-        .path
-        .windows(2)
-        .map(|w| (w[0].clone(), w[1].clone()))
-        .max_by(|a, b| {
-            let da = (centre(&a.0) - centre(&a.1)).norm();
-            let db = (centre(&b.0) - centre(&b.1)).norm();
-            da.total_cmp(&db)
+    // The plate goes across the middle of a segment, normal to the gripper's chord there; of
+    // the plan's segments, the one whose gripper travels farthest with both ends clear of it.
+    let base = agent_problem(&scenario, 0, &[vec![scenario.agents[0].start.clone()]]);
+    let with_plate = |qa: &[f64], qb: &[f64]| {
+        let qm = robot.config_space().interpolate(qa, qb, 0.5);
+        let dir = (centre(qb) - centre(qa)).normalize();
+        let rot = UnitQuaternion::rotation_between(&Vector3::z(), &dir).unwrap();
+        let at = centre(&qm);
+        let plate = Obstacle::new(
+            "plate",
+            Isometry3::from_parts(Translation3::from(at), rot),
+            Shape::cuboid(0.04, 0.04, 0.0005),
+        );
+        let mut model = base.clone();
+        let mut env: Environment = model.environment().clone();
+        env.add(plate);
+        model.set_environment(env);
+        (model, qm, at, rot)
+    };
+    let mut segments: Vec<(Vec<f64>, Vec<f64>)> = p.path.windows(2).map(|w| (w[0].clone(), w[1].clone())).collect();
+    segments.sort_by(|a, b| (centre(&b.0) - centre(&b.1)).norm().total_cmp(&(centre(&a.0) - centre(&a.1)).norm()));
+    let (qa, qb, model, qm, at, rot) = segments
+        .into_iter()
+        .find_map(|(qa, qb)| {
+            let (model, qm, at, rot) = with_plate(&qa, &qb);
+            let ends_free = model.first_collision(&qa).is_none() && model.first_collision(&qb).is_none();
+            ends_free.then_some((qa, qb, model, qm, at, rot))
         })
-        .unwrap();
-    let qm = robot.config_space().interpolate(&qa, &qb, 0.5);
-    let dir = (centre(&qb) - centre(&qa)).normalize();
-    let rot = UnitQuaternion::rotation_between(&Vector3::z(), &dir).unwrap();
-    let at = centre(&qm);
-    let plate_pose = Isometry3::from_parts(Translation3::from(at), rot);
-    let plate = Obstacle::new("plate", plate_pose, Shape::cuboid(0.04, 0.04, 0.0005));
-    let mut model = agent_problem(&scenario, 0, &[vec![scenario.agents[0].start.clone()]]);
-    let mut env: Environment = model.environment().clone();
-    env.add(plate);
-    model.set_environment(env);
-    assert!(model.first_collision(&qa).is_none() && model.first_collision(&qb).is_none(), "ends must be free");
+        .expect("a segment whose ends are clear of its plate");
     assert!(model.first_collision(&qm).is_some(), "the plate must be in the way");
 
     // The two waypoints alone, as a two-sample path: the certificate finds the plate.

@@ -113,27 +113,6 @@ impl ScrewTriangle {
         Some(if (t1 - near).abs() <= (t2 - near).abs() { t1 } else { t2 })
     }
 
-    /// Widen the stroke to every length the drive angle reaches while each degree of freedom
-    /// it depends on stays within `[lower, upper]` of `limits` (indexed by degree of freedom),
-    /// plus `margin` (m): the stroke then never binds inside the joint limits.
-    pub fn widen_to_joint_limits(&mut self, limits: &[crate::JointLimits], margin: f64) {
-        let (mut lo, mut hi) = (self.offset, self.offset);
-        for &(k, w) in &self.angle {
-            let Some(l) = limits.get(k) else { continue };
-            let (a, b) = (w * l.lower, w * l.upper);
-            lo += a.min(b);
-            hi += a.max(b);
-        }
-        let n = 2000;
-        for i in 0..=n {
-            let l = self.length_at(lo + (hi - lo) * i as f64 / n as f64);
-            if l.is_finite() {
-                self.min_length = self.min_length.min(l - margin);
-                self.max_length = self.max_length.max(l + margin);
-            }
-        }
-    }
-
     /// How far `q` is outside the stroke, m (<= 0 inside; NaN gives +infinity).
     #[inline]
     pub fn stroke_excess(&self, q: &[f64]) -> f64 {

@@ -48,8 +48,9 @@ kinematic_model_irp6p_with_wrist.cc, a2=0.455, a3=0.67, d5=0.19 m); shoulder 0.9
 tool 0.25 m along flange z (MRROC++); joint limits MRROC++ joint space (README 1.5). ASSUMPTION: 1.5 rad/s and 7 rad/s^2 \
 per joint (README 1.6: no authoritative spec); collision capsules (README 1.9). Lower and upper arm driven by ball \
 screws through triangles, MRROC++ constants (sl123, mi, ni, lead 5 mm, README 1.5); screw speed 0.159 m/s from MRROC++'s \
-motor_max_velocity 200 rad/s (a generator default, README 1.6). The screws' strokes are widened to the joint limits: \
-MRROC++'s motor range would cut the upper arm's absolute angle to -25.3..36.6 degrees.";
+motor_max_velocity 200 rad/s (a generator default, README 1.6). Strokes from MRROC++'s motor ranges (lower_limit_axis, \
+upper_limit_axis): with the joint limits they leave q1 in -125.3..-52.0 degrees and the upper arm's absolute angle \
+q1 + q2 + 90 degrees in -25.3..36.5 degrees, as MRROC++ checks both joints and motors.";
 const IRP6_OT_SOURCE: &str = "IRp-6 on track, 7 DOF: prismatic track along +y (-0.125..1.21 m, MRROC++ \
 kinematic_model_irp6ot_with_wrist.cc) then the IRp-6 arm (flange = Ty(q0) Tz(0.95) DH(q1..q6)). ASSUMPTION: track 0.5 m/s \
 (URDF .53), 2 m/s^2; arm 1.5 rad/s, 7 rad/s^2; collision capsules and track bed box (README 1.9).";
@@ -173,15 +174,13 @@ fn add_irp6_arm(b: &mut RobotBuilder, parent: usize, base: Isometry3<f64>, prefi
         irp6_arm_shapes(),
     );
     debug_assert_eq!(links.len(), 6);
-    // The screws' speed limits bind; their strokes are widened to the joint limits. MRROC++'s
-    // motor ranges would cut the upper arm's absolute angle q1 + q2 + pi/2 to [-25.3, 36.6]
-    // degrees (the range its older, absolute-angle joint limits of -25..40 degrees gave), which
-    // the DH joint limits here exceed (-65..80 degrees) and the built-in carry and stacking poses
-    // use; `irp6_arm_screws` keeps MRROC++'s strokes.
-    let mut limits = vec![JointLimits::new(0.0, 0.0, 1.0, 1.0); lower_arm - 1];
-    limits.extend(irp6_arm_limits());
-    for mut screw in irp6_arm_screws(prefix, lower_arm) {
-        screw.widen_to_joint_limits(&limits, 1e-3);
+    // MRROC++ checks a commanded position twice: its DH joints against the joint limits
+    // (`check_joints`) and the motor positions against the motor ranges
+    // (`check_motor_position`). The screws carry the second check as their strokes: the
+    // lower-arm stroke leaves q1 in [-125.3, -52.0] degrees, the upper-arm stroke the upper
+    // arm's absolute angle q1 + q2 + pi/2 in [-25.3, 36.5] degrees (a coupled limit the joint
+    // box cannot express).
+    for screw in irp6_arm_screws(prefix, lower_arm) {
         b.actuator(screw);
     }
 }

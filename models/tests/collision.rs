@@ -285,10 +285,17 @@ fn adjacent_links_and_links_joined_through_shapeless_links_are_not_checked() {
 fn irp6_postument_folded_onto_its_column_collides() {
     let r = builtin("irp6-postument").unwrap();
     let m = CollisionModel::new(&r, Environment::new());
-    // Lower arm at its forward limit (-50 deg), upper arm at its lowest (+40 deg, pointing down
-    // and back), wrist pitched fully (92 deg): the gripper swings back into the column.
+    // Lower arm at its forward joint limit (-50 deg), upper arm at its lowest (+40 deg, pointing
+    // down and back), wrist pitched fully (92 deg): the gripper swings back into the column. The
+    // screws cannot get there (the lower-arm screw stops the lower arm at -52 deg, the upper-arm
+    // screw the upper arm's absolute angle at 36.5 deg): the configuration is refused, and the
+    // collision model, which does not look at limits, still finds the contact.
     let q = [0.0, -0.8727, 0.6981, 1.6057, 0.0, 0.0];
-    r.check_configuration(&q).unwrap();
+    assert!(
+        matches!(r.check_configuration(&q), Err(embodied_models::ModelError::OutOfStroke { .. })),
+        "{:?}",
+        r.check_configuration(&q)
+    );
     let c = m.first_collision(&q).expect("folded wrist against the column");
     let names = [c.a.name(), c.b.name()];
     assert!(names.contains(&"base") && names.contains(&"link6"), "{c}");

@@ -33,20 +33,31 @@ fn the_irp6_screws_with_mrroc_strokes_cut_the_joint_ranges_and_the_built_in_arms
     // ... and within it with the lower arm raised by 10 degrees (the absolute angle counts).
     q[1] = home[1] - 10f64.to_radians();
     assert!(within(&q));
-    // The built-in arms carry the same screws: MRROC++'s speed limit, the stroke widened to the
-    // joint limits (so every configuration within them stays valid).
+    // The built-in arms carry the same screws, strokes and speeds: a configuration within the
+    // joint limits but out of a stroke is refused, naming the screw, and random configurations
+    // are drawn within the strokes.
     assert_eq!(robot.actuators().len(), 2);
     for (a, m) in robot.actuators().iter().zip(&mrroc) {
-        assert_eq!((a.name.as_str(), a.max_speed, a.c, a.m, a.n), (m.name.as_str(), m.max_speed, m.c, m.m, m.n));
-        assert!(a.min_length <= m.min_length && a.max_length >= m.max_length);
+        assert_eq!(
+            (a.name.as_str(), a.max_speed, a.c, a.m, a.n, a.min_length, a.max_length),
+            (m.name.as_str(), m.max_speed, m.c, m.m, m.n, m.min_length, m.max_length)
+        );
     }
+    let mut q = home.clone();
+    q[1] = -129f64.to_radians();
+    assert!(robot.limits().iter().zip(&q).all(|(l, v)| (l.lower..=l.upper).contains(v)));
+    assert!(
+        matches!(robot.check_configuration(&q), Err(ModelError::OutOfStroke { ref actuator, .. }) if actuator == "lower_arm_screw")
+    );
+    q = home.clone();
+    q[2] = 39f64.to_radians();
+    assert!(
+        matches!(robot.check_configuration(&q), Err(ModelError::OutOfStroke { ref actuator, .. }) if actuator == "upper_arm_screw")
+    );
     let mut rng = embodied_models::Rng::new(7);
     for _ in 0..200 {
-        let mut q = robot.random_configuration(&mut rng);
-        for (v, l) in q.iter_mut().zip(robot.limits()).take(3) {
-            *v = if rng.range(0.0, 1.0) < 0.5 { l.lower } else { l.upper };
-        }
-        assert!(robot.within_limits(&q), "{:?}", robot.check_configuration(&q));
+        let q = robot.random_configuration(&mut rng);
+        assert!(robot.within_limits(&q) && within(&q), "{:?}", robot.check_configuration(&q));
     }
     // The on-track and two-handed cells carry the screws on their arms' joints.
     let two = builtin("two-irp6").unwrap();

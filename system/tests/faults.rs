@@ -164,7 +164,7 @@ fn an_infeasible_closed_chain_qp_halts_the_pair_the_same_step() {
         .find(|(_, _, e)| matches!(e, Event::HaltStarted { reason: HaltReason::ClosedChain, .. }))
         .map(|(t, _, _)| *t)
         .expect("halt");
-    assert!((4.5..4.5015).contains(&halt), "{halt}");
+    assert!((2.5..2.5015).contains(&halt), "{halt}");
     assert!(events.iter().any(|(_, _, e)| matches!(e, Event::Grasp)));
     assert!(!events.iter().any(|(_, _, e)| matches!(e, Event::Release | Event::GoalReached { .. })), "{events:?}");
 }

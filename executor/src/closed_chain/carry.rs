@@ -140,6 +140,41 @@ pub struct CarryAgent {
 pub type QpFault = Box<dyn FnMut(u64) -> bool + Send>;
 
 impl CarryAgent {
+    /// The robot's screws as rows of the QP (serial-parallel actuation): each screw's speed
+    /// `|dl/dq · qd| <= max_speed`, and its length kept inside the stroke (`l + dl/dq · qd dt`
+    /// within `[min_length, max_length]`). Only rows that the step's velocity box (`lo`, `hi`)
+    /// could violate are added, most binding first, up to the controller's row budget; a row the
+    /// box cannot satisfy is relaxed to its least violation, like the collision dampers.
+    fn screw_rows(&self, q: &[f64], lo: &[f64], hi: &[f64], dt: f64, rows: &mut Vec<VelocityDamper>) {
+        let mut found: Vec<(f64, VelocityDamper)> = Vec::new();
+        for screw in self.robot.actuators() {
+            let l = screw.length(q);
+            if !l.is_finite() {
+                continue;
+            }
+            let mut g = DVector::zeros(q.len());
+            for (k, d) in screw.gradient(q) {
+                if k < q.len() {
+                    g[k] += d;
+                }
+            }
+            let extend = screw.max_speed.min(((screw.max_length - l) / dt).max(0.0));
+            let retract = screw.max_speed.min(((l - screw.min_length) / dt).max(0.0));
+            for (a, b) in [(g.clone(), extend), (-g, retract)] {
+                let most: f64 = a.iter().enumerate().map(|(j, a)| if *a > 0.0 { a * hi[j] } else { a * lo[j] }).sum();
+                if most <= b {
+                    continue;
+                }
+                let least: f64 = a.iter().enumerate().map(|(j, a)| if *a > 0.0 { a * lo[j] } else { a * hi[j] }).sum();
+                let b = if least > b { least + 1e-9 * (1.0 + least.abs()) } else { b };
+                found.push((b - least, VelocityDamper::new(a, b)));
+            }
+        }
+        found.sort_by(|x, y| x.0.total_cmp(&y.0));
+        let room = self.controller.config().max_dampers.saturating_sub(rows.len());
+        rows.extend(found.into_iter().take(room).map(|(_, row)| row));
+    }
+
     fn time(i: &InputImages) -> f64 {
         i.step() as f64 * i.dt()
     }
@@ -280,6 +315,7 @@ impl CarryAgent {
                 dampers.push(row);
             }
         }
+        self.screw_rows(q, &lo, &hi, i.dt(), &mut dampers);
         let input =
             StepInput { q, j_a: &j_object, j_r: &kin.j_r, v_a, e_r, dampers: &dampers, reference: Some(&posture) };
         let started = Instant::now();

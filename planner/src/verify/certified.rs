@@ -621,7 +621,9 @@ mod tests {
             let robot = builtin(name).unwrap();
             let env = Environment::new()
                 .with(Obstacle::new("pillar", Isometry3::translation(0.6, 0.4, 0.5), Shape::cuboid(0.08, 0.08, 0.5)))
-                .with(Obstacle::new("ball", Isometry3::translation(-0.5, 0.3, 1.0), Shape::sphere(0.15)));
+                .with(Obstacle::new("ball", Isometry3::translation(-0.5, 0.3, 1.0), Shape::sphere(0.15)))
+                // In front of the IRp-6 arms, where their screws' strokes let them go.
+                .with(Obstacle::new("block", Isometry3::translation(0.8, 0.0, 1.1), Shape::cuboid(0.1, 0.3, 0.1)));
             let model = CollisionModel::new(&robot, env);
             let space = robot.config_space();
             let mut rng = Rng::new(7);

@@ -314,12 +314,13 @@ mod tests {
             }
             other => panic!("{other:?}"),
         }
-        // Joint 1 out of its position limits (so moving too fast, and its screw beyond its
-        // stroke) and joint 0 stopping at once: four more violations, the first kept.
+        // Joint 1 out of its position limits (so moving too fast, and both screws beyond their
+        // strokes: the lower arm's drives joint 1, the upper arm's its absolute angle) and joint 0
+        // stopping at once: five more violations, the first kept.
         q[1] = l[1].upper + 0.1;
         // Half a step later: stopping from v takes 2.2 / 1.1 times the acceleration limit.
-        assert_eq!(c.push(2.5 * h, &q, &zero), 4, "position, velocity from q, acceleration, stroke");
-        assert_eq!(c.violations(), 5);
+        assert_eq!(c.push(2.5 * h, &q, &zero), 5, "position, velocity from q, acceleration, two strokes");
+        assert_eq!(c.violations(), 6);
         assert_eq!(c.samples(), 4);
         assert!(matches!(c.first(), Some(Finding::Velocity { .. })));
         assert!(c.max_acceleration_ratio() > 1.0);
