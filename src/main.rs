@@ -396,6 +396,11 @@ enum BenchCommand {
         /// Step the agents one after the other instead of on the rayon pool.
         #[arg(long)]
         sequential: bool,
+        /// Where the planners run: `threads` (the queue's own planner threads, beside the
+        /// control step) or `inline` (inside the steps, on the control thread). The events and
+        /// queue figures are the same; only wall-clock figures differ.
+        #[arg(long, default_value = "threads", value_parser = ["threads", "inline"])]
+        planning: String,
         #[arg(long)]
         json: bool,
     },
@@ -823,6 +828,7 @@ fn run(cli: Cli) -> Result<(), AppError> {
             deadline_ms,
             give_up_ms,
             sequential,
+            planning,
             json,
         }) => {
             use embodied_executor::deliberation::QueuePolicy;
@@ -835,6 +841,7 @@ fn run(cli: Cli) -> Result<(), AppError> {
                 deadline_ms,
                 give_up_ms,
                 parallel: !sequential,
+                planner_threads: planning == "threads",
                 ..embodied::load::LoadSettings::default()
             };
             let bar = spinner("running");
