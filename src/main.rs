@@ -206,6 +206,10 @@ enum Command {
         /// Print the report as one JSON object.
         #[arg(long)]
         json: bool,
+        /// Distance evaluations the collision checks of the plan (and of the log) may spend in
+        /// all; once they are spent the rest is reported not certified, never free (0: no limit).
+        #[arg(long, default_value_t = embodied::verify::DEFAULT_MAX_EVALUATIONS)]
+        max_evaluations: usize,
     },
     /// Benchmarks: MotionBenchMaker problems, planning deadlines.
     #[command(subcommand)]
@@ -392,6 +396,11 @@ enum BenchCommand {
         /// Step the agents one after the other instead of on the rayon pool.
         #[arg(long)]
         sequential: bool,
+        /// Where the planners run: `threads` (the queue's own planner threads, beside the
+        /// control step) or `inline` (inside the steps, on the control thread). The events and
+        /// queue figures are the same; only wall-clock figures differ.
+        #[arg(long, default_value = "threads", value_parser = ["threads", "inline"])]
+        planning: String,
         #[arg(long)]
         json: bool,
     },
@@ -684,7 +693,8 @@ fn run(cli: Cli) -> Result<(), AppError> {
             );
             Ok(())
         }
-        Command::Verify { scenario, plan, log, json, trajectory, urdf, srdf, scene, limits } => {
+        Command::Verify { scenario, plan, log, json, trajectory, urdf, srdf, scene, limits, max_evaluations } => {
+            let max_evaluations = (max_evaluations > 0).then_some(max_evaluations);
             let certified = match (trajectory, urdf) {
                 (Some(t), Some(u)) => embodied::moveit_cli::verify_joint_trajectory(
                     &u,
@@ -693,10 +703,16 @@ fn run(cli: Cli) -> Result<(), AppError> {
                     limits.as_deref(),
                     &t,
                     json,
+                    max_evaluations,
                 )?,
                 _ => {
-                    let v =
-                        embodied::verify::verify_files(&scenario.unwrap_or_default(), plan.as_deref(), log.as_deref())?;
+                    let settings = embodied_planner::verify::CheckSettings { max_evaluations, ..Default::default() };
+                    let v = embodied::verify::verify_files(
+                        &scenario.unwrap_or_default(),
+                        plan.as_deref(),
+                        log.as_deref(),
+                        &settings,
+                    )?;
                     if json {
                         outln!("{}", v.to_json()?);
                     } else {
@@ -812,6 +828,7 @@ fn run(cli: Cli) -> Result<(), AppError> {
             deadline_ms,
             give_up_ms,
             sequential,
+            planning,
             json,
         }) => {
             use embodied_executor::deliberation::QueuePolicy;
@@ -824,6 +841,7 @@ fn run(cli: Cli) -> Result<(), AppError> {
                 deadline_ms,
                 give_up_ms,
                 parallel: !sequential,
+                planner_threads: planning == "threads",
                 ..embodied::load::LoadSettings::default()
             };
             let bar = spinner("running");

@@ -154,6 +154,7 @@ pub fn verify_joint_trajectory(
     limits: Option<&Path>,
     trajectory: &Path,
     json: bool,
+    max_evaluations: Option<usize>,
 ) -> Result<bool, AppError> {
     let (robot, _) = load_moveit_robot(urdf, srdf, limits)?;
     let scene = scene.map(load_scene).transpose().map_err(from_moveit)?;
@@ -168,7 +169,8 @@ pub fn verify_joint_trajectory(
     let located = load_joint_trajectory(trajectory).map_err(from_moveit)?;
     let state = scene.as_ref().and_then(|s| s.robot_state.as_ref());
     let problem = trajectory_problem(&robot, state, env, &located.trajectory, trajectory).map_err(from_moveit)?;
-    let report = Verifier::default().check_trajectory(&problem.model, &problem.trajectory, &[]);
+    let settings = embodied_planner::verify::CheckSettings { max_evaluations, ..Default::default() };
+    let report = Verifier::default().with_settings(settings).check_trajectory(&problem.model, &problem.trajectory, &[]);
     if json {
         crate::outln!("{}", serde_json::to_string(&report).map_err(|e| AppError::Failed(e.to_string()))?);
     } else {

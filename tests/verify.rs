@@ -63,6 +63,13 @@ fn every_builtin_plan_is_certified() {
         }
         let plan = plan_scenario(&scenario, Some(30_000.0)).unwrap();
         let v = verify_plan(&scenario, &plan, Path::new("plan.json"), &settings).unwrap();
+        // The CLI's default budget of distance evaluations changes nothing.
+        let budgeted = CheckSettings { max_evaluations: Some(embodied::verify::DEFAULT_MAX_EVALUATIONS), ..settings };
+        let b = verify_plan(&scenario, &plan, Path::new("plan.json"), &budgeted).unwrap();
+        assert!(!b.budget_exhausted && b.distance_evaluations == v.distance_evaluations, "{name}");
+        for (a, x) in v.agents.iter().zip(&b.agents) {
+            assert_eq!((a.certified, a.report.findings()), (x.certified, x.report.findings()), "{name}");
+        }
         for a in &v.agents {
             let c = &a.report.collision;
             assert!(a.certified, "{name}/{}: {:?} {:?}", a.agent, a.report.findings(), a.timing);
@@ -525,4 +532,119 @@ fn bad_inputs_name_the_file() {
     let (code, _, err) = embodied(&["verify", "irp6-pick"]);
     assert_eq!(code, 2);
     assert!(err.contains("PLAN") || err.contains("required"), "{err}");
+}
+
+// (f) The budget of distance evaluations.
+
+/// A plan of polycrank-transfer whose middle sample jumps `jump` rad on joint `joint` and back.
+fn jumping_plan(joint: usize, jump: f64) -> PlanFile {
+    let mut plan = plan_of("polycrank-transfer");
+    let traj = &mut plan.plans[0].trajectory;
+    let k = traj.q.len() / 2;
+    traj.q[k][joint] += jump;
+    plan
+}
+
+#[test]
+fn a_grazing_jumping_plan_spends_the_budget_and_is_not_certified() {
+    let scenario = load_scenario("polycrank-transfer").unwrap();
+    let agent = scenario.agents[0].name.clone();
+    // Joint 5 jumps 40 rad and back: certifying the two segments free takes about two thousand
+    // distance evaluations.
+    let plan = jumping_plan(4, 40.0);
+    let verify = |max_evaluations: Option<usize>| {
+        let settings = CheckSettings { max_evaluations, ..CheckSettings::default() };
+        verify_plan(&scenario, &plan, Path::new("plan.json"), &settings).unwrap()
+    };
+    let free = verify(None);
+    let needed = free.distance_evaluations;
+    assert!(needed > 1500, "{needed}");
+    assert!(free.agents[0].report.collision.ok && !free.budget_exhausted, "{:?}", free.agents[0].report.collision);
+    // A smaller budget: not certified, never free, and the finding says where it ran out.
+    let spent = verify(Some(1000));
+    assert!(!spent.certified && spent.budget_exhausted);
+    assert_eq!(spent.distance_evaluations, 1000);
+    let c = &spent.agents[0].report.collision;
+    assert!(!c.ok && !spent.agents[0].certified);
+    let k = plan.plans[0].trajectory.q.len() / 2;
+    match c.violation.as_ref().unwrap() {
+        f @ Finding::BudgetExhausted { budget, segment, agent: a, .. } => {
+            assert_eq!((*budget, a.as_str()), (1000, agent.as_str()));
+            assert!(*segment == k - 1 || *segment == k, "segment {segment}, jump at sample {k}");
+            let text = f.to_string();
+            assert!(text.contains("not certified: budget of 1000 distance evaluations exhausted at segment"), "{text}");
+            assert!(text.contains(&format!("of agent {agent}")), "{text}");
+        }
+        f => panic!("expected the budget spent, got {f}"),
+    }
+    // Enough budget: the same report as without one.
+    let enough = verify(Some(needed));
+    assert_eq!(enough.agents[0].report.findings(), free.agents[0].report.findings());
+    assert_eq!((enough.certified, enough.distance_evaluations), (free.certified, needed));
+    // The CLI: the flag sets it, the report says so and how to raise it.
+    let dir = temp_dir("budget");
+    let file = write_plan(&dir, &plan);
+    let (code, out, err) =
+        embodied(&["verify", "polycrank-transfer", file.to_str().unwrap(), "--max-evaluations", "1000"]);
+    assert_eq!(code, 1, "{out}{err}");
+    assert!(
+        out.contains("budget of 1000 distance evaluations exhausted") && out.contains("--max-evaluations"),
+        "{out}"
+    );
+    let (_, out, _) = embodied(&["verify", "polycrank-transfer", file.to_str().unwrap()]);
+    assert!(!out.contains("exhausted") && out.contains("of 2000000 allowed"), "{out}");
+}
+
+#[test]
+fn a_grazing_jumping_log_spends_the_budget_and_normal_logs_are_unaffected() {
+    let scenario = load_scenario("polycrank-transfer").unwrap();
+    let agent = &scenario.agents[0];
+    let dir = temp_dir("budget-log");
+    let write = |name: &str, jump: f64| {
+        let mut lines = vec![log_header("polycrank-transfer", &agent.name, &agent.robot, None)];
+        for s in 0..40 {
+            let mut q = agent.start.clone();
+            if s == 20 {
+                q[4] += jump;
+            }
+            lines.push(log_step(s, &agent.name, &q, &vec![0.0; q.len()], &[]));
+        }
+        lines.push(r#"{"summary": {"steps": 40}}"#.into());
+        let path = dir.join(name);
+        std::fs::write(&path, lines.join("\n") + "\n").unwrap();
+        path
+    };
+    let verify = |file: &Path, max_evaluations: Option<usize>| {
+        let settings = CheckSettings { max_evaluations, ..CheckSettings::default() };
+        verify_log(&scenario, file, &settings).unwrap()
+    };
+    let findings = |v: &embodied::verify::LogVerification| {
+        let mut f: Vec<Option<Finding>> =
+            v.agents.iter().map(|a| a.collision.as_ref().unwrap().violation.clone()).collect();
+        f.extend(v.agents.iter().map(|a| a.violation.clone()));
+        (v.certified, f)
+    };
+    // A quiet log: the same findings with the CLI's default budget as with none.
+    let quiet = write("quiet.jsonl", 0.0);
+    let (a, b) = (verify(&quiet, None), verify(&quiet, Some(embodied::verify::DEFAULT_MAX_EVALUATIONS)));
+    assert!(a.certified && !b.budget_exhausted);
+    assert_eq!(findings(&a), findings(&b));
+    assert_eq!(a.distance_evaluations, b.distance_evaluations);
+    // Joint 5 jumps 40 rad for one step: a small budget runs out there, and the log is not
+    // certified although its collision check would otherwise pass.
+    let jumping = write("jumping.jsonl", 40.0);
+    let free = verify(&jumping, None);
+    assert!(free.agents[0].collision.as_ref().unwrap().ok, "{:?}", free.agents[0].collision);
+    assert!(free.distance_evaluations > 1000, "{}", free.distance_evaluations);
+    let spent = verify(&jumping, Some(500));
+    assert!(!spent.certified && spent.budget_exhausted && spent.distance_evaluations == 500);
+    let c = spent.agents[0].collision.as_ref().unwrap();
+    match c.violation.as_ref().unwrap() {
+        Finding::BudgetExhausted { budget: 500, segment, agent: a, t_from, .. } => {
+            assert_eq!(a, &agent.name);
+            assert!(*segment == 19 || *segment == 20, "segment {segment}");
+            assert!((0.019..=0.022).contains(t_from), "t = {t_from}");
+        }
+        f => panic!("expected the budget spent, got {f}"),
+    }
 }

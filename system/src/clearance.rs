@@ -24,7 +24,7 @@ use embodied_models::collision::{CollisionModel, Environment, Obstacle};
 use embodied_models::nalgebra::{Translation3, Vector3};
 use embodied_models::{Robot, Shape};
 use embodied_planner::trajectory::Trajectory;
-use embodied_planner::verify::{Finding, Verifier};
+use embodied_planner::verify::{EvaluationBudget, Finding, Verifier};
 use serde::Serialize;
 
 use crate::scenario::Scenario;
@@ -181,7 +181,8 @@ impl MotionCheck {
     }
 }
 
-/// Prefix the robot's side of a finding's pair with the agent's name.
+/// Prefix the robot's side of a finding's pair with the agent's name (a spent budget names the
+/// agent).
 fn name_robot_side(f: Finding, agent: &str) -> Finding {
     let rename = |a: String| format!("{agent}/{a}");
     match f {
@@ -192,7 +193,7 @@ fn name_robot_side(f: Finding, agent: &str) -> Finding {
         Finding::NotCertified { t_from, t_to, q_from, q_to, a, b, clearance_m, reason } => {
             Finding::NotCertified { t_from, t_to, q_from, q_to, a: rename(a), b, clearance_m, reason }
         }
-        other => other,
+        other => other.of_agent(agent),
     }
 }
 
@@ -225,8 +226,13 @@ const WINDOW: usize = 400;
 const MOVING_WINDOW: usize = 8;
 
 /// Certify `m`'s logged motion free of the scenario's obstacles (at their times) and of
-/// self-collision, step to step, with `verifier`.
-pub fn certify_environment(m: &LoggedMotion, timeline: &ObstacleTimeline, verifier: &Verifier) -> MotionCheck {
+/// self-collision, step to step, with `verifier`, spending distance evaluations from `budget`.
+pub fn certify_environment(
+    m: &LoggedMotion,
+    timeline: &ObstacleTimeline,
+    verifier: &Verifier,
+    budget: &mut EvaluationBudget,
+) -> MotionCheck {
     let mut out = MotionCheck::new("robot-environment".into());
     let n = m.q.len();
     if n == 0 {
@@ -249,12 +255,13 @@ pub fn certify_environment(m: &LoggedMotion, timeline: &ObstacleTimeline, verifi
         }
         let (from, to) = (if i1 > i0 { m.steps[i0] + 1 } else { m.steps[i0] }, m.steps[i1] + 1);
         model.set_environment(timeline.environment(from, to));
-        let report = verifier.check_collisions(&model, &trajectory(m.robot, &m.t[i0..=i1], &m.q[i0..=i1]), &[]);
+        let report =
+            verifier.check_collisions_within(&model, &trajectory(m.robot, &m.t[i0..=i1], &m.q[i0..=i1]), &[], budget);
         out.segments += i1 - i0;
         out.min_clearance_m = out.min_clearance_m.min(report.min_clearance_m);
         if !report.ok {
             out.ok = false;
-            out.violation = report.violation.map(|f| name_robot_side(f, m.agent));
+            out.violation = report.violation.map(|f| name_robot_side(f.shifted(i0), m.agent));
             return out;
         }
         if i1 + 1 >= n {
@@ -265,8 +272,14 @@ pub fn certify_environment(m: &LoggedMotion, timeline: &ObstacleTimeline, verifi
 }
 
 /// Certify that robots `a` and `b` never touch while both follow their logged motions (the
-/// samples of equal index are at the same step), with `verifier`.
-pub fn certify_pair(a: &LoggedMotion, b: &LoggedMotion, verifier: &Verifier) -> MotionCheck {
+/// samples of equal index are at the same step), with `verifier`, spending distance evaluations
+/// from `budget`.
+pub fn certify_pair(
+    a: &LoggedMotion,
+    b: &LoggedMotion,
+    verifier: &Verifier,
+    budget: &mut EvaluationBudget,
+) -> MotionCheck {
     let mut out = MotionCheck::new(format!("robot-robot {} {}", a.agent, b.agent));
     let n = a.q.len().min(b.q.len());
     if n == 0 {
@@ -274,13 +287,16 @@ pub fn certify_pair(a: &LoggedMotion, b: &LoggedMotion, verifier: &Verifier) -> 
     }
     let mut model = CollisionModel::new(&without_self_pairs(a.robot), Environment::new());
     let b_model = CollisionModel::new(b.robot, Environment::new());
-    let check = |model: &mut CollisionModel, i0: usize, i1: usize| {
+    let mut check = |model: &mut CollisionModel, i0: usize, i1: usize| {
         let qs: Vec<&[f64]> = b.q[i0..=i1].iter().map(Vec::as_slice).collect();
         let margins = travel_along(&b_model, &qs);
         let env =
             posed_shapes(b.robot, &b.q[i0], &margins, b.agent).into_iter().fold(Environment::new(), Environment::with);
         model.set_environment(env);
-        verifier.check_collisions(model, &trajectory(a.robot, &a.t[i0..=i1], &a.q[i0..=i1]), &[])
+        let mut r =
+            verifier.check_collisions_within(model, &trajectory(a.robot, &a.t[i0..=i1], &a.q[i0..=i1]), &[], budget);
+        r.violation = r.violation.map(|f| f.shifted(i0));
+        r
     };
     let mut i0 = 0;
     while i0 + 1 < n || (n == 1 && i0 == 0) {
@@ -293,6 +309,12 @@ pub fn certify_pair(a: &LoggedMotion, b: &LoggedMotion, verifier: &Verifier) -> 
         };
         let report = check(&mut model, i0, i1);
         out.min_clearance_m = out.min_clearance_m.min(report.min_clearance_m);
+        if let Some(f @ Finding::BudgetExhausted { .. }) = report.violation {
+            // Spent: checking again step by step would certify nothing more.
+            out.ok = false;
+            out.violation = Some(name_robot_side(f, a.agent));
+            return out;
+        }
         if !report.ok {
             // Again step by step: less growth of B.
             for j in i0..i1.max(i0 + 1).min(n.max(2) - 1) {

@@ -10,6 +10,12 @@
 //! step's wall time and the real-time factor (simulated time / wall time; above 1 the 1 ms step
 //! is kept in real time).
 //!
+//! By default the queue has planner threads of its own ([`PlanQueue::with_worker_threads`]): the
+//! control step only puts requests in the queue and takes the answers, the planners run beside
+//! it. `planner_threads: false` runs them inside the steps, on the control thread, as before.
+//! Both give the same events and queue figures (the queue's timeline is simulated); only the
+//! wall-clock figures differ.
+//!
 //! The promise checked: every request is answered (a plan or a failure delivered) by its
 //! deadline, or its agent gets `plan_late` at the deadline and halts safely until the answer
 //! comes; no agent goes without a plan for the whole run.
@@ -55,6 +61,8 @@ pub struct LoadSettings {
     pub us_per_check: f64,
     /// Step the agents in parallel (rayon) or one after the other.
     pub parallel: bool,
+    /// Plan on the queue's own planner threads (else inside the steps, on the control thread).
+    pub planner_threads: bool,
     /// Seed of the planners and the noise.
     pub seed: u64,
 }
@@ -71,6 +79,7 @@ impl Default for LoadSettings {
             give_up_ms: 500.0,
             us_per_check: 2.0,
             parallel: true,
+            planner_threads: true,
             seed: 1,
         }
     }
@@ -139,8 +148,14 @@ pub struct LoadReport {
     pub wait_max_ms: f64,
     /// Most requests waiting at once.
     pub max_waiting: usize,
-    /// Wall time spent planning (on the control thread, inside the steps), s.
+    /// Wall time spent planning, s (on the planner threads, or inside the steps).
     pub planning_wall_s: f64,
+    /// Planner threads of the queue (0: planning ran inside the steps, on the control thread).
+    pub planner_threads: usize,
+    /// Answers the simulated timeline reached before a planner thread had them: the step waited.
+    pub worker_waits: u64,
+    /// Wall time the steps waited for planner threads, s.
+    pub worker_wait_wall_s: f64,
 }
 
 /// `c_c` of an errand runner: the deliberation and the goals it visits in turn.
@@ -234,7 +249,11 @@ pub fn run_load(settings: &LoadSettings) -> Result<LoadReport, SystemError> {
     }
     let robot = Arc::new(embodied_models::builtin("rnt")?);
     let clock = PlanClock::Simulated { steps_per_unit: settings.us_per_check.max(0.0) * 1e-3, fixed_steps: 0 };
-    let queue = PlanQueue::new(settings.workers, settings.policy, clock).shared();
+    let mut queue = PlanQueue::new(settings.workers, settings.policy, clock);
+    if settings.planner_threads {
+        queue = queue.with_worker_threads();
+    }
+    let queue = queue.shared();
     let parallelism = if settings.parallel { Parallelism::Rayon { min_agents: 256 } } else { Parallelism::Sequential };
     let mut rt =
         Runtime::new(RuntimeConfig { seed: settings.seed, parallelism, record: true, ..RuntimeConfig::default() });
@@ -310,6 +329,9 @@ pub fn run_load(settings: &LoadSettings) -> Result<LoadReport, SystemError> {
         wait_max_ms: 0.0,
         max_waiting: 0,
         planning_wall_s: 0.0,
+        planner_threads: 0,
+        worker_waits: 0,
+        worker_wait_wall_s: 0.0,
     };
     let mut step_us = Vec::with_capacity(steps as usize);
     let start = Instant::now();
@@ -398,6 +420,9 @@ pub fn run_load(settings: &LoadSettings) -> Result<LoadReport, SystemError> {
     r.wait_max_ms = s.wait_quantile(1.0) as f64;
     r.max_waiting = s.max_waiting;
     r.planning_wall_s = s.planning_wall_s;
+    r.planner_threads = s.worker_threads;
+    r.worker_waits = s.worker_waits;
+    r.worker_wait_wall_s = s.worker_wait_wall_s;
     Ok(r)
 }
 
@@ -407,7 +432,7 @@ pub fn render_load(r: &LoadReport) -> String {
         "load: {} agents ({} deliberative, {} reactive), {} planner workers ({:?}), {} steps of 1 ms\n\
          wall {:.2} s for {:.2} s simulated: real-time factor {:.2}; step p50 {:.0} us, p99 {:.0} us, max {:.0} us, {} steps over 1 ms\n\
          requests {}: landed in time {}, landed late {}, failed {}; plan_late (halted) {}; unanswered without a halt {}\n\
-         queue: planned {}, given up {}, withdrawn {}; wait p50 {:.0} ms, p99 {:.0} ms, max {:.0} ms; at most {} waiting; planning {:.2} s wall\n\
+         queue: planned {}, given up {}, withdrawn {}; wait p50 {:.0} ms, p99 {:.0} ms, max {:.0} ms; at most {} waiting; planning {:.2} s wall {}\n\
          agents: plans landed per deliberative agent {}..{}, starved {}; goals reached {}; halts {}\n",
         r.agents,
         r.deliberative,
@@ -436,6 +461,14 @@ pub fn render_load(r: &LoadReport) -> String {
         r.wait_max_ms,
         r.max_waiting,
         r.planning_wall_s,
+        if r.planner_threads > 0 {
+            format!(
+                "on {} planner threads (steps waited for them {} times, {:.3} s)",
+                r.planner_threads, r.worker_waits, r.worker_wait_wall_s
+            )
+        } else {
+            "inside the steps (control thread)".to_string()
+        },
         r.min_plans_per_agent,
         r.max_plans_per_agent,
         r.starved_agents,

@@ -40,7 +40,7 @@ use embodied_models::Robot;
 use embodied_models::nalgebra::Isometry3;
 use embodied_planner::trajectory::Trajectory;
 use embodied_planner::verify::certified::pose_error;
-use embodied_planner::verify::{CheckSettings, Finding, LimitsChecker, TrajectoryReport, Verifier};
+use embodied_planner::verify::{CheckSettings, EvaluationBudget, Finding, LimitsChecker, TrajectoryReport, Verifier};
 use serde::Serialize;
 use serde_json::Value;
 
@@ -48,6 +48,11 @@ use crate::SystemError;
 use crate::clearance::{LoggedMotion, MotionCheck, ObstacleTimeline, certify_environment, certify_pair};
 use crate::plan::{PlanFile, agent_problem, read_plan};
 use crate::scenario::{GoalSpec, Scenario, load_scenario};
+
+/// The distance evaluations `embodied verify` lets the collision checks of one plan file (or one
+/// run log) spend unless told otherwise (`--max-evaluations`): a few minutes at most of
+/// the slowest robot's pairs, and many times what a plan or log of the built-in scenarios needs.
+pub const DEFAULT_MAX_EVALUATIONS: usize = 2_000_000;
 
 /// Exit status of `embodied verify` when the input was read but is not certified.
 pub const EXIT_NOT_CERTIFIED: u8 = 1;
@@ -90,6 +95,11 @@ pub struct PlanVerification {
     pub together: Vec<MotionCheck>,
     /// The settings of the certified check.
     pub settings: CheckSettings,
+    /// Distance evaluations spent by all the collision checks together (at most
+    /// `settings.max_evaluations`).
+    pub distance_evaluations: usize,
+    /// Whether the budget of distance evaluations ran out (the plan is then not certified).
+    pub budget_exhausted: bool,
     /// Wall-clock time of the check, s.
     pub time_s: f64,
 }
@@ -250,6 +260,7 @@ pub fn verify_plan(
 ) -> Result<PlanVerification, SystemError> {
     let start = Instant::now();
     let (warnings, index) = match_plan(scenario, plan, file)?;
+    let mut budget = EvaluationBudget::new(settings.max_evaluations);
     let mut agents = Vec::new();
     for (j, (p, &k)) in plan.plans.iter().zip(&index).enumerate() {
         let mut occupied = Vec::new();
@@ -279,8 +290,13 @@ pub fn verify_plan(
             }
         }
         let model = agent_problem(scenario, k, &occupied);
-        let report =
-            Verifier::certified(0.0).with_settings(*settings).check_trajectory(&model, &p.trajectory, &p.closed_chain);
+        let mut report = Verifier::certified(0.0).with_settings(*settings).check_trajectory_within(
+            &model,
+            &p.trajectory,
+            &p.closed_chain,
+            &mut budget,
+        );
+        report.collision.violation = report.collision.violation.take().map(|f| f.of_agent(&p.agent));
         let timing = timing(scenario, k, p);
         agents.push(AgentVerification {
             agent: p.agent.clone(),
@@ -304,9 +320,11 @@ pub fn verify_plan(
             let steps: Vec<u64> = (0..times.len() as u64).collect();
             let a = LoggedMotion { agent: &pa.agent, robot: ra, steps: &steps, t: &times, q: &qa };
             let b = LoggedMotion { agent: &pb.agent, robot: rb, steps: &steps, t: &times, q: &qb };
-            together.push(certify_pair(&a, &b, &verifier));
+            together.push(certify_pair(&a, &b, &verifier, &mut budget));
         }
     }
+    let budget_exhausted = agents.iter().any(|a| is_spent(a.report.collision.violation.as_ref()))
+        || together.iter().any(|c| is_spent(c.violation.as_ref()));
     Ok(PlanVerification {
         generator: crate::generator(),
         plan_file: file.to_path_buf(),
@@ -316,8 +334,37 @@ pub fn verify_plan(
         agents,
         together,
         settings: *settings,
+        distance_evaluations: budget.used,
+        budget_exhausted,
         time_s: start.elapsed().as_secs_f64(),
     })
+}
+
+fn is_spent(f: Option<&Finding>) -> bool {
+    matches!(f, Some(Finding::BudgetExhausted { .. }))
+}
+
+/// The closing line of a report: certified or not, the evaluations spent, the time.
+fn closing_line(
+    s: &mut String,
+    certified: bool,
+    evaluations: usize,
+    settings: &CheckSettings,
+    exhausted: bool,
+    time_s: f64,
+) {
+    let of = settings.max_evaluations.map(|m| format!(" of {m} allowed")).unwrap_or_default();
+    s.push_str(&format!(
+        "certified: {} [{:.1} ms, {evaluations} distance evaluations{of}]\n",
+        if certified { "yes" } else { "no" },
+        time_s * 1e3
+    ));
+    if exhausted {
+        s.push_str(
+            "note: the budget of distance evaluations ran out before the motion was certified \
+             (`--max-evaluations` raises it)\n",
+        );
+    }
 }
 
 fn ok_word(ok: bool) -> &'static str {
@@ -385,7 +432,7 @@ pub fn render_plan(v: &PlanVerification) -> String {
     for c in &v.together {
         render_motion_check(&mut s, c);
     }
-    s.push_str(&format!("certified: {} [{:.1} ms]\n", if v.certified { "yes" } else { "no" }, v.time_s * 1e3));
+    closing_line(&mut s, v.certified, v.distance_evaluations, &v.settings, v.budget_exhausted, v.time_s);
     s
 }
 
@@ -470,6 +517,13 @@ pub struct LogVerification {
     pub agents: Vec<LogAgent>,
     /// Every two robots certified apart, step to step.
     pub robot_robot: Vec<MotionCheck>,
+    /// The settings of the certified check.
+    pub settings: CheckSettings,
+    /// Distance evaluations spent by all the collision checks together (at most
+    /// `settings.max_evaluations`).
+    pub distance_evaluations: usize,
+    /// Whether the budget of distance evaluations ran out (the log is then not certified).
+    pub budget_exhausted: bool,
     /// Wall-clock time of the check, s.
     pub time_s: f64,
 }
@@ -759,12 +813,13 @@ pub fn verify_log_text(
     // Collisions: every robot against the obstacles at their times, every two robots at the
     // same steps.
     let verifier = Verifier::certified(0.0).with_settings(*settings);
+    let mut budget = EvaluationBudget::new(settings.max_evaluations);
     let timeline = ObstacleTimeline::new(scenario, step_s);
     let mut robot_robot = Vec::new();
     for (i, a) in agents.iter().enumerate() {
         for b in &agents[i + 1..] {
             if a.steps == b.steps {
-                robot_robot.push(certify_pair(&motion(a), &motion(b), &verifier));
+                robot_robot.push(certify_pair(&motion(a), &motion(b), &verifier, &mut budget));
             } else {
                 warnings.push(format!(
                     "agents {} and {} are not logged at the same steps: not checked against each other",
@@ -774,7 +829,8 @@ pub fn verify_log_text(
         }
     }
     let collisions: Vec<MotionCheck> =
-        agents.iter().map(|st| certify_environment(&motion(st), &timeline, &verifier)).collect();
+        agents.iter().map(|st| certify_environment(&motion(st), &timeline, &verifier, &mut budget)).collect();
+    let budget_exhausted = collisions.iter().chain(&robot_robot).any(|c| is_spent(c.violation.as_ref()));
     let agents: Vec<LogAgent> = agents
         .into_iter()
         .zip(collisions)
@@ -803,6 +859,9 @@ pub fn verify_log_text(
         warnings,
         agents,
         robot_robot,
+        settings: *settings,
+        distance_evaluations: budget.used,
+        budget_exhausted,
         time_s: start.elapsed().as_secs_f64(),
     })
 }
@@ -857,7 +916,7 @@ pub fn render_log(v: &LogVerification) -> String {
     for c in &v.robot_robot {
         render_motion_check(&mut s, c);
     }
-    s.push_str(&format!("certified: {} [{:.1} ms]\n", if v.certified { "yes" } else { "no" }, v.time_s * 1e3));
+    closing_line(&mut s, v.certified, v.distance_evaluations, &v.settings, v.budget_exhausted, v.time_s);
     s
 }
 
@@ -909,19 +968,24 @@ impl Verification {
     }
 }
 
-/// Check a plan file and/or a run log against a scenario (a built-in name or a file).
-pub fn verify_files(scenario: &str, plan: Option<&Path>, log: Option<&Path>) -> Result<Verification, SystemError> {
+/// Check a plan file and/or a run log against a scenario (a built-in name or a file) with
+/// `settings` (the plan and the log each get the budget of distance evaluations).
+pub fn verify_files(
+    scenario: &str,
+    plan: Option<&Path>,
+    log: Option<&Path>,
+    settings: &CheckSettings,
+) -> Result<Verification, SystemError> {
     if plan.is_none() && log.is_none() {
         return Err(SystemError::Usage("verify: give a plan file, --log FILE.jsonl, or both".into()));
     }
     let scenario = load_scenario(scenario)?;
-    let settings = CheckSettings::default();
     let plan = match plan {
-        Some(p) => Some(verify_plan(&scenario, &read_plan(p)?, p, &settings)?),
+        Some(p) => Some(verify_plan(&scenario, &read_plan(p)?, p, settings)?),
         None => None,
     };
     let log = match log {
-        Some(l) => Some(verify_log(&scenario, l, &settings)?),
+        Some(l) => Some(verify_log(&scenario, l, settings)?),
         None => None,
     };
     let certified = plan.as_ref().is_none_or(|r| r.certified) && log.as_ref().is_none_or(|r| r.certified);

@@ -16,6 +16,7 @@ fn settings(policy: QueuePolicy, us_per_check: f64) -> LoadSettings {
         give_up_ms: 200.0,
         us_per_check,
         parallel: false,
+        planner_threads: true,
         seed: 3,
     }
 }
@@ -50,4 +51,27 @@ fn an_overloaded_queue_halts_agents_instead_of_missing_deadlines_silently() {
     assert_eq!(r.unanswered_without_halt, 0, "{r:?}");
     assert_eq!(r.starved_agents, 0, "{r:?}");
     assert!(r.halts >= r.late, "every late plan starts a halt: {r:?}");
+}
+
+/// Planning on the queue's own threads or inside the steps: the same events and queue figures
+/// (the queue's timeline is simulated), on the rayon pool too.
+#[test]
+fn planner_threads_change_no_figure_but_wall_time() {
+    for parallel in [false, true] {
+        let run = |planner_threads: bool| {
+            let s = LoadSettings { parallel, planner_threads, ..settings(QueuePolicy::EarliestDeadline, 2.0) };
+            run_load(&s).expect("load run")
+        };
+        let (threads, inline) = (run(true), run(false));
+        assert_eq!(threads.planner_threads, 2);
+        assert_eq!(inline.planner_threads, 0);
+        let figures = |r: &embodied_system::load::LoadReport| {
+            (
+                (r.requests, r.landed_in_time, r.landed_late, r.failed, r.late, r.halts, r.goals_reached),
+                (r.min_plans_per_agent, r.max_plans_per_agent, r.queue_planned, r.queue_expired, r.queue_withdrawn),
+                (r.wait_p50_ms, r.wait_p99_ms, r.wait_max_ms, r.max_waiting),
+            )
+        };
+        assert_eq!(figures(&threads), figures(&inline), "parallel {parallel}");
+    }
 }

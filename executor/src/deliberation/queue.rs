@@ -16,9 +16,22 @@
 //! whatever the thread timing, so a run replays bit for bit. Requests made during step `i` are
 //! served from step `i + 1` on, so the order in which agents stepping in parallel ask does not
 //! matter.
+//!
+//! **Where the planners run.** A queue made with [`PlanQueue::new`] runs each planning job on
+//! the thread that serves the queue, which is the control thread (inside a step). One made with
+//! [`PlanQueue::with_worker_threads`] starts `workers` planner threads of its own: a request is
+//! handed to them when it is made, and they plan the waiting requests ahead, in the queue's
+//! order, while the control steps go on; serving the queue then only takes their answers. The
+//! simulated timeline is the same in both (an answer depends only on its request, not on when
+//! or where it was computed), so a run gives the same events, plans and queue figures either
+//! way; only wall-clock figures differ. Should the simulated timeline reach a request the
+//! threads have not finished yet, serving the queue waits for it (counted in
+//! [`QueueStats::worker_waits`]): determinism is kept, at the price of that step's wall time.
 
-use std::sync::{Arc, Mutex};
-use std::time::Instant;
+use std::collections::{HashMap, HashSet};
+use std::sync::{Arc, Condvar, Mutex, MutexGuard, PoisonError};
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
 
 use embodied_planner::request::PlanFailure;
 
@@ -36,13 +49,179 @@ pub enum QueuePolicy {
 /// What a planning job computes: its outcome and the work it took.
 pub(crate) type Work = Box<dyn FnOnce() -> (PlanOutcome, u64) + Send>;
 
+/// Where a waiting request's answer comes from.
+enum Job {
+    /// Computed when it is served, on the serving thread.
+    Inline(Work),
+    /// Handed to the planner threads (the ticket of [`Pool`]).
+    Pooled(u64),
+}
+
 struct Waiting {
     key: usize,
     id: u64,
     submitted: u64,
     deadline: u64,
     give_up: Option<u64>,
+    job: Job,
+}
+
+/// An answer computed by a planner thread.
+struct Computed {
+    outcome: PlanOutcome,
+    work: u64,
+    elapsed: Duration,
+}
+
+/// A job waiting for a planner thread, with the queue's order.
+struct Pending {
+    ticket: u64,
+    order: (u64, u64, usize, u64),
     work: Work,
+}
+
+#[derive(Default)]
+struct PoolState {
+    pending: Vec<Pending>,
+    results: HashMap<u64, Computed>,
+    /// Tickets whose answer is no longer wanted (withdrawn or given up while running).
+    dropped: HashSet<u64>,
+    /// A ticket the queue is waiting for: planned next.
+    urgent: Option<u64>,
+    shutdown: bool,
+}
+
+struct PoolShared {
+    state: Mutex<PoolState>,
+    /// A job was added (or the pool shuts down).
+    work: Condvar,
+    /// An answer is ready.
+    done: Condvar,
+}
+
+impl PoolShared {
+    fn lock(&self) -> MutexGuard<'_, PoolState> {
+        self.state.lock().unwrap_or_else(PoisonError::into_inner)
+    }
+}
+
+/// Planner threads that compute the queue's jobs ahead of the simulated timeline.
+struct Pool {
+    shared: Arc<PoolShared>,
+    threads: Vec<JoinHandle<()>>,
+    next_ticket: u64,
+}
+
+impl Pool {
+    fn new(workers: usize) -> Self {
+        let shared = Arc::new(PoolShared {
+            state: Mutex::new(PoolState::default()),
+            work: Condvar::new(),
+            done: Condvar::new(),
+        });
+        let threads = (0..workers.max(1))
+            .filter_map(|k| {
+                let shared = shared.clone();
+                std::thread::Builder::new().name(format!("planner-{k}")).spawn(move || serve(&shared)).ok()
+            })
+            .collect();
+        Self { shared, threads, next_ticket: 0 }
+    }
+
+    fn add(&mut self, order: (u64, u64, usize, u64), work: Work) -> u64 {
+        let ticket = self.next_ticket;
+        self.next_ticket += 1;
+        self.shared.lock().pending.push(Pending { ticket, order, work });
+        self.shared.work.notify_one();
+        ticket
+    }
+
+    /// The answer of `ticket`, waiting for it if a thread has not computed it yet (and whether
+    /// it had to wait). Without planner threads (none could be started) the job is computed
+    /// here.
+    fn wait_for(&self, ticket: u64) -> (Computed, bool) {
+        let mut state = self.shared.lock();
+        let mut waited = false;
+        loop {
+            if let Some(c) = state.results.remove(&ticket) {
+                return (c, waited);
+            }
+            if let Some(k) = state.pending.iter().position(|p| p.ticket == ticket) {
+                if self.threads.is_empty() {
+                    let job = state.pending.swap_remove(k);
+                    drop(state);
+                    return (compute(job.work), false);
+                }
+                state.urgent = Some(ticket);
+                self.shared.work.notify_one();
+            }
+            waited = true;
+            state = self.shared.done.wait(state).unwrap_or_else(PoisonError::into_inner);
+        }
+    }
+
+    /// `ticket`'s answer is not wanted: not computed if it still waits, dropped if it comes.
+    fn discard(&self, ticket: u64) {
+        let mut state = self.shared.lock();
+        let before = state.pending.len();
+        state.pending.retain(|p| p.ticket != ticket);
+        if state.pending.len() == before && state.results.remove(&ticket).is_none() {
+            state.dropped.insert(ticket);
+        }
+    }
+}
+
+impl Drop for Pool {
+    fn drop(&mut self) {
+        {
+            let mut state = self.shared.lock();
+            state.shutdown = true;
+            state.pending.clear();
+        }
+        self.shared.work.notify_all();
+        for t in self.threads.drain(..) {
+            let _ = t.join();
+        }
+    }
+}
+
+/// Run one job, a panic caught as an outcome (the jobs catch their planner's panics already).
+fn compute(work: Work) -> Computed {
+    let started = Instant::now();
+    let (outcome, work) = std::panic::catch_unwind(std::panic::AssertUnwindSafe(work))
+        .unwrap_or_else(|_| (PlanOutcome::Panicked("planning job panicked".into()), 0));
+    Computed { outcome, work, elapsed: started.elapsed() }
+}
+
+/// A planner thread: the urgent job first, else the first in the queue's order.
+fn serve(shared: &PoolShared) {
+    loop {
+        let job = {
+            let mut state = shared.lock();
+            loop {
+                if state.shutdown {
+                    return;
+                }
+                let urgent = state.urgent.and_then(|t| state.pending.iter().position(|p| p.ticket == t));
+                let next =
+                    urgent.or_else(|| state.pending.iter().enumerate().min_by_key(|(_, p)| p.order).map(|(k, _)| k));
+                if let Some(k) = next {
+                    if urgent.is_some() {
+                        state.urgent = None;
+                    }
+                    break state.pending.swap_remove(k);
+                }
+                state = shared.work.wait(state).unwrap_or_else(PoisonError::into_inner);
+            }
+        };
+        let computed = compute(job.work);
+        let mut state = shared.lock();
+        if !state.dropped.remove(&job.ticket) {
+            state.results.insert(job.ticket, computed);
+        }
+        drop(state);
+        shared.done.notify_all();
+    }
 }
 
 /// A result waiting to land.
@@ -75,8 +254,16 @@ pub struct QueueStats {
     pub waits: Vec<u64>,
     /// Most requests waiting at once.
     pub max_waiting: usize,
-    /// Wall-clock time spent planning, s.
+    /// Wall-clock time spent planning, s (on the planner threads, with
+    /// [`PlanQueue::with_worker_threads`]; else on the thread that served the queue).
     pub planning_wall_s: f64,
+    /// Planner threads (0: the jobs run on the thread that serves the queue).
+    pub worker_threads: usize,
+    /// Answers the simulated timeline reached before a planner thread had computed them: the
+    /// serving thread waited.
+    pub worker_waits: u64,
+    /// Wall-clock time the serving thread waited for planner threads, s.
+    pub worker_wait_wall_s: f64,
 }
 
 impl QueueStats {
@@ -102,6 +289,8 @@ pub struct PlanQueue {
     waiting: Vec<Waiting>,
     finished: Vec<Finished>,
     stats: QueueStats,
+    /// Planner threads, if the queue has its own.
+    pool: Option<Pool>,
 }
 
 /// A queue shared by the deliberators of many agents.
@@ -124,7 +313,18 @@ impl PlanQueue {
             waiting: Vec::new(),
             finished: Vec::new(),
             stats: QueueStats::default(),
+            pool: None,
         }
+    }
+
+    /// The same queue with `workers` planner threads of its own (as many as the simulated
+    /// workers): requests are planned on them, ahead of the simulated timeline, and serving
+    /// the queue only collects their answers (see the [module documentation](self)).
+    pub fn with_worker_threads(mut self) -> Self {
+        let pool = Pool::new(self.free_at.len());
+        self.stats.worker_threads = pool.threads.len();
+        self.pool = Some(pool);
+        self
     }
 
     /// The queue, shareable.
@@ -152,17 +352,29 @@ impl PlanQueue {
         work: Work,
     ) {
         self.stats.requests += 1;
-        self.waiting.push(Waiting { key, id, submitted, deadline, give_up, work });
+        let job = match &mut self.pool {
+            Some(pool) => {
+                let order = match self.policy {
+                    QueuePolicy::EarliestDeadline => (deadline, submitted, key, id),
+                    QueuePolicy::Fifo => (submitted, 0, key, id),
+                };
+                Job::Pooled(pool.add(order, work))
+            }
+            None => Job::Inline(work),
+        };
+        self.waiting.push(Waiting { key, id, submitted, deadline, give_up, job });
         self.stats.max_waiting = self.stats.max_waiting.max(self.waiting.len());
     }
 
     /// Withdraw agent `key`'s request `id` (superseded): not planned if it still waits, never
     /// delivered if it is done.
     pub(crate) fn withdraw(&mut self, key: usize, id: u64) {
-        let before = self.waiting.len();
-        self.waiting.retain(|w| !(w.key == key && w.id == id));
-        if self.waiting.len() < before {
+        if let Some(k) = self.waiting.iter().position(|w| w.key == key && w.id == id) {
+            let w = self.waiting.swap_remove(k);
             self.stats.withdrawn += 1;
+            if let (Job::Pooled(ticket), Some(pool)) = (w.job, &self.pool) {
+                pool.discard(ticket);
+            }
         }
         self.finished.retain(|f| !(f.key == key && f.id == id));
     }
@@ -201,6 +413,9 @@ impl PlanQueue {
                 && now >= job.submitted + g
             {
                 // Waited until its give-up step: never planned, the worker stays free.
+                if let (Job::Pooled(ticket), Some(pool)) = (&job.job, &self.pool) {
+                    pool.discard(*ticket);
+                }
                 let done_at = job.submitted + g;
                 answer(&mut self.stats, done_at);
                 self.stats.expired += 1;
@@ -217,9 +432,24 @@ impl PlanQueue {
                 });
                 continue;
             }
-            let started = Instant::now();
-            let (mut outcome, mut work) = (job.work)();
-            let elapsed = started.elapsed();
+            let computed = match (job.job, &self.pool) {
+                (Job::Pooled(ticket), Some(pool)) => {
+                    let started = Instant::now();
+                    let (c, waited) = pool.wait_for(ticket);
+                    if waited {
+                        self.stats.worker_waits += 1;
+                        self.stats.worker_wait_wall_s += started.elapsed().as_secs_f64();
+                    }
+                    c
+                }
+                (Job::Inline(work), _) => compute(work),
+                (Job::Pooled(_), None) => Computed {
+                    outcome: PlanOutcome::Failed(PlanFailure::Error("planning job without planner threads".into())),
+                    work: 0,
+                    elapsed: Duration::ZERO,
+                },
+            };
+            let Computed { mut outcome, mut work, elapsed } = computed;
             self.stats.planning_wall_s += elapsed.as_secs_f64();
             self.stats.planned += 1;
             let latency = self.fixed_steps.saturating_add((work as f64 * self.steps_per_unit).ceil() as u64).max(1);
@@ -283,6 +513,38 @@ mod tests {
         let s = q.stats();
         assert_eq!((s.requests, s.planned, s.expired, s.answered_in_time, s.answered_late), (3, 3, 1, 3, 0));
         assert_eq!(s.waits, vec![1, 11, 15]);
+    }
+
+    /// Planner threads compute the same answers at the same simulated steps; withdrawn and
+    /// given-up requests are never delivered.
+    #[test]
+    fn planner_threads_serve_the_same_timeline() {
+        let run = |threads: bool| {
+            let clock = PlanClock::Simulated { steps_per_unit: 1.0, fixed_steps: 0 };
+            let mut q = PlanQueue::new(2, QueuePolicy::EarliestDeadline, clock);
+            if threads {
+                q = q.with_worker_threads();
+            }
+            for key in 0..12u64 {
+                let give_up = if key % 5 == 4 { Some(12) } else { None };
+                q.submit(key as usize, 1, key / 3, 30 + (key * 7) % 11, give_up, job(3 + key % 4));
+            }
+            q.withdraw(3, 1);
+            let mut answers = Vec::new();
+            for step in 0..80 {
+                for key in 0..12 {
+                    if let Some(f) = q.take(key, 1, step) {
+                        let failed = matches!(f.outcome, PlanOutcome::Failed(_));
+                        answers.push((key, f.done_at, f.work, failed));
+                    }
+                }
+            }
+            let s = q.stats().clone();
+            (answers, s.planned, s.expired, s.withdrawn, s.waits, s.answered_in_time, s.answered_late)
+        };
+        let inline = run(false);
+        assert_eq!(inline.0.len(), 11, "{:?}", inline.0);
+        assert_eq!(run(true), inline);
     }
 
     #[test]

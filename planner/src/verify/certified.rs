@@ -42,6 +42,7 @@
 
 use std::time::Instant;
 
+use super::EvaluationBudget;
 use super::finding::Finding;
 use super::report::{CheckSettings, ClosureReport, CollisionReport};
 use crate::carry::ClosedChainSpan;
@@ -243,10 +244,25 @@ struct Walk<'a> {
     tolerance: f64,
     report: CollisionReport,
     scratch: Vec<f64>,
+    /// The verification's evaluations left.
+    budget: &'a mut EvaluationBudget,
+    /// The segment being checked: its index and its end times.
+    segment: (usize, f64, f64),
 }
 
 impl Walk<'_> {
-    fn eval(&mut self, q: &[f64]) -> Eval {
+    fn eval(&mut self, q: &[f64]) -> Result<Eval, Box<Finding>> {
+        if !self.budget.allows() {
+            let (segment, t_from, t_to) = self.segment;
+            return Err(Box::new(Finding::BudgetExhausted {
+                budget: self.budget.limit.unwrap_or(usize::MAX),
+                segment,
+                t_from,
+                t_to,
+                agent: String::new(),
+            }));
+        }
+        self.budget.used += 1;
         self.report.distance_evaluations += 1;
         let mut e = self.pairs.eval(self.model.robot(), q, self.settings.exact_within);
         if e.min < self.report.min_clearance_m {
@@ -259,7 +275,12 @@ impl Walk<'_> {
             e.d.iter_mut().for_each(|d| *d -= self.tolerance);
             e.min -= self.tolerance;
         }
-        e
+        Ok(e)
+    }
+
+    /// Make segment `k` (samples `k` to `k + 1`, or the single sample) the one being checked.
+    fn at_segment(&mut self, t: &[f64], k: usize) {
+        self.segment = (k, t[k], t[(k + 1).min(t.len() - 1)]);
     }
 
     fn collision(&self, t: f64, q: &[f64], e: &Eval) -> Option<Box<Finding>> {
@@ -278,7 +299,8 @@ impl Walk<'_> {
     /// Certify samples `i0..=i1` of the trajectory (one model throughout).
     fn run(&mut self, t: &[f64], q: &[Vec<f64>], i0: usize, i1: usize) -> Result<(), Box<Finding>> {
         let mut anchor = i0;
-        let mut da = self.eval(&q[i0]);
+        self.at_segment(t, i0);
+        let mut da = self.eval(&q[i0])?;
         if let Some(f) = self.collision(t[i0], &q[i0], &da) {
             return Err(f);
         }
@@ -286,6 +308,7 @@ impl Walk<'_> {
         let mut seg = Vec::new();
         let mut k = i0;
         while k < i1 {
+            self.at_segment(t, k);
             self.pairs.travel(self.model, &q[k], &q[k + 1], &mut seg);
             let mut lowest = f64::INFINITY;
             let mut ok = true;
@@ -308,7 +331,7 @@ impl Walk<'_> {
             }
             if anchor != k {
                 anchor = k;
-                da = self.eval(&q[k]);
+                da = self.eval(&q[k])?;
                 if let Some(f) = self.collision(t[k], &q[k], &da) {
                     return Err(f);
                 }
@@ -316,7 +339,7 @@ impl Walk<'_> {
                 continue;
             }
             // One end does not cover the segment: measure the other end and bisect.
-            let db = self.eval(&q[k + 1]);
+            let db = self.eval(&q[k + 1])?;
             if let Some(f) = self.collision(t[k + 1], &q[k + 1], &db) {
                 return Err(f);
             }
@@ -382,7 +405,7 @@ impl Walk<'_> {
         self.report.subdivisions += 1;
         let qm = self.pairs.space.interpolate(qa, qb, 0.5);
         let tm = 0.5 * (ta + tb);
-        let dm = self.eval(&qm);
+        let dm = self.eval(&qm)?;
         if let Some(f) = self.collision(tm, &qm, &dm) {
             return Err(f);
         }
@@ -446,6 +469,7 @@ pub(crate) fn certify_collisions(
     spans: &[ClosedChainSpan],
     settings: &CheckSettings,
     tolerance: f64,
+    budget: &mut EvaluationBudget,
 ) -> CollisionReport {
     let start = Instant::now();
     let n = traj.t.len();
@@ -477,7 +501,16 @@ pub(crate) fn certify_collisions(
     };
     let mut result = Ok(());
     if n == 1 {
-        let mut walk = Walk { model, pairs: plain, settings, tolerance, report, scratch: Vec::new() };
+        let mut walk = Walk {
+            model,
+            pairs: plain,
+            settings,
+            tolerance,
+            report,
+            scratch: Vec::new(),
+            budget,
+            segment: (0, 0.0, 0.0),
+        };
         result = walk.run(&traj.t, &traj.q, 0, 0);
         report = walk.report;
     } else {
@@ -494,7 +527,16 @@ pub(crate) fn certify_collisions(
             } else {
                 (&models[id], Pairs::new(&models[id]))
             };
-            let mut walk = Walk { model: m, pairs, settings, tolerance, report, scratch: Vec::new() };
+            let mut walk = Walk {
+                model: m,
+                pairs,
+                settings,
+                tolerance,
+                report,
+                scratch: Vec::new(),
+                budget: &mut *budget,
+                segment: (i, 0.0, 0.0),
+            };
             result = walk.run(&traj.t, &traj.q, i, j);
             report = walk.report;
             if id == usize::MAX {
@@ -640,6 +682,26 @@ mod tests {
                     &[],
                     &CheckSettings::default(),
                     0.0,
+                    &mut EvaluationBudget::new(None),
+                );
+                // A budget of what it spent changes nothing; one less, and it is not certified.
+                let with_budget = |limit: usize| {
+                    certify_collisions(
+                        &model,
+                        &two_samples(&robot, qa.clone(), qb.clone()),
+                        &[],
+                        &CheckSettings::default(),
+                        0.0,
+                        &mut EvaluationBudget::new(Some(limit)),
+                    )
+                };
+                let same = with_budget(r.distance_evaluations);
+                assert_eq!((same.ok, &same.violation), (r.ok, &r.violation), "{name}");
+                let short = with_budget(r.distance_evaluations - 1);
+                assert!(
+                    !short.ok && matches!(short.violation, Some(Finding::BudgetExhausted { .. })),
+                    "{name}: {:?}",
+                    short.violation
                 );
                 match &r.violation {
                     None => {

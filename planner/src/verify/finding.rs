@@ -131,6 +131,21 @@ pub enum Finding {
         /// Why the piece could not be certified.
         reason: String,
     },
+    /// The verification's budget of distance evaluations
+    /// ([`super::CheckSettings::max_evaluations`]) was spent before the motion was certified:
+    /// from this segment on nothing is certified (not free, not in collision: unknown).
+    BudgetExhausted {
+        /// The budget, distance evaluations.
+        budget: usize,
+        /// The segment (from sample `segment` to `segment + 1`) being checked when it ran out.
+        segment: usize,
+        /// Start of that segment, s (the path parameter for a path).
+        t_from: f64,
+        /// End of that segment, s (the path parameter for a path).
+        t_to: f64,
+        /// The agent whose motion it is (empty where the checker does not know it).
+        agent: String,
+    },
     /// The pose of the second tool frame relative to the first drifted from its value at the
     /// start of the closed-chain span.
     ClosureDrift {
@@ -182,6 +197,14 @@ impl std::fmt::Display for Finding {
                  clearance {clearance_m:.3e} m at q = {}",
                 fmt_q(q_from)
             ),
+            Finding::BudgetExhausted { budget, segment, t_from, t_to, agent } => {
+                let of = if agent.is_empty() { String::new() } else { format!(" of agent {agent}") };
+                write!(
+                    f,
+                    "not certified: budget of {budget} distance evaluations exhausted at segment {segment}{of} \
+                     (t = {t_from:.4}..{t_to:.4} s)"
+                )
+            }
             Finding::ClosureDrift { t, span, position_error_m, angle_error_rad, tolerance_m, tolerance_rad } => {
                 write!(
                     f,
@@ -213,7 +236,28 @@ impl Finding {
             | Finding::Collision { t, .. }
             | Finding::TooClose { t, .. }
             | Finding::ClosureDrift { t, .. } => Some(*t),
-            Finding::NotCertified { t_from, .. } => Some(*t_from),
+            Finding::NotCertified { t_from, .. } | Finding::BudgetExhausted { t_from, .. } => Some(*t_from),
+        }
+    }
+
+    /// The same finding naming `agent` as the one whose motion it is (a spent budget).
+    pub fn of_agent(self, agent: &str) -> Finding {
+        match self {
+            Finding::BudgetExhausted { budget, segment, t_from, t_to, .. } => {
+                Finding::BudgetExhausted { budget, segment, t_from, t_to, agent: agent.to_string() }
+            }
+            other => other,
+        }
+    }
+
+    /// The same finding with its segment index moved on by `offset` samples (a check of a
+    /// window of a longer motion).
+    pub fn shifted(self, offset: usize) -> Finding {
+        match self {
+            Finding::BudgetExhausted { budget, segment, t_from, t_to, agent } => {
+                Finding::BudgetExhausted { budget, segment: segment + offset, t_from, t_to, agent }
+            }
+            other => other,
         }
     }
 }

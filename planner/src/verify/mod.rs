@@ -41,6 +41,29 @@ use crate::trajectory::Trajectory;
 /// default [`CheckSettings::limit_tolerance`].
 pub const LIMIT_TOLERANCE: f64 = 1e-6;
 
+/// The distance evaluations one verification may still spend
+/// ([`CheckSettings::max_evaluations`]), shared by all its collision checks: a check that finds
+/// it spent reports [`Finding::BudgetExhausted`] and certifies nothing further.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+pub struct EvaluationBudget {
+    /// The budget (`None`: no limit).
+    pub limit: Option<usize>,
+    /// Evaluations spent so far.
+    pub used: usize,
+}
+
+impl EvaluationBudget {
+    /// A budget of `limit` evaluations (`None`: no limit), none spent.
+    pub fn new(limit: Option<usize>) -> Self {
+        Self { limit, used: 0 }
+    }
+
+    /// Whether another evaluation may be spent.
+    pub fn allows(&self) -> bool {
+        self.limit.is_none_or(|l| self.used < l)
+    }
+}
+
 /// How the [`Verifier`] checks that the path between samples is free.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 #[serde(tag = "mode", rename_all = "snake_case")]
@@ -108,6 +131,19 @@ impl Verifier {
         traj: &Trajectory,
         spans: &[ClosedChainSpan],
     ) -> TrajectoryReport {
+        let mut budget = EvaluationBudget::new(self.settings.max_evaluations);
+        self.check_trajectory_within(model, traj, spans, &mut budget)
+    }
+
+    /// [`Verifier::check_trajectory`] spending distance evaluations from `budget` (shared with
+    /// other checks of the same verification) instead of a budget of its own.
+    pub fn check_trajectory_within(
+        &self,
+        model: &CollisionModel,
+        traj: &Trajectory,
+        spans: &[ClosedChainSpan],
+        budget: &mut EvaluationBudget,
+    ) -> TrajectoryReport {
         let robot = model.robot();
         let samples = traj.t.len();
         if let Err(message) = well_formed(robot, traj) {
@@ -118,7 +154,7 @@ impl Verifier {
             limits.push(traj.t[k], &traj.q[k], &traj.qd[k]);
         }
         let limits = limits.report();
-        let collision = self.check_collisions(model, traj, spans);
+        let collision = self.check_collisions_within(model, traj, spans, budget);
         let closure = certified::check_closure(robot, traj, spans);
         TrajectoryReport {
             certified: limits.ok && collision.ok && closure.ok,
@@ -138,10 +174,23 @@ impl Verifier {
         traj: &Trajectory,
         spans: &[ClosedChainSpan],
     ) -> CollisionReport {
+        let mut budget = EvaluationBudget::new(self.settings.max_evaluations);
+        self.check_collisions_within(model, traj, spans, &mut budget)
+    }
+
+    /// [`Verifier::check_collisions`] spending distance evaluations from `budget` (the
+    /// certified mode; the sampled mode measures no distances and spends none).
+    pub fn check_collisions_within(
+        &self,
+        model: &CollisionModel,
+        traj: &Trajectory,
+        spans: &[ClosedChainSpan],
+        budget: &mut EvaluationBudget,
+    ) -> CollisionReport {
         match self.mode {
             Mode::Sampled { resolution } => sampled::sample_collisions(model, traj, spans, resolution),
             Mode::Certified { tolerance } => {
-                certified::certify_collisions(model, traj, spans, &self.settings, tolerance.max(0.0))
+                certified::certify_collisions(model, traj, spans, &self.settings, tolerance.max(0.0), budget)
             }
         }
     }

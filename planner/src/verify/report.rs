@@ -18,6 +18,10 @@ pub struct CheckSettings {
     pub max_depth: u32,
     /// Largest number of distance evaluations spent bisecting one segment.
     pub max_evaluations_per_segment: usize,
+    /// Largest number of distance evaluations of one verification, every collision check of it
+    /// together (`None`: no limit). Once they are spent, the rest of the motion is not
+    /// certified ([`Finding::BudgetExhausted`]): a spent budget never counts as free.
+    pub max_evaluations: Option<usize>,
 }
 
 impl Default for CheckSettings {
@@ -28,6 +32,7 @@ impl Default for CheckSettings {
             exact_within: 0.2,
             max_depth: 30,
             max_evaluations_per_segment: 20_000,
+            max_evaluations: None,
         }
     }
 }

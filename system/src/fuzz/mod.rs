@@ -261,6 +261,16 @@ pub fn file_name(loader: &str, i: u64) -> String {
     format!("fuzz-{loader}-{i}.{ext}")
 }
 
+/// The distance evaluations one `plan`, `trajectory` or `log` input's collision checks may spend
+/// in all: the fixture's own plan and log need far fewer, and a few thousand evaluations of the
+/// Polycrank's pairs take tens of milliseconds, so no input comes near 1 s. An input that
+/// spends it is not certified (never free).
+pub const FUZZ_MAX_EVALUATIONS: usize = 2_000;
+
+fn fuzz_check_settings() -> CheckSettings {
+    CheckSettings { max_evaluations: Some(FUZZ_MAX_EVALUATIONS), ..CheckSettings::default() }
+}
+
 /// Feed one input to `loader`: `Ok` if it was accepted, else the error's text.
 pub fn load(fx: &Fixture, loader: &str, bytes: &[u8], file: &Path) -> Result<(), String> {
     let text = || std::str::from_utf8(bytes).map_err(|e| format!("{}: not UTF-8 text: {e}", file.display()));
@@ -317,7 +327,7 @@ pub fn load(fx: &Fixture, loader: &str, bytes: &[u8], file: &Path) -> Result<(),
         }
         "plan" => {
             let plan = crate::plan::parse_plan(text()?, file).map_err(|e| err(&e))?;
-            crate::verify::verify_plan(&fx.scenario, &plan, file, &CheckSettings::default())
+            crate::verify::verify_plan(&fx.scenario, &plan, file, &fuzz_check_settings())
                 .map(|_| ())
                 .map_err(|e| err(&e))
         }
@@ -331,11 +341,9 @@ pub fn load(fx: &Fixture, loader: &str, bytes: &[u8], file: &Path) -> Result<(),
                 file,
             )
             .map_err(|e| err(&e))?;
-            let report = embodied_planner::verify::Verifier::default().check_trajectory(
-                &problem.model,
-                &problem.trajectory,
-                &[],
-            );
+            let report = embodied_planner::verify::Verifier::default()
+                .with_settings(fuzz_check_settings())
+                .check_trajectory(&problem.model, &problem.trajectory, &[]);
             let _ = report.certified;
             Ok(())
         }
@@ -344,7 +352,7 @@ pub fn load(fx: &Fixture, loader: &str, bytes: &[u8], file: &Path) -> Result<(),
             for (n, line) in text.lines().enumerate() {
                 let _ = crate::log::parse_log_line(line, file, n + 1);
             }
-            crate::verify::verify_log_text(&fx.scenario, text, file, &CheckSettings::default())
+            crate::verify::verify_log_text(&fx.scenario, text, file, &fuzz_check_settings())
                 .map(|_| ())
                 .map_err(|e| err(&e))
         }
