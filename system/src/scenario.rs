@@ -684,6 +684,13 @@ impl ScenarioBuilder {
         self
     }
 
+    /// A polishing job (the `[polish]` table): a raster over the workpiece's top face under a
+    /// regulated contact force, see [`PolishSpec::new`].
+    pub fn polish(mut self, polish: PolishSpec) -> Self {
+        self.scenario.polish = Some(polish);
+        self
+    }
+
     /// Check and return the scenario: at least one agent, unique names, start and goals
     /// within the robots' limits, positive sizes and finite numbers.
     pub fn build(self) -> Result<Scenario, SystemError> {
@@ -771,6 +778,11 @@ impl ScenarioBuilder {
             if !c.size.iter().all(|v| v.is_finite() && *v > 0.0) {
                 return Err(bad(format!("carry: size: expected three positive lengths in m, got {:?}", c.size)));
             }
+        }
+        if let Some(p) = &s.polish
+            && let Some((_, m)) = p.problem(&s.agents, &s.obstacles)
+        {
+            return Err(bad(format!("polish: {m}")));
         }
         s.hash = sha256_hex(&format!(
             "{}\n{}\n{:?}",
@@ -1375,18 +1387,6 @@ fn parse_polish(
         let names: Vec<&str> = agents.iter().map(|a| a.name.as_str()).collect();
         ctx.err(p.agent.span(), format!("polish: no agent `{}`; expected one of {names:?}", p.agent.get_ref()))
     })?;
-    if agents[agent].goal.is_some() {
-        return Err(ctx.err(
-            p.agent.span(),
-            format!(
-                "polish: agent `{}` has a goal; the polishing job decides its motion, remove it",
-                p.agent.get_ref()
-            ),
-        ));
-    }
-    if agents[agent].robot.end_effectors().is_empty() {
-        return Err(ctx.err(p.agent.span(), format!("polish: agent `{}` has no end effector", p.agent.get_ref())));
-    }
     let workpiece = obstacles.iter().position(|o| o.obstacle.name == *p.workpiece.get_ref()).ok_or_else(|| {
         let names: Vec<&str> = obstacles.iter().map(|o| o.obstacle.name.as_str()).collect();
         ctx.err(
@@ -1394,37 +1394,96 @@ fn parse_polish(
             format!("polish: no obstacle `{}`; expected one of {names:?}", p.workpiece.get_ref()),
         )
     })?;
-    let o = &obstacles[workpiece];
-    let axis_aligned = o.obstacle.pose.rotation.angle() < 1e-9;
-    if !(axis_aligned && o.on_map() && matches!(o.obstacle.shape, Shape::Cuboid { .. })) {
-        return Err(ctx.err(
-            p.workpiece.span(),
-            format!("polish: workpiece `{}`: expected a still box without rotation (rpy = 0)", p.workpiece.get_ref()),
-        ));
-    }
-    let number = |v: &Option<Spanned<f64>>, default: f64, lo: f64, hi: f64, what: &str, unit: &str| match v {
-        None => Ok(default),
-        Some(x) if x.get_ref().is_finite() && (lo..=hi).contains(x.get_ref()) => Ok(*x.get_ref()),
-        Some(x) => Err(ctx.err(x.span(), format!("polish: {what}: expected {lo}..{hi} {unit}, got {}", x.get_ref()))),
+    let value = |v: &Option<Spanned<f64>>, default: f64| v.as_ref().map_or(default, |x| *x.get_ref());
+    let d = PolishSpec::new(agent, workpiece);
+    let spec = PolishSpec {
+        force_n: value(&p.force_n, d.force_n),
+        band_n: value(&p.band_n, d.band_n),
+        tool_radius: value(&p.tool_radius, d.tool_radius),
+        speed: value(&p.speed, d.speed),
+        skin: p.skin_mm.as_ref().map_or(d.skin, |x| *x.get_ref() * 1e-3),
+        ..d
     };
-    let force_n = number(&p.force_n, 20.0, 0.5, 500.0, "force_n", "N")?;
-    let band_n = number(&p.band_n, 5.0, 0.1, 100.0, "band_n", "N")?;
-    let tool_radius = number(&p.tool_radius, 0.05, 0.005, 0.5, "tool_radius", "m")?;
-    let speed = number(&p.speed, 0.1, 0.005, 1.0, "speed", "m/s")?;
-    let skin = number(&p.skin_mm, 5.0, 0.5, 50.0, "skin_mm", "mm")? * 1e-3;
-    if let Some(limit) = agents[agent].behaviour.force_limit
-        && limit <= force_n + band_n
-    {
-        return Err(ctx.err(
-            spanned.span(),
-            format!(
-                "polish: force_n + band_n ({} N) must stay below agent `{}`'s force_limit ({limit} N)",
-                force_n + band_n,
-                p.agent.get_ref()
-            ),
-        ));
+    match spec.problem(agents, obstacles) {
+        None => Ok(spec),
+        Some((field, message)) => {
+            let span = match field {
+                PolishField::Agent => Some(p.agent.span()),
+                PolishField::Workpiece => Some(p.workpiece.span()),
+                PolishField::Number("force_n") => p.force_n.as_ref().map(Spanned::span),
+                PolishField::Number("band_n") => p.band_n.as_ref().map(Spanned::span),
+                PolishField::Number("tool_radius") => p.tool_radius.as_ref().map(Spanned::span),
+                PolishField::Number("speed") => p.speed.as_ref().map(Spanned::span),
+                PolishField::Number(_) => p.skin_mm.as_ref().map(Spanned::span),
+                PolishField::Whole => None,
+            };
+            Err(ctx.err(span.unwrap_or_else(|| spanned.span()), format!("polish: {message}")))
+        }
     }
-    Ok(PolishSpec { agent, workpiece, force_n, band_n, tool_radius, speed, skin })
+}
+
+/// The field of a [`PolishSpec`] a problem is about (for the TOML error's place).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum PolishField {
+    Agent,
+    Workpiece,
+    /// A number, by its TOML key.
+    Number(&'static str),
+    Whole,
+}
+
+impl PolishSpec {
+    /// Polishing by agent `agent` on obstacle `workpiece` (indices in the scenario) with the
+    /// defaults of the `[polish]` table: 20 ± 5 N, a 0.05 m pad, 0.1 m/s, a 5 mm pad skin.
+    pub fn new(agent: usize, workpiece: usize) -> Self {
+        Self { agent, workpiece, force_n: 20.0, band_n: 5.0, tool_radius: 0.05, speed: 0.1, skin: 0.005 }
+    }
+
+    /// What is wrong with this job in a scenario with `agents` and `obstacles`, if anything.
+    fn problem(&self, agents: &[AgentSpec], obstacles: &[ObstacleSpec]) -> Option<(PolishField, String)> {
+        let Some(a) = agents.get(self.agent) else {
+            return Some((PolishField::Agent, format!("no agent #{}", self.agent)));
+        };
+        if a.goal.is_some() {
+            let m = format!("agent `{}` has a goal; the polishing job decides its motion, remove it", a.name);
+            return Some((PolishField::Agent, m));
+        }
+        if a.robot.end_effectors().is_empty() {
+            return Some((PolishField::Agent, format!("agent `{}` has no end effector", a.name)));
+        }
+        let Some(o) = obstacles.get(self.workpiece) else {
+            return Some((PolishField::Workpiece, format!("no obstacle #{}", self.workpiece)));
+        };
+        let axis_aligned = o.obstacle.pose.rotation.angle() < 1e-9;
+        if !(axis_aligned && o.on_map() && matches!(o.obstacle.shape, Shape::Cuboid { .. })) {
+            let m = format!("workpiece `{}`: expected a still box without rotation (rpy = 0)", o.obstacle.name);
+            return Some((PolishField::Workpiece, m));
+        }
+        let numbers = [
+            ("force_n", self.force_n, 0.5, 500.0, "N", 1.0),
+            ("band_n", self.band_n, 0.1, 100.0, "N", 1.0),
+            ("tool_radius", self.tool_radius, 0.005, 0.5, "m", 1.0),
+            ("speed", self.speed, 0.005, 1.0, "m/s", 1.0),
+            ("skin_mm", self.skin, 0.5, 50.0, "mm", 1e3),
+        ];
+        for (what, v, lo, hi, unit, scale) in numbers {
+            let v = v * scale;
+            if !(v.is_finite() && (lo..=hi).contains(&v)) {
+                return Some((PolishField::Number(what), format!("{what}: expected {lo}..{hi} {unit}, got {v}")));
+            }
+        }
+        if let Some(limit) = a.behaviour.force_limit
+            && limit <= self.force_n + self.band_n
+        {
+            let m = format!(
+                "force_n + band_n ({} N) must stay below agent `{}`'s force_limit ({limit} N)",
+                self.force_n + self.band_n,
+                a.name
+            );
+            return Some((PolishField::Whole, m));
+        }
+        None
+    }
 }
 
 fn parse_carry(ctx: &Ctx, spanned: &Spanned<RawCarry>, agents: &[AgentSpec]) -> Result<CarrySpec, SystemError> {

@@ -102,3 +102,45 @@ fn the_raster_covers_the_plate_at_the_regulated_force_within_every_limit_and_the
     let v = verify_log(&scenario, &path, &CheckSettings::default()).unwrap();
     assert!(v.certified && v.complete, "{v:?}");
 }
+
+/// The builder makes the same polishing scenario as the `[polish]` table, and refuses a job
+/// the table would refuse, with the same words.
+#[test]
+fn the_builder_gives_the_polishing_scenario_of_the_table() {
+    use embodied_models::collision::Obstacle;
+    use embodied_models::nalgebra::Isometry3;
+    use embodied_models::{Shape, builtin};
+    use embodied_system::scenario::{AgentSpec, PolishSpec, Scenario};
+    let table = load_scenario("rnt-polish-raster").unwrap();
+    let plate = Obstacle::new("plate", Isometry3::translation(1.43, 0.0, 0.25), Shape::cuboid(0.3, 0.5, 0.25));
+    let agent = || {
+        AgentSpec::new("rnt", builtin("rnt").unwrap())
+            .start(vec![-0.37, -1.19, -0.63, 0.0, 0.25, -0.37])
+            .force_limit(60.0)
+    };
+    let job =
+        PolishSpec { force_n: 20.0, band_n: 5.0, tool_radius: 0.06, speed: 0.2, skin: 0.005, ..PolishSpec::new(0, 0) };
+    let built = Scenario::builder("rnt-polish-raster")
+        .agent(agent())
+        .obstacle(plate.clone())
+        .polish(job.clone())
+        .build()
+        .unwrap();
+    assert_eq!(built.polish, table.polish);
+    assert_eq!(format!("{:?}", built.obstacles[0].obstacle.shape), format!("{:?}", table.obstacles[0].obstacle.shape));
+    // The same job through both doors: a force band reaching the force limit is refused.
+    let strong = PolishSpec { force_n: 58.0, ..job.clone() };
+    let err =
+        Scenario::builder("b").agent(agent()).obstacle(plate.clone()).polish(strong).build().unwrap_err().to_string();
+    assert!(err.contains("polish: force_n + band_n (63 N) must stay below agent `rnt`'s force_limit (60 N)"), "{err}");
+    let text = include_str!("../scenarios/rnt-polish-raster.toml").replace("force_n = 20.0", "force_n = 58.0");
+    let err =
+        Scenario::from_toml(&text, std::path::Path::new("p.toml"), std::path::Path::new(".")).unwrap_err().to_string();
+    assert!(err.contains("polish: force_n + band_n (63 N) must stay below agent `rnt`'s force_limit (60 N)"), "{err}");
+    // A workpiece index that names no obstacle, and a pad out of range.
+    let err = Scenario::builder("b").agent(agent()).polish(job.clone()).build().unwrap_err().to_string();
+    assert!(err.contains("polish: no obstacle #0"), "{err}");
+    let wide = PolishSpec { tool_radius: 2.0, ..job };
+    let err = Scenario::builder("b").agent(agent()).obstacle(plate).polish(wide).build().unwrap_err().to_string();
+    assert!(err.contains("polish: tool_radius: expected 0.005..0.5 m, got 2"), "{err}");
+}
