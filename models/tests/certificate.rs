@@ -68,6 +68,7 @@ fn spherized_ur5_takes_the_sphere_path_and_agrees_with_the_general_path() {
             let c = fast.collides(&q);
             assert_eq!(c, general.collides(&q), "seed {seed}, q = {q:?}");
             assert_eq!(c, general.first_collision(&q).is_some());
+            assert_eq!(c, fast.first_collision(&q).is_some(), "seed {seed}, q = {q:?}");
             hits += c as usize;
             n += 1;
         }
