@@ -103,6 +103,8 @@ pub struct RunReport {
     pub deterministic: Option<bool>,
     /// What went wrong, if anything.
     pub problems: Vec<String>,
+    /// Where the run's log was kept when something went wrong (deleted otherwise).
+    pub kept_log: Option<String>,
 }
 
 impl RunReport {
@@ -204,7 +206,8 @@ impl CampaignReport {
         self.longest_halt_s = self.longest_halt_s.max(r.longest_halt_s);
         if r.violated() {
             self.violating_runs += 1;
-            self.violations.push((r.seed, r.problems[0].clone()));
+            let log = r.kept_log.as_ref().map(|p| format!(" (log kept: {p})")).unwrap_or_default();
+            self.violations.push((r.seed, format!("{}{log}", r.problems[0])));
         }
     }
 }
@@ -566,17 +569,19 @@ fn answer(
             } else if answered {
                 return Answer::Answered;
             }
-            // The request was dropped before its answer was due (a sensor fault, the run ended).
+            // The request was dropped before its answer was due (a sensor fault, the effector
+            // off its command, the run ended), or a newer request of the agent replaced it.
             let dropped = mine().any(|(s, _, e)| {
                 *s >= inj.step
-                    && matches!(
+                    && (matches!(
                         e,
                         Event::SensorSilent { .. }
                             | Event::SensorNonFinite
                             | Event::SensorImplausible { .. }
                             | Event::PlanLost { .. }
                             | Event::ForceLimit { .. }
-                    )
+                            | Event::TrackingError { .. }
+                    ) || matches!(e, Event::PlanRequested { id: i, .. } if *i > id))
             });
             if dropped || inj.kind != FaultKind::PlannerLate {
                 // Panics and over-limit plans are answered when the answer lands, which may be
@@ -751,7 +756,6 @@ pub fn run_checked(scenario: &Scenario, seed: u64, dir: &Path, twice: bool) -> R
     } else {
         None
     };
-    let _ = std::fs::remove_file(&path);
     let events = log_events(&bytes);
     let last_step = system.runtime().current_step().saturating_sub(1);
     let deadline_steps = (scenario.planner.deadline_ms / 1e3 / 0.001).ceil() as u64;
@@ -791,6 +795,13 @@ pub fn run_checked(scenario: &Scenario, seed: u64, dir: &Path, twice: bool) -> R
     if deterministic == Some(false) {
         problems.push("the same seed gave other bytes".into());
     }
+    // A run that broke a promise keeps its log, named in the report, for the post-mortem.
+    let kept_log = if problems.is_empty() {
+        let _ = std::fs::remove_file(&path);
+        None
+    } else {
+        Some(path.display().to_string())
+    };
     let outcome = if result.is_err() || summary.failure.is_some() {
         "failed"
     } else if summary.agents.iter().all(|a| a.goal_reached) {
@@ -799,9 +810,6 @@ pub fn run_checked(scenario: &Scenario, seed: u64, dir: &Path, twice: bool) -> R
         "goal_not_reached"
     };
     let halts = events.iter().filter(|(_, _, e)| matches!(e, Event::HaltStarted { .. })).count();
-    let plan_late_halts =
-        events.iter().filter(|(_, _, e)| matches!(e, Event::HaltStarted { reason: HaltReason::PlanLate, .. })).count();
-    let _ = plan_late_halts;
     let stops_blocked = events.iter().filter(|(_, _, e)| matches!(e, Event::StopPathBlocked { .. })).count();
     let longest_halt_s = events
         .iter()
@@ -828,6 +836,7 @@ pub fn run_checked(scenario: &Scenario, seed: u64, dir: &Path, twice: bool) -> R
         log_complete: verification.complete,
         deterministic,
         problems,
+        kept_log,
     })
 }
 

@@ -30,10 +30,11 @@ fn a_run_replays_byte_for_byte() {
 
 /// Seeds whose runs once broke a promise (checker and planner-fault bugs, since fixed): a NaN or
 /// wild reading during a dropout of the same sensor, a late fault on a request whose plan
-/// failed at once.
+/// failed at once, a late fault on a request replaced by a newer one after a tracking-error
+/// halt (4463).
 #[test]
 fn regression_seeds() {
-    for seed in [56, 143, 163, 219, 5169, 5298, 5323, 5431, 5469] {
+    for seed in [56, 143, 163, 219, 4463, 5169, 5298, 5323, 5431, 5469] {
         let r = run_one(seed, &dir(), false).expect("run");
         assert!(r.problems.is_empty(), "seed {seed}: {:?}", r.problems);
     }
