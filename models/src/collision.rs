@@ -654,6 +654,14 @@ pub const CERTIFY_START_MARGIN: f64 = 0.3;
 /// See [`CERTIFY_START_MARGIN`].
 pub const CERTIFY_START_LEVELS: u32 = 4;
 
+/// Most checks one certificate may spend before it gives up and answers "not free" (sound: a
+/// planner only loses a segment it could not prove). A segment that grazes an obstacle over a
+/// long stretch is bisected breadth first down to the tolerance: about twice its travel over
+/// the tolerance in checks (2 m sliding 1e-6 m from a wall at 1e-4: 40,000, each a GJK query),
+/// which made a shortcut pass run for minutes. Free certificates take about 30 checks on the
+/// MotionBenchMaker UR5 problems, the largest problem 2,269 checks in all.
+pub const CERTIFY_MAX_CHECKS: u32 = 4096;
+
 /// Margins of an inflated query: `link[slot]` against obstacles, `pair[p]` for self-collision
 /// pair `p` (the two links together).
 #[derive(Debug, Clone, Copy)]
@@ -1451,6 +1459,10 @@ impl CollisionModel {
         let mut free = true;
         let mut head = 0;
         while head < spans.len() {
+            if checks >= CERTIFY_MAX_CHECKS {
+                free = false;
+                break;
+            }
             let Span { t0, t1, within } = spans[head];
             head += 1;
             let half = 0.5 * (t1 - t0);

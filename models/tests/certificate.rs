@@ -599,3 +599,39 @@ fn certificate_is_sound_under_dense_sampling_on_sphere_robots() {
         assert!(certified > 20 && refused > 5, "robot {which}: {certified} certified, {refused} refused");
     }
 }
+
+/// A box sliding 2 m along a wall 1e-6 m away grazes it the whole way: the certificate gives up
+/// after [`CERTIFY_MAX_CHECKS`] checks and says "not free" (never "free"), instead of bisecting
+/// the whole slide down to the tolerance.
+#[test]
+fn a_long_grazing_slide_is_refused_within_the_check_cap() {
+    use embodied_models::collision::CERTIFY_MAX_CHECKS;
+    let limits = JointLimits::new(-0.1, 2.5, 1.0, 2.0);
+    let mut b = RobotBuilder::new("slider");
+    let base = b.link("base", vec![]);
+    let cart = b.link("cart", vec![PlacedShape::new(Isometry3::identity(), Shape::cuboid(0.05, 0.05, 0.05))]);
+    b.joint(
+        "x",
+        JointKind::Prismatic,
+        base,
+        cart,
+        Isometry3::identity(),
+        Vector3::x(),
+        0.0,
+        Isometry3::identity(),
+        limits,
+    );
+    let robot = b.build().unwrap();
+    let wall = Obstacle::new("wall", Isometry3::translation(1.0, 0.05 + 1e-6 + 0.5, 0.0), Shape::cuboid(2.0, 0.5, 0.5));
+    let model = CollisionModel::new(&robot, Environment::new().with(wall));
+    assert!(!model.collides(&[0.0]) && !model.collides(&[2.0]) && !model.collides(&[1.0]));
+    let mut s = model.scratch();
+    let (free, checks) = model.certify(&[0.0], &[2.0], 1e-4, false, &mut s);
+    assert!(!free);
+    assert_eq!(checks, CERTIFY_MAX_CHECKS, "the slide is refused by the cap, not before");
+    // With room to spare the same slide is certified in a few checks.
+    let far = Obstacle::new("wall", Isometry3::translation(1.0, 0.05 + 0.2 + 0.5, 0.0), Shape::cuboid(2.0, 0.5, 0.5));
+    let model = CollisionModel::new(&robot, Environment::new().with(far));
+    let (free, checks) = model.certify(&[0.0], &[2.0], 1e-4, false, &mut model.scratch());
+    assert!(free && checks < 100, "{free} {checks}");
+}
