@@ -240,6 +240,10 @@ enum Command {
         /// Print one JSON object instead of the table.
         #[arg(long)]
         json: bool,
+        /// Keep every run's log in the folder (`campaign-SEED-PID.jsonl`), not only the logs of
+        /// runs that broke a promise.
+        #[arg(long)]
+        keep_logs: bool,
     },
     /// Feed every file loader structure-aware random inputs (generated documents with the
     /// formats' keys and tags, random values and nesting, cuts and byte edits; edits of
@@ -933,7 +937,7 @@ fn run(cli: Cli) -> Result<(), AppError> {
             out!("{}", String::from_utf8_lossy(&page));
             Ok(())
         }
-        Command::Campaign { runs, seed, determinism_every, dir, json } => {
+        Command::Campaign { runs, seed, determinism_every, dir, json, keep_logs } => {
             // Injected planner panics are caught and answered; only other panics are printed.
             let default_hook = std::panic::take_hook();
             std::panic::set_hook(Box::new(move |info| {
@@ -944,7 +948,8 @@ fn run(cli: Cli) -> Result<(), AppError> {
             }));
             let dir =
                 dir.unwrap_or_else(|| std::env::temp_dir().join(format!("embodied-campaign-{}", std::process::id())));
-            let settings = embodied::campaign::CampaignSettings { runs, seed, determinism_every, dir: dir.clone() };
+            let settings =
+                embodied::campaign::CampaignSettings { runs, seed, determinism_every, dir: dir.clone(), keep_logs };
             // Progress on stderr every 100 runs: runs done, runs that broke a promise (seeds).
             let (mut done, mut bad) = (0usize, Vec::new());
             let report = embodied::campaign::campaign(&settings, |r| {

@@ -518,3 +518,54 @@ fn online_gate_certifies_and_refuses_a_plan_the_sampled_check_passes() {
     let sampled = outcome(Some(Verifier::sampled(0.01)));
     assert!(sampled.iter().any(|(_, e)| e.starts_with("plan_landed id=1")), "{sampled:?}");
 }
+
+/// In simulated time the search is stopped by the collision checks that would put it past its
+/// give-up step: the deliberator hands the planner exactly that many as a check budget (and
+/// none where simulated time does not apply or work costs no time).
+#[test]
+fn simulated_give_up_becomes_a_check_budget() {
+    let seen = Arc::new(std::sync::Mutex::new(Vec::new()));
+    let record = seen.clone();
+    let planner = move |_: &PlanRequest, d: &Deadline| {
+        record.lock().unwrap_or_else(std::sync::PoisonError::into_inner).push(d.check_budget());
+        Err(PlanFailure::Infeasible { work: 0 })
+    };
+    let planner: Arc<dyn MotionPlanner> = Arc::new(planner);
+    let robot = robot();
+    let verifier = PlanVerifier {
+        collision: CollisionModel::new(&robot, Environment::new()),
+        verifier: Default::default(),
+        goal_tolerance: 1e-3,
+    };
+    let cases = [
+        // 5 + ceil(w / 100) > 100 from w = 9,501 on.
+        (PlanClock::Simulated { steps_per_unit: 0.01, fixed_steps: 5 }, Some(100), Some(9_501)),
+        // ceil(w / 3) > 7 from w = 22 on.
+        (PlanClock::Simulated { steps_per_unit: 1.0 / 3.0, fixed_steps: 0 }, Some(7), Some(22)),
+        (PlanClock::Simulated { steps_per_unit: 0.01, fixed_steps: 5 }, None, None),
+        (PlanClock::Simulated { steps_per_unit: 0.0, fixed_steps: 5 }, Some(100), None),
+        (PlanClock::WallClock, Some(100), None),
+    ];
+    for (clock, give_up_steps, _) in cases {
+        let mut deliberator = Deliberator::new(planner.clone(), verifier.clone(), clock);
+        let request = PlanRequest {
+            id: 0,
+            world_version: 0,
+            step: 0,
+            start: START.to_vec(),
+            goal: goal(),
+            dt: 0.001,
+            environment: None,
+            budget: PlanBudget { steps: 10, wall: None, give_up_steps, work: None },
+        };
+        deliberator.request(request);
+        let mut step = 0;
+        while deliberator.poll(step).is_none() {
+            step += 1;
+            std::thread::sleep(std::time::Duration::from_micros(100));
+            assert!(step < 100_000, "{clock:?}: no delivery");
+        }
+    }
+    let seen = seen.lock().unwrap_or_else(std::sync::PoisonError::into_inner).clone();
+    assert_eq!(seen, cases.iter().map(|c| c.2).collect::<Vec<_>>());
+}

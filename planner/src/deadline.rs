@@ -19,6 +19,8 @@ pub enum Interrupt {
     ExpansionBudget,
     /// Another thread raised the cancellation flag.
     Cancelled,
+    /// The collision-check budget was used up.
+    CheckBudget,
 }
 
 /// A limit on deliberation: wall clock, expansion budget, cancellation flag, or none of them.
@@ -30,6 +32,8 @@ pub enum Interrupt {
 pub struct Deadline {
     at: Option<Instant>,
     max_expansions: Option<u64>,
+    /// At most this many collision checks (simulated planning time is counted in them).
+    max_checks: Option<u64>,
     cancel: Option<Arc<AtomicBool>>,
     /// A second flag: a race of planners stops its losers with it, whatever flag the caller
     /// gave.
@@ -61,6 +65,17 @@ impl Deadline {
     #[must_use]
     pub fn and_expansions(mut self, n: u64) -> Self {
         self.max_expansions = Some(self.max_expansions.map_or(n, |m| m.min(n)));
+        self
+    }
+
+    /// Adds (or tightens to) a collision-check budget: the search stops once it has made `n`
+    /// collision checks (a certificate in progress ends first, at most
+    /// `embodied_models::collision::CERTIFY_MAX_CHECKS` checks later). Reproducible on any
+    /// machine; a simulated planning clock, which counts time in collision checks, bounds a
+    /// search's wall time with it.
+    #[must_use]
+    pub fn and_checks(mut self, n: u64) -> Self {
+        self.max_checks = Some(self.max_checks.map_or(n, |m| m.min(n)));
         self
     }
 
@@ -106,9 +121,14 @@ impl Deadline {
         self.max_expansions
     }
 
+    /// The collision-check budget, if any.
+    pub fn check_budget(&self) -> Option<u64> {
+        self.max_checks
+    }
+
     /// True when the search, having expanded `expansions` states, must stop now.
     pub fn is_past(&self, expansions: u64) -> bool {
-        self.check(expansions, true).is_some()
+        self.check(expansions, 0, true).is_some()
     }
 
     /// Time left before the wall-clock deadline (`None` without one, zero once past).
@@ -116,13 +136,17 @@ impl Deadline {
         self.at.map(|at| at.saturating_duration_since(Instant::now()))
     }
 
-    /// The reason to stop, if any. The expansion budget is an integer compare and is always
-    /// checked; the cancellation flag and the clock are checked only when `read_clock` is set,
-    /// so that a hot loop can read `Instant::now()` every few expansions.
+    /// The reason to stop, if any, after `expansions` units of work and `checks` collision
+    /// checks. The budgets are integer compares and are always checked; the cancellation flag
+    /// and the clock are checked only when `read_clock` is set, so that a hot loop can read
+    /// `Instant::now()` every few expansions.
     #[inline]
-    pub(crate) fn check(&self, expansions: u64, read_clock: bool) -> Option<Interrupt> {
+    pub(crate) fn check(&self, expansions: u64, checks: u64, read_clock: bool) -> Option<Interrupt> {
         if self.max_expansions.is_some_and(|max| expansions >= max) {
             return Some(Interrupt::ExpansionBudget);
+        }
+        if self.max_checks.is_some_and(|max| checks >= max) {
+            return Some(Interrupt::CheckBudget);
         }
         if read_clock {
             if self.cancel.as_ref().is_some_and(|flag| flag.load(Ordering::Relaxed))
@@ -145,32 +169,53 @@ impl Deadline {
 }
 
 /// Units of planning work against a [`Deadline`]: samples drawn, tree extensions, A*
-/// expansions. The expansion budget of the deadline bounds this count; the clock and the
-/// cancellation flag are read every few units (a unit costs at most a few collision checks).
+/// expansions. The expansion budget of the deadline bounds this count, its check budget the
+/// collision checks the caller reports with each unit; the clock and the cancellation flag are
+/// read every few units (a unit costs at most a few collision checks, or one certificate).
 pub(crate) struct Budget<'d> {
     deadline: &'d Deadline,
     pub work: u64,
+    /// Collision checks made so far, as last reported to [`Self::spend`].
+    checks: u64,
+    /// `checks` when the clock was last read.
+    checks_at_clock: u64,
     since_clock: u32,
     pub started: Instant,
     /// The limit that stopped planning, once one has.
     stopped: Option<Interrupt>,
 }
 
+/// At most this many collision checks between two reads of the clock (a few hundred µs).
+const CHECKS_PER_CLOCK_READ: u64 = 256;
+
 impl<'d> Budget<'d> {
     pub fn new(deadline: &'d Deadline) -> Self {
-        Self { deadline, work: 0, since_clock: 0, started: Instant::now(), stopped: None }
+        Self {
+            deadline,
+            work: 0,
+            checks: 0,
+            checks_at_clock: 0,
+            since_clock: 0,
+            started: Instant::now(),
+            stopped: None,
+        }
     }
 
-    /// Count `units` of work; true when planning must stop now.
+    /// Count `units` of work, `checks` being the collision checks made so far; true when
+    /// planning must stop now.
     #[inline]
-    pub fn spend(&mut self, units: u64) -> bool {
+    pub fn spend(&mut self, units: u64, checks: u64) -> bool {
         self.work += units;
+        self.checks = self.checks.max(checks);
         self.since_clock += 1;
-        let read_clock = self.since_clock >= 8 && self.deadline.has_clock();
+        // Every 8 units, or sooner after many checks (a unit may be a whole certificate).
+        let read_clock = (self.since_clock >= 8 || self.checks - self.checks_at_clock >= CHECKS_PER_CLOCK_READ)
+            && self.deadline.has_clock();
         if read_clock {
             self.since_clock = 0;
+            self.checks_at_clock = self.checks;
         }
-        match self.deadline.check(self.work, read_clock) {
+        match self.deadline.check(self.work, self.checks, read_clock) {
             Some(cause) => {
                 self.stopped.get_or_insert(cause);
                 true
@@ -179,9 +224,14 @@ impl<'d> Budget<'d> {
         }
     }
 
+    /// Collision checks made so far, as last reported.
+    pub fn checks(&self) -> u64 {
+        self.checks
+    }
+
     /// True when the deadline has passed (reads the clock now).
     pub fn expired(&mut self) -> bool {
-        match self.deadline.check(self.work, true) {
+        match self.deadline.check(self.work, self.checks, true) {
             Some(cause) => {
                 self.stopped.get_or_insert(cause);
                 true
@@ -192,6 +242,6 @@ impl<'d> Budget<'d> {
 
     /// Which limit stopped planning (asked of the deadline now if none has yet).
     pub fn cause(&self) -> Interrupt {
-        self.stopped.or_else(|| self.deadline.check(self.work, true)).unwrap_or(Interrupt::ExpansionBudget)
+        self.stopped.or_else(|| self.deadline.check(self.work, self.checks, true)).unwrap_or(Interrupt::ExpansionBudget)
     }
 }

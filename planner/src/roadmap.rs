@@ -286,7 +286,7 @@ impl Roadmap {
             to_check.sort_by(|a, b| a.0.total_cmp(&b.0));
             let mut all_valid = true;
             for &(_, e) in &to_check {
-                if budget.spend(1) {
+                if budget.spend(1, validity.collision_checks) {
                     return LazyOutcome::Interrupted;
                 }
                 let Some((a, b)) = self.graph.edge_endpoints(e) else { continue };
@@ -347,7 +347,7 @@ impl Roadmap {
             // A* expansions are cheap next to collision checks: count them in bundles.
             if expansions_since == 16 {
                 expansions_since = 0;
-                if budget.spend(16) {
+                if budget.spend(16, budget.checks()) {
                     return Search::Interrupted;
                 }
             }

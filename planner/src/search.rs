@@ -356,7 +356,7 @@ pub fn solve<P: SearchProblem>(problem: &P, deadline: &Deadline) -> SearchReport
         SearchReport { outcome, stats }
     };
 
-    if let Some(cause) = deadline.check(0, true) {
+    if let Some(cause) = deadline.check(0, 0, true) {
         return finish(SearchOutcome::OutOfTime { best: None, cause }, stats);
     }
 
@@ -383,7 +383,7 @@ pub fn solve<P: SearchProblem>(problem: &P, deadline: &Deadline) -> SearchReport
             continue; // stale entry: a cheaper path to this state was found after it was pushed
         }
         let read_clock = watch_clock && stats.expansions % CLOCK_CHECK_INTERVAL == 0;
-        if let Some(cause) = deadline.check(stats.expansions, read_clock) {
+        if let Some(cause) = deadline.check(stats.expansions, 0, read_clock) {
             let best_so_far =
                 best.map(|b| PartialPlan { plan: path_to(&nodes, b), remaining_estimate: nodes[b].h.get() });
             return finish(SearchOutcome::OutOfTime { best: best_so_far, cause }, stats);

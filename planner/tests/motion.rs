@@ -579,6 +579,41 @@ fn motion_planners_report_outcomes() {
     }
 }
 
+/// A collision-check budget stops both planners, with that cause, within one certificate of
+/// the budget; a budget above what a run needs changes nothing.
+#[test]
+fn a_check_budget_stops_planning_and_takes_nothing_below_it() {
+    let (model, start, goal) = irp6_around_box();
+    let goal = Goal::Configuration(goal);
+    let base = MotionSettings { deadline: Deadline::none(), ..MotionSettings::default() };
+    for kind in PlannerKind::ALL {
+        let Ok(Outcome::Solved(plan)) = plan_with_kind(kind, &model, &start, &goal, &base) else {
+            panic!("{kind}: no plan")
+        };
+        let needed = plan.stats.collision_checks;
+        let roomy = MotionSettings { deadline: Deadline::none().and_checks(needed + 1), ..base.clone() };
+        match plan_with_kind(kind, &model, &start, &goal, &roomy) {
+            Ok(Outcome::Solved(p)) => assert_eq!(p.path, plan.path, "{kind}"),
+            other => panic!("{kind}: a budget over the need changed the outcome: {other:?}"),
+        }
+        for budget in [1, needed / 4] {
+            let tight = MotionSettings { deadline: Deadline::none().and_checks(budget), ..base.clone() };
+            match plan_with_kind(kind, &model, &start, &goal, &tight) {
+                Ok(Outcome::OutOfTime { best: Some(stats), cause: Interrupt::CheckBudget }) => {
+                    let limit = budget + u64::from(embodied_models::collision::CERTIFY_MAX_CHECKS) + 64;
+                    assert!(stats.collision_checks <= limit, "{kind}: {} checks for {budget}", stats.collision_checks);
+                }
+                // The shortcut pass is anytime: stopped there, the path so far is returned.
+                Ok(Outcome::Solved(p)) => {
+                    assert!(p.stats.collision_checks >= budget, "{kind}");
+                    assert!(p.stats.collision_checks < needed, "{kind}: the budget did not stop it");
+                }
+                other => panic!("{kind}: expected out of time, got {other:?}"),
+            }
+        }
+    }
+}
+
 #[test]
 fn planner_names_round_trip() {
     for kind in PlannerKind::ALL {

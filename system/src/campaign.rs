@@ -48,8 +48,11 @@ pub struct CampaignSettings {
     pub seed: u64,
     /// Every this many runs, one is run twice and its bytes compared (0: never).
     pub determinism_every: usize,
-    /// Where the logs are written (each is removed after it is checked).
+    /// Where the logs are written (each is removed after it is checked, unless kept).
     pub dir: PathBuf,
+    /// Keep every run's log (`campaign-SEED-PID.jsonl` in `dir`), not only those of runs that
+    /// broke a promise.
+    pub keep_logs: bool,
 }
 
 /// How one injected fault was answered.
@@ -103,7 +106,8 @@ pub struct RunReport {
     pub deterministic: Option<bool>,
     /// What went wrong, if anything.
     pub problems: Vec<String>,
-    /// Where the run's log was kept when something went wrong (deleted otherwise).
+    /// Where the run's log was kept: when something went wrong, or when asked to keep every
+    /// log (deleted otherwise).
     pub kept_log: Option<String>,
 }
 
@@ -727,9 +731,25 @@ pub fn run_one(seed: u64, dir: &Path, twice: bool) -> Result<RunReport, SystemEr
     run_checked(&scenario, seed, dir, twice)
 }
 
+/// [`run_one`], keeping the log whatever the run's verdict when `keep_log` is set.
+pub fn run_one_keeping(seed: u64, dir: &Path, twice: bool, keep_log: bool) -> Result<RunReport, SystemError> {
+    let scenario = random_scenario(seed)?;
+    check_run(&scenario, seed, dir, twice, keep_log)
+}
+
 /// Run `scenario` (with its own seed; `seed` names the run), logging into `dir`, and check its
 /// log as the campaign does; `twice`: run it again and compare the bytes.
 pub fn run_checked(scenario: &Scenario, seed: u64, dir: &Path, twice: bool) -> Result<RunReport, SystemError> {
+    check_run(scenario, seed, dir, twice, false)
+}
+
+fn check_run(
+    scenario: &Scenario,
+    seed: u64,
+    dir: &Path,
+    twice: bool,
+    keep_log: bool,
+) -> Result<RunReport, SystemError> {
     let scenario = scenario.clone();
     std::fs::create_dir_all(dir).map_err(|e| SystemError::write(dir.to_path_buf(), e))?;
     let path = dir.join(format!("campaign-{seed}-{}.jsonl", std::process::id()));
@@ -796,7 +816,7 @@ pub fn run_checked(scenario: &Scenario, seed: u64, dir: &Path, twice: bool) -> R
         problems.push("the same seed gave other bytes".into());
     }
     // A run that broke a promise keeps its log, named in the report, for the post-mortem.
-    let kept_log = if problems.is_empty() {
+    let kept_log = if problems.is_empty() && !keep_log {
         let _ = std::fs::remove_file(&path);
         None
     } else {
@@ -851,7 +871,7 @@ pub fn campaign(
     for k in 0..settings.runs {
         let seed = settings.seed.wrapping_add(k as u64);
         let twice = settings.determinism_every > 0 && k % settings.determinism_every == 0;
-        let r = run_one(seed, &settings.dir, twice)?;
+        let r = run_one_keeping(seed, &settings.dir, twice, settings.keep_logs)?;
         report.add(&r);
         progress(&r);
     }

@@ -9,7 +9,7 @@ fn dir() -> std::path::PathBuf {
 
 #[test]
 fn a_campaign_breaks_no_promise() {
-    let settings = CampaignSettings { runs: 200, seed: 1, determinism_every: 20, dir: dir() };
+    let settings = CampaignSettings { runs: 200, seed: 1, determinism_every: 20, dir: dir(), keep_logs: false };
     let report = campaign(&settings, |_| {}).expect("campaign runs");
     let text = render_campaign(&report);
     println!("{text}");

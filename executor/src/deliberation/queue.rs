@@ -452,7 +452,7 @@ impl PlanQueue {
             let Computed { mut outcome, mut work, elapsed } = computed;
             self.stats.planning_wall_s += elapsed.as_secs_f64();
             self.stats.planned += 1;
-            let latency = self.fixed_steps.saturating_add((work as f64 * self.steps_per_unit).ceil() as u64).max(1);
+            let latency = super::worker::simulated_latency(work, self.steps_per_unit, self.fixed_steps);
             let mut done_at = now + latency;
             if let Some(g) = job.give_up
                 && done_at > job.submitted + g

@@ -175,10 +175,17 @@ impl Deliberator {
         if let Some(n) = request.budget.work {
             deadline = deadline.and_expansions(n);
         }
-        // Simulated time never reads the clock: the give-up step is applied on delivery.
+        // Simulated time never reads the clock: the give-up step is applied on delivery, and
+        // the search is stopped by the collision checks that put it past that step (it would be
+        // out of time whatever it found; without this its wall time has no bound).
         let (wall, give_up_steps) = match self.clock {
             PlanClock::WallClock => (request.budget.wall, None),
-            PlanClock::Simulated { .. } => (None, request.budget.give_up_steps),
+            PlanClock::Simulated { steps_per_unit, fixed_steps } => {
+                if let Some(n) = request.budget.give_up_steps.and_then(|g| work_past(g, steps_per_unit, fixed_steps)) {
+                    deadline = deadline.and_checks(n);
+                }
+                (None, request.budget.give_up_steps)
+            }
         };
         if let Some(w) = wall {
             deadline = deadline.and_after(w);
@@ -271,8 +278,7 @@ impl Deliberator {
             (None, PlanClock::Simulated { steps_per_unit, fixed_steps }) => {
                 if job.held.is_none() {
                     let mut r = job.rx.recv().unwrap_or_else(|_| lost_worker());
-                    let mut latency =
-                        fixed_steps.saturating_add((r.work as f64 * steps_per_unit.max(0.0)).ceil() as u64).max(1);
+                    let mut latency = simulated_latency(r.work, steps_per_unit, fixed_steps);
                     if let Some(limit) = job.give_up_steps
                         && latency > limit
                     {
@@ -325,6 +331,36 @@ impl Drop for Deliberator {
     fn drop(&mut self) {
         self.cancel();
     }
+}
+
+/// Simulated planning time, in control steps, of `work` units (at least one step).
+pub(crate) fn simulated_latency(work: u64, steps_per_unit: f64, fixed_steps: u64) -> u64 {
+    fixed_steps.saturating_add((work as f64 * steps_per_unit.max(0.0)).ceil() as u64).max(1)
+}
+
+/// The least work whose simulated time is over `give_up` steps (`None` when no work is:
+/// work costs no time). A search stopped at that much work loses nothing it could deliver.
+pub(crate) fn work_past(give_up: u64, steps_per_unit: f64, fixed_steps: u64) -> Option<u64> {
+    if !(steps_per_unit > 0.0 && steps_per_unit.is_finite()) {
+        return None;
+    }
+    if simulated_latency(0, steps_per_unit, fixed_steps) > give_up {
+        return Some(0);
+    }
+    // Near the answer from the real quotient, then exact against the same rounding as delivery.
+    let estimate = (give_up.saturating_sub(fixed_steps) as f64 / steps_per_unit).floor();
+    if estimate >= 2f64.powi(52) {
+        // Past exact integers in f64: no bound worth the name.
+        return None;
+    }
+    let mut w = estimate.max(0.0) as u64;
+    while w > 0 && simulated_latency(w - 1, steps_per_unit, fixed_steps) > give_up {
+        w -= 1;
+    }
+    while simulated_latency(w, steps_per_unit, fixed_steps) <= give_up {
+        w = w.checked_add(1)?;
+    }
+    Some(w)
 }
 
 fn lost_worker() -> WorkerResult {

@@ -162,8 +162,10 @@ fn outcome_of(result: Result<MotionPlan, PlanError>, deadline: &Deadline) -> Res
     match result {
         Ok(plan) => Ok(Outcome::Solved(plan)),
         Err(PlanError::OutOfTime { stats }) => Ok(Outcome::OutOfTime {
+            cause: deadline
+                .check(0, stats.collision_checks, true)
+                .unwrap_or(crate::deadline::Interrupt::ExpansionBudget),
             best: Some(stats),
-            cause: deadline.check(0, true).unwrap_or(crate::deadline::Interrupt::ExpansionBudget),
         }),
         Err(PlanError::NoPath { .. }) => Ok(Outcome::Infeasible),
         Err(e) => Err(e),
@@ -417,7 +419,7 @@ fn plan_alone<V: StateValidity>(
             raw = Some((vec![start.to_vec(), goals[i].clone()], "direct"));
             break;
         }
-        if budget.spend(1) {
+        if budget.spend(1, validity.collision_checks) {
             return Err(out_of_time(&budget, &validity, &stats));
         }
     }
@@ -495,7 +497,7 @@ fn lazy_prm<V: StateValidity>(
         roadmap.grow(model, n, settings.parallel);
         stats.samples = roadmap.samples();
         validity.collision_checks += n as u64;
-        if budget.spend(n as u64) {
+        if budget.spend(n as u64, validity.collision_checks) {
             return Outcome::OutOfTime { best: None, cause: budget.cause() };
         }
         let outcome = roadmap.lazy_search(validity, budget, s, &gs, &mut counters);

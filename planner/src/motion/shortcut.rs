@@ -23,7 +23,7 @@ pub(crate) fn shortcut<V: StateValidity>(
     }
     let space = validity.space.clone();
     for _ in 0..attempts {
-        if path.len() < 3 || budget.spend(1) {
+        if path.len() < 3 || budget.spend(1, validity.collision_checks) {
             break;
         }
         // Two points on different segments: segment index and fraction along it.
@@ -97,7 +97,7 @@ pub(crate) fn farthest_visible<V: StateValidity>(
     budget: &mut Budget<'_>,
 ) -> Result<Option<usize>, OutOfTime> {
     for j in (i + 2..path.len()).rev() {
-        if budget.spend(1) {
+        if budget.spend(1, validity.collision_checks) {
             return Err(OutOfTime);
         }
         if validity.segment_free(&path[i], &path[j]) {
