@@ -68,7 +68,9 @@ use crate::rng::Rng;
 use crate::robot::Robot;
 pub use environment::{Environment, Obstacle};
 use narrow::View;
-pub use narrow::{Separation, parry_shape_separation, parry_shapes_intersect, shape_separation, shapes_intersect};
+pub use narrow::{
+    Separation, parry_shape_separation, parry_shapes_intersect, shape_separation, shapes_intersect, shapes_within,
+};
 use spheres::{Check, Solid, SphereGeom, SphereScratch};
 
 /// How many configurations [`CollisionModel::batch_collisions_with`] checks at once (on the
@@ -1025,7 +1027,7 @@ impl CollisionModel {
             if narrow::intersects(&kv, &ov) {
                 return Err(());
             }
-            near = near || (GROW && e > 0.0 && narrow::separation(&kv, &ov).distance <= e);
+            near = near || (GROW && e > 0.0 && narrow::within(&kv, &ov, e));
         }
         Ok(near)
     }
@@ -1052,7 +1054,7 @@ impl CollisionModel {
                 if narrow::intersects(&vi, &vj) {
                     return Err(());
                 }
-                near = near || (GROW && grow > 0.0 && narrow::separation(&vi, &vj).distance <= grow);
+                near = near || (GROW && grow > 0.0 && narrow::within(&vi, &vj, grow));
             }
         }
         Ok(near)

@@ -5,7 +5,7 @@
 
 use embodied_models::collision::{
     Body, CollisionModel, Environment, Obstacle, disable_always_colliding, parry_shape_separation,
-    parry_shapes_intersect, shape_separation, shapes_intersect,
+    parry_shapes_intersect, shape_separation, shapes_intersect, shapes_within,
 };
 use embodied_models::nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 use embodied_models::{BUILTIN_NAMES, Rng, Shape, builtin};
@@ -145,8 +145,56 @@ fn capsule_reference(a: &Shape, pa: &Isometry3<f64>, b: &Shape, pb: &Isometry3<f
     (core > 1e-9).then_some(core - r)
 }
 
+/// Two shapes whose distance is known exactly, turned together by `turn`: a box or an upright
+/// cylinder at the origin, and beside it along x, `gap` away, a box or an upright cylinder whose
+/// extent along y and z overlaps the first's (so the nearest points face each other across x).
+fn known_gap(
+    first_box: bool,
+    second_box: bool,
+    size: [f64; 3],
+    gap: f64,
+    turn: &Isometry3<f64>,
+) -> (Shape, Isometry3<f64>, Shape, Isometry3<f64>) {
+    let [a, b, h] = size;
+    let first = if first_box { Shape::cuboid(a, a, h) } else { Shape::cylinder(a, h) };
+    let second = if second_box { Shape::cuboid(b, b, h) } else { Shape::cylinder(b, h) };
+    let at = Isometry3::translation(a + gap + b, 0.0, 0.0);
+    (first, *turn, second, turn * at)
+}
+
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(2000))]
+
+    /// The certificate's proximity test never calls two shapes farther apart than `e` when they
+    /// are not: boxes and cylinders at an exactly known gap are within any `e` over the gap (GJK's
+    /// converged distance of a curved cylinder can come out above the gap); and it answers
+    /// "farther" when the gap clearly exceeds `e`.
+    #[test]
+    fn proximity_is_never_farther_than_the_truth(
+        first_box in any::<bool>(), second_box in any::<bool>(),
+        size in prop::array::uniform3(0.02..0.5f64), gap in 1e-4..0.3f64, turn in pose(),
+        slack in 0.0..1e-3f64,
+    ) {
+        let (a, pa, b, pb) = known_gap(first_box, second_box, size, gap, &turn);
+        prop_assert!(shapes_within(&a, &pa, &b, &pb, gap + slack * gap + 1e-12), "{} {} at {gap}", a.kind(), b.kind());
+        prop_assert!(shapes_within(&b, &pb, &a, &pa, gap + slack * gap + 1e-12), "{} {} at {gap}", b.kind(), a.kind());
+        prop_assert!(!shapes_within(&a, &pa, &b, &pb, gap * 0.99 - 1e-6), "{} {} at {gap}", a.kind(), b.kind());
+    }
+
+    /// Against the converged distance on random poses: within whenever that (an upper bound of
+    /// the distance) is; farther whenever it is clearly over `e`.
+    #[test]
+    fn proximity_agrees_with_the_distance(a in any_shape(), pa in pose(), b in any_shape(), pb in pose(), e in 0.0..0.2f64) {
+        prop_assume!(!shapes_intersect(&a, &pa, &b, &pb));
+        let d = shape_separation(&a, &pa, &b, &pb).distance;
+        let near = shapes_within(&a, &pa, &b, &pb, e);
+        if d <= e {
+            prop_assert!(near, "{} {}: distance {d} <= {e}", a.kind(), b.kind());
+        }
+        if d > e + 1e-4 {
+            prop_assert!(!near, "{} {}: distance {d} > {e}", a.kind(), b.kind());
+        }
+    }
 
     /// sphere-sphere, sphere-capsule, capsule-capsule, sphere-box, sphere-cylinder (both orders).
     #[test]

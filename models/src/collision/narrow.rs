@@ -556,6 +556,43 @@ pub(crate) fn parry_intersects(a: &View, b: &View) -> bool {
     query::intersection_test(&ia, sa.shape(), &ib, sb.shape()).unwrap_or(true)
 }
 
+/// Whether two posed shapes that do not overlap may be within `e` of each other: `false` only
+/// when they are proven farther apart. Analytic pairs (a sphere or a capsule on either side)
+/// compare their closed-form distance; the others (boxes, cylinders, meshes) run GJK as a
+/// proximity query that stops as soon as it decides, and answer "farther" only from a
+/// separating direction whose support gap, recomputed here, is wider than `e`: a lower bound
+/// of the distance, where the converged distance of [`separation`] is an upper one (and GJK's
+/// give-up after 100 iterations also comes back as "no intersection").
+pub(crate) fn within(a: &View, b: &View, e: f64) -> bool {
+    use View::*;
+    match (a, b) {
+        (Sphere { .. } | Capsule { .. }, _) | (_, Sphere { .. } | Capsule { .. }) => separation(a, b).distance <= e,
+        _ => parry_within(a, b, e),
+    }
+}
+
+fn parry_within(a: &View, b: &View, e: f64) -> bool {
+    use parry3d_f64::query::gjk::{self, CSOPoint, GJKResult, VoronoiSimplex};
+    let (ia, sa) = to_parry(a);
+    let (ib, sb) = to_parry(b);
+    let (Some(ga), Some(gb)) = (sa.shape().as_support_map(), sb.shape().as_support_map()) else {
+        return parry_separation(a, b).distance <= e;
+    };
+    let pos12 = ia.inv_mul(&ib);
+    let start = nalgebra::Unit::try_new(-pos12.translation.vector, f64::EPSILON).unwrap_or_else(Vector3::x_axis);
+    let mut simplex = VoronoiSimplex::new();
+    simplex.reset(CSOPoint::from_shapes(&pos12, ga, gb, &start));
+    match gjk::closest_points(&pos12, ga, gb, e, false, &mut simplex) {
+        GJKResult::NoIntersection(dir) => {
+            // Every point x of the shapes' difference has |x| >= -dir.x >= -dir.support(dir).
+            // Farther only when that gap is over `e` (a NaN gap proves nothing).
+            let gap = -dir.dot(&CSOPoint::from_shapes(&pos12, ga, gb, &dir).point.coords);
+            gap.partial_cmp(&e) != Some(std::cmp::Ordering::Greater)
+        }
+        _ => true,
+    }
+}
+
 pub(crate) fn parry_separation(a: &View, b: &View) -> Separation {
     let (ia, sa) = to_parry(a);
     let (ib, sb) = to_parry(b);
@@ -589,6 +626,12 @@ pub(crate) fn view_of<'a>(shape: &'a Shape, pose: &'a Isometry3<f64>) -> View<'a
 /// Whether two posed shapes overlap (touching counts), with the analytic fast paths.
 pub fn shapes_intersect(a: &Shape, pose_a: &Isometry3<f64>, b: &Shape, pose_b: &Isometry3<f64>) -> bool {
     intersects(&view_of(a, pose_a), &view_of(b, pose_b))
+}
+
+/// Whether two posed shapes that do not overlap may be within `e` of each other (`false` only
+/// when proven farther apart): the test a certificate's inflated check makes.
+pub fn shapes_within(a: &Shape, pose_a: &Isometry3<f64>, b: &Shape, pose_b: &Isometry3<f64>, e: f64) -> bool {
+    within(&view_of(a, pose_a), &view_of(b, pose_b), e)
 }
 
 /// Signed distance between two posed shapes, with the analytic fast paths.
