@@ -39,3 +39,12 @@ fn regression_seeds() {
         assert!(r.problems.is_empty(), "seed {seed}: {:?}", r.problems);
     }
 }
+
+/// A Polycrank run among boxes whose every request searched on after its give-up step under the
+/// simulated clock (its certificates bisected grazing stretches; the run did not end in hours):
+/// the give-up step is now the search's collision-check budget.
+#[test]
+fn a_search_past_its_give_up_step_is_stopped() {
+    let r = run_one(5815, &dir(), false).expect("run");
+    assert!(r.problems.is_empty(), "seed 5815: {:?}", r.problems);
+}
