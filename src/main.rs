@@ -244,6 +244,10 @@ enum Command {
         /// runs that broke a promise.
         #[arg(long)]
         keep_logs: bool,
+        /// Run nothing: merge these `--json` reports of one campaign run in chunks (their seeds
+        /// must make one range, no seed twice) and print the one report.
+        #[arg(long, num_args = 1.., value_name = "REPORT.json", conflicts_with_all = ["runs", "seed", "keep_logs", "dir"])]
+        merge: Vec<PathBuf>,
     },
     /// Feed every file loader structure-aware random inputs (generated documents with the
     /// formats' keys and tags, random values and nesting, cuts and byte edits; edits of
@@ -937,7 +941,34 @@ fn run(cli: Cli) -> Result<(), AppError> {
             out!("{}", String::from_utf8_lossy(&page));
             Ok(())
         }
-        Command::Campaign { runs, seed, determinism_every, dir, json, keep_logs } => {
+        Command::Campaign { merge, json, .. } if !merge.is_empty() => {
+            let mut reports = Vec::new();
+            for file in merge {
+                let text = embodied::error::read_input(&file, embodied_models::formats::limits::InputKind::Text)?;
+                let report: embodied::campaign::CampaignReport =
+                    serde_json::from_str(&text).map_err(|e| AppError::Parse {
+                        file: file.clone(),
+                        line: e.line(),
+                        column: e.column(),
+                        message: format!("expected a report of `embodied campaign --json`: {e}"),
+                    })?;
+                reports.push((file, report));
+            }
+            let report = embodied::campaign::merge_reports(&reports)?;
+            if json {
+                outln!("{}", to_json(&report)?);
+            } else {
+                out!("{}", embodied::campaign::render_campaign(&report));
+            }
+            if report.violating_runs > 0 {
+                return Err(AppError::Failed(format!(
+                    "{} of {} runs broke a promise",
+                    report.violating_runs, report.runs
+                )));
+            }
+            Ok(())
+        }
+        Command::Campaign { runs, seed, determinism_every, dir, json, keep_logs, .. } => {
             // Injected planner panics are caught and answered; only other panics are printed.
             let default_hook = std::panic::take_hook();
             std::panic::set_hook(Box::new(move |info| {

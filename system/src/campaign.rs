@@ -120,7 +120,8 @@ impl RunReport {
 }
 
 /// Per fault kind: injected, answered, not due, unanswered.
-#[derive(Debug, Clone, Default, Serialize)]
+#[derive(Debug, Clone, Default, Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct FaultCount {
     /// Injected.
     pub injected: usize,
@@ -132,8 +133,9 @@ pub struct FaultCount {
     pub unanswered: usize,
 }
 
-/// What a campaign found.
-#[derive(Debug, Clone, Default, Serialize)]
+/// What a campaign found (`embodied campaign --json` writes it; `--merge` reads several back).
+#[derive(Debug, Clone, Default, Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct CampaignReport {
     /// Runs.
     pub runs: usize,
@@ -165,7 +167,9 @@ pub struct CampaignReport {
     pub determinism_checked: usize,
     /// Runs whose second run gave other bytes.
     pub nondeterministic: usize,
-    /// Worst: closest approach to an obstacle on the map, m.
+    /// Worst: closest approach to an obstacle on the map, m (infinite, written `null`, when no
+    /// run had one).
+    #[serde(deserialize_with = "infinite_if_null")]
     pub closest_approach_m: f64,
     /// Worst: largest velocity ratio.
     pub max_velocity_ratio: f64,
@@ -177,7 +181,76 @@ pub struct CampaignReport {
     pub violations: Vec<(u64, String)>,
 }
 
+/// JSON has no infinity: serde_json writes it `null`.
+fn infinite_if_null<'de, D: serde::Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
+    Ok(<Option<f64> as serde::Deserialize>::deserialize(d)?.unwrap_or(f64::INFINITY))
+}
+
+/// One report of the campaigns `reports` (each with the file it came from) ran: their seeds
+/// must make one range with no seed twice and none missing (the chunks of one campaign run
+/// apart, e.g. one per core or machine).
+pub fn merge_reports(reports: &[(PathBuf, CampaignReport)]) -> Result<CampaignReport, SystemError> {
+    let mut order: Vec<&(PathBuf, CampaignReport)> = reports.iter().collect();
+    order.sort_by_key(|(_, r)| r.seed);
+    let Some((_, first)) = order.first() else {
+        return Err(SystemError::Usage("campaign --merge: no report given".into()));
+    };
+    let mut merged = CampaignReport { seed: first.seed, closest_approach_m: f64::INFINITY, ..Default::default() };
+    let mut next: Option<(u64, &PathBuf)> = None;
+    for (file, r) in order {
+        if let Some((expected, previous)) = next
+            && r.seed != expected
+        {
+            let what = if r.seed < expected { "overlap" } else { "leave a gap" };
+            return Err(SystemError::Usage(format!(
+                "{} (seeds {}-{}) and {} (from seed {}) {what}: the next report must start at seed {expected}",
+                previous.display(),
+                merged.seed,
+                expected.saturating_sub(1),
+                file.display(),
+                r.seed
+            )));
+        }
+        merged.merge(r);
+        next = Some((r.seed.saturating_add(r.runs as u64), file));
+    }
+    Ok(merged)
+}
+
 impl CampaignReport {
+    /// Add the counts and worst figures of `other` (a campaign over other seeds).
+    pub fn merge(&mut self, other: &CampaignReport) {
+        self.runs += other.runs;
+        for (kind, c) in &other.faults {
+            let m = self.faults.entry(kind.clone()).or_default();
+            m.injected += c.injected;
+            m.answered += c.answered;
+            m.not_due += c.not_due;
+            m.unanswered += c.unanswered;
+        }
+        for (k, v) in &other.outcomes {
+            *self.outcomes.entry(k.clone()).or_default() += v;
+        }
+        for (k, v) in &other.robots {
+            *self.robots.entry(k.clone()).or_default() += v;
+        }
+        self.halts += other.halts;
+        self.stops_blocked += other.stops_blocked;
+        self.violating_runs += other.violating_runs;
+        self.limit_violations += other.limit_violations;
+        self.map_collisions += other.map_collisions;
+        self.moving_contacts += other.moving_contacts;
+        self.resting_contacts += other.resting_contacts;
+        self.incomplete_logs += other.incomplete_logs;
+        self.determinism_checked += other.determinism_checked;
+        self.nondeterministic += other.nondeterministic;
+        self.closest_approach_m = self.closest_approach_m.min(other.closest_approach_m);
+        self.max_velocity_ratio = self.max_velocity_ratio.max(other.max_velocity_ratio);
+        self.max_acceleration_ratio = self.max_acceleration_ratio.max(other.max_acceleration_ratio);
+        self.longest_halt_s = self.longest_halt_s.max(other.longest_halt_s);
+        self.violations.extend(other.violations.iter().cloned());
+    }
+
     fn add(&mut self, r: &RunReport) {
         self.runs += 1;
         for (inj, answer) in &r.faults {

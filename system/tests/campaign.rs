@@ -1,7 +1,7 @@
 //! The fault campaign in CI: random scenarios with injected faults, every log checked by the
 //! independent verifier; no run may break a promise. Seeds that once did are kept below.
 
-use embodied_system::campaign::{CampaignSettings, campaign, render_campaign, run_one};
+use embodied_system::campaign::{CampaignReport, CampaignSettings, campaign, merge_reports, render_campaign, run_one};
 
 fn dir() -> std::path::PathBuf {
     std::env::temp_dir().join(format!("embodied-campaign-test-{}", std::process::id()))
@@ -47,4 +47,33 @@ fn regression_seeds() {
 fn a_search_past_its_give_up_step_is_stopped() {
     let r = run_one(5815, &dir(), false).expect("run");
     assert!(r.problems.is_empty(), "seed 5815: {:?}", r.problems);
+}
+
+/// A campaign run in chunks and merged gives the report of the campaign run in one go (through
+/// the JSON the chunks are written as); chunks that overlap or leave a gap are refused, naming
+/// the files.
+#[test]
+fn chunks_merge_into_the_whole_campaign() {
+    let settings = |runs, seed| CampaignSettings { runs, seed, determinism_every: 0, dir: dir(), keep_logs: false };
+    let whole = campaign(&settings(6, 40), |_| {}).expect("campaign");
+    let through_json = |r: &CampaignReport| -> CampaignReport {
+        serde_json::from_str(&serde_json::to_string(r).expect("write")).expect("read back")
+    };
+    let a = through_json(&campaign(&settings(2, 40), |_| {}).expect("campaign"));
+    let b = through_json(&campaign(&settings(4, 42), |_| {}).expect("campaign"));
+    let merged = merge_reports(&[("b.json".into(), b.clone()), ("a.json".into(), a.clone())]).expect("merge");
+    assert_eq!(serde_json::to_value(&merged).expect("json"), serde_json::to_value(&whole).expect("json"));
+    assert_eq!(render_campaign(&merged), render_campaign(&whole));
+
+    let overlap =
+        merge_reports(&[("a.json".into(), a.clone()), ("again.json".into(), a.clone())]).expect_err("overlap");
+    assert!(overlap.to_string().contains("again.json") && overlap.to_string().contains("overlap"), "{overlap}");
+    let mut later = b.clone();
+    later.seed = 50;
+    let gap = merge_reports(&[("a.json".into(), a), ("later.json".into(), later)]).expect_err("gap");
+    assert!(gap.to_string().contains("later.json") && gap.to_string().contains("seed 42"), "{gap}");
+
+    // No run near an obstacle: the closest approach is infinite, written null, read back.
+    let empty = CampaignReport { closest_approach_m: f64::INFINITY, ..Default::default() };
+    assert_eq!(through_json(&empty).closest_approach_m, f64::INFINITY);
 }
