@@ -60,6 +60,8 @@ struct Tree {
 struct KdIndex {
     /// Which joints wrap (split on the angle in [-pi, pi)).
     wraps: Vec<bool>,
+    /// Whether any does.
+    any_wrap: bool,
     left: Vec<u32>,
     right: Vec<u32>,
     split: Vec<u16>,
@@ -68,10 +70,67 @@ struct KdIndex {
 }
 
 impl KdIndex {
-    /// The coordinate joint `s` splits on: its angle in [-pi, pi) when it wraps.
-    #[inline]
-    fn key(&self, s: usize, x: f64) -> f64 {
-        if self.wraps[s] { wrap_angle(x) } else { x }
+    /// The coordinate joint `s` splits on: its angle in [-pi, pi) when it wraps (`WRAP`: some
+    /// joint does).
+    #[inline(always)]
+    fn key<const WRAP: bool>(&self, s: usize, x: f64) -> f64 {
+        if WRAP && self.wraps[s] { wrap_angle(x) } else { x }
+    }
+
+    /// The living node of `coords` nearest to `q` as (squared distance, index), ties to the
+    /// lowest index; `WRAP` must be `any_wrap` (compiled apart so that a robot without a
+    /// wrapping joint pays nothing for them).
+    fn nearest<const WRAP: bool>(
+        &mut self,
+        coords: &[f64],
+        alive: &[bool],
+        space: &ConfigSpace,
+        q: &[f64],
+    ) -> (f64, usize) {
+        let dof = q.len();
+        let mut best = (f64::INFINITY, 0);
+        // Branch and bound over the cells of the tree; a cell's bound is its largest gap to `q`
+        // along one joint. (A sum of squared gaps over the joints, Arya and Mount's incremental
+        // distance, visited fewer nodes but cost 28% more instructions over the 296
+        // MotionBenchMaker UR5 problems, whose trees are small.)
+        let mut found = false;
+        self.stack.clear();
+        if !coords.is_empty() {
+            self.stack.push((0, 0.0));
+        }
+        while let Some((n, bound)) = self.stack.pop() {
+            if found && bound > best.0 {
+                continue;
+            }
+            let n = n as usize;
+            let p = &coords[n * dof..(n + 1) * dof];
+            if alive[n] {
+                let d = space.distance_squared(p, q);
+                if !found || d < best.0 || (d == best.0 && n < best.1) {
+                    best = (d, n);
+                    found = true;
+                }
+            }
+            let s = self.split[n] as usize;
+            let (qs, ps) = (self.key::<WRAP>(s, q[s]), self.key::<WRAP>(s, p[s]));
+            let right = qs >= ps;
+            let (near, far) = if right { (self.right[n], self.left[n]) } else { (self.left[n], self.right[n]) };
+            if far != NONE {
+                let gap = if WRAP && self.wraps[s] {
+                    // Far side: the arc [-pi, ps) or [ps, pi); the shorter way round to it, less a
+                    // margin over the rounding of the wrapped differences the distance sums.
+                    let around = if right { (qs - ps).min(PI - qs) } else { (ps - qs).min(qs + PI) };
+                    (around - WRAP_MARGIN).max(0.0)
+                } else {
+                    qs - ps
+                };
+                self.stack.push((far, bound.max(gap * gap)));
+            }
+            if near != NONE {
+                self.stack.push((near, bound));
+            }
+        }
+        best
     }
 }
 
@@ -96,6 +155,7 @@ impl Tree {
             radius: Vec::new(),
             kd: (kd && dof > 0).then(|| KdIndex {
                 wraps: (0..dof).map(|i| space.wraps(i)).collect(),
+                any_wrap: (0..dof).any(|i| space.wraps(i)),
                 left: Vec::new(),
                 right: Vec::new(),
                 split: Vec::new(),
@@ -117,7 +177,7 @@ impl Tree {
                 let mut n = 0usize;
                 loop {
                     let s = kd.split[n] as usize;
-                    let go_right = kd.key(s, q[s]) >= kd.key(s, self.coords[n * self.dof + s]);
+                    let go_right = kd.key::<true>(s, q[s]) >= kd.key::<true>(s, self.coords[n * self.dof + s]);
                     let child = if go_right { kd.right[n] } else { kd.left[n] };
                     if child == NONE {
                         if go_right {
@@ -172,48 +232,12 @@ impl Tree {
             }
             return best;
         };
-        // Branch and bound over the cells of the tree; a cell's bound is its largest gap to `q`
-        // along one joint. (A sum of squared gaps over the joints, Arya and Mount's incremental
-        // distance, visited fewer nodes but cost 28% more instructions over the 296
-        // MotionBenchMaker UR5 problems, whose trees are small.)
-        let mut found = false;
-        kd.stack.clear();
-        if !self.coords.is_empty() {
-            kd.stack.push((0, 0.0));
+        let (coords, alive) = (&self.coords[..], &self.alive[..]);
+        if kd.any_wrap {
+            kd.nearest::<true>(coords, alive, space, q)
+        } else {
+            kd.nearest::<false>(coords, alive, space, q)
         }
-        while let Some((n, bound)) = kd.stack.pop() {
-            if found && bound > best.0 {
-                continue;
-            }
-            let n = n as usize;
-            let p = &self.coords[n * self.dof..(n + 1) * self.dof];
-            if self.alive[n] {
-                let d = space.distance_squared(p, q);
-                if !found || d < best.0 || (d == best.0 && n < best.1) {
-                    best = (d, n);
-                    found = true;
-                }
-            }
-            let s = kd.split[n] as usize;
-            let (qs, ps) = (kd.key(s, q[s]), kd.key(s, p[s]));
-            let right = qs >= ps;
-            let (near, far) = if right { (kd.right[n], kd.left[n]) } else { (kd.left[n], kd.right[n]) };
-            if far != NONE {
-                let gap = if kd.wraps[s] {
-                    // Far side: the arc [-pi, ps) or [ps, pi); the shorter way round to it, less a
-                    // margin over the rounding of the wrapped differences the distance sums.
-                    let around = if right { (qs - ps).min(PI - qs) } else { (ps - qs).min(qs + PI) };
-                    (around - WRAP_MARGIN).max(0.0)
-                } else {
-                    qs - ps
-                };
-                kd.stack.push((far, bound.max(gap * gap)));
-            }
-            if near != NONE {
-                kd.stack.push((near, bound));
-            }
-        }
-        best
     }
     /// Root-to-node node indices.
     fn chain_to(&self, mut i: usize) -> Vec<usize> {
