@@ -982,7 +982,7 @@ pub fn render_campaign(r: &CampaignReport) -> String {
     );
     let _ = writeln!(
         out,
-        "worst: closest approach {:.4} m, |qd|/vmax {:.4}, |qdd|/amax {:.4}, longest halt {:.3} s",
+        "worst: closest approach {:.3e} m, |qd|/vmax {:.4}, |qdd|/amax {:.4}, longest halt {:.3} s",
         r.closest_approach_m, r.max_velocity_ratio, r.max_acceleration_ratio, r.longest_halt_s
     );
     for (seed, why) in r.violations.iter().take(20) {
