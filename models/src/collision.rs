@@ -443,13 +443,23 @@ impl RobotGeom {
 /// Lever arms of the motion certificate (see [`RobotGeom::lever`]).
 ///
 /// A revolute joint turning by `dq` moves a point at distance `rho` from its axis by at most
-/// `rho * |dq|`, and `rho` is at most the distance from the point to the joint's origin, which
-/// the triangle inequality bounds, whatever the configuration, by the lengths of the fixed
-/// translations on the chain between them (plus the reach of prismatic joints in between). A
-/// prismatic joint moves every point below it by `|dq|`. Along a straight joint-space segment
-/// the path of a point is therefore no longer than `sum_i lever[i] * |dq_i|`. Sphere shapes
-/// count by their centre (a ball turning about its centre covers the same set); other shapes
-/// add their bounding radius.
+/// `rho * |dq|`; a prismatic joint moves every point below it by `|dq|`. Along a straight
+/// joint-space segment the path of a point is therefore no longer than `sum_i lever[i] * |dq_i|`
+/// when `lever[i]` bounds `rho` for joint `i` over every configuration. The axis of a body's
+/// joint passes through the origin of the frame the joint moves in (`pre`'s), along `axis`; a
+/// point `c` of the body sits at `post * c` in that frame, fixed. Walking up from the link:
+///
+/// * its own joint: `rho` is the distance of `post * c` from the axis, exactly (no joint in
+///   between);
+/// * each joint above: the origin of the child's joint frame sits at a fixed point `w` of the
+///   parent's joint frame (`post * pre.translation` of the child), and the rest of the chain
+///   down to the point has a length of at most `below` whatever the joints between do, so `rho`
+///   is at most the distance of `w` from the axis plus `below`; then `below` grows by `|w|` and
+///   the parent's prismatic reach.
+///
+/// Sphere shapes count by their centre (a ball turning about its centre covers the same set);
+/// other shapes add their bounding radius. Each bound is at most the plain triangle bound (the
+/// lengths of the fixed translations on the chain).
 ///
 /// Adds link slot `slot`'s lever arms into `out` (one per DOF), over the joints from its body up
 /// to, not including, body `stop` (0, the base, for motion in the world; the deepest common
@@ -465,33 +475,50 @@ fn lever_arms(
 ) {
     debug_assert_eq!(out.len(), dof);
     let l = &slots[slot];
-    {
-        let mut dist = l
-            .shapes
-            .clone()
-            .map(|k| {
-                let sh = &shapes[k];
-                let own = if matches!(sh.local, Local::Sphere { .. }) { 0.0 } else { sh.r };
-                sh.c.coords.norm() + own
-            })
-            .fold(0.0, f64::max);
-        let mut b = l.body;
-        while b != 0 && b != stop {
-            let body = &bodies[b];
-            let post = body.post.map_or(0.0, |p| p.translation.vector.norm());
-            let arm = if body.prismatic { 1.0 } else { dist + post };
-            let (i, factor) = match body.value {
-                Value::Dof(i) => (Some(i), 1.0),
-                Value::Mimic(d, m, _) => (Some(d), m.abs()),
-                Value::Zero => (None, 0.0),
-            };
-            if let Some(i) = i {
-                out[i] += factor * arm;
-            }
-            dist += post + body.reach + body.pre.translation.vector.norm();
-            b = body.parent;
-        }
+    let mut b = l.body;
+    if b == 0 || b == stop {
+        return;
     }
+    let body = &bodies[b];
+    // Farthest point of the link from the origin of its joint's frame, and from the axis.
+    let (mut below, mut arm) = l
+        .shapes
+        .clone()
+        .map(|k| {
+            let sh = &shapes[k];
+            let w = body.post.map_or(sh.c.coords, |p| (p * sh.c).coords);
+            let own = if matches!(sh.local, Local::Sphere { .. }) { 0.0 } else { sh.r };
+            (w.norm() + own, off_axis(&w, body) + own)
+        })
+        .fold((0.0f64, 0.0f64), |(a, b), (x, y)| (a.max(x), b.max(y)));
+    below += body.reach;
+    loop {
+        let body = &bodies[b];
+        let (i, factor) = match body.value {
+            Value::Dof(i) => (Some(i), 1.0),
+            Value::Mimic(d, m, _) => (Some(d), m.abs()),
+            Value::Zero => (None, 0.0),
+        };
+        if let Some(i) = i {
+            out[i] += factor * if body.prismatic { 1.0 } else { arm };
+        }
+        let parent = body.parent;
+        if parent == 0 || parent == stop {
+            return;
+        }
+        let up = &bodies[parent];
+        let at = Point3::from(body.pre.translation.vector);
+        let w = up.post.map_or(at.coords, |p| (p * at).coords);
+        arm = off_axis(&w, up) + below;
+        below += w.norm() + up.reach;
+        b = parent;
+    }
+}
+
+/// Distance of `w` (in the frame `body`'s joint moves in) from that joint's axis.
+fn off_axis(w: &Vector3<f64>, body: &FkBody) -> f64 {
+    let a = body.axis.into_inner();
+    (w - a * w.dot(&a)).norm()
 }
 
 /// The deepest body that carries both `a` and `b` (bodies are stored parents first).
