@@ -955,18 +955,7 @@ fn run(cli: Cli) -> Result<(), AppError> {
                 reports.push((file, report));
             }
             let report = embodied::campaign::merge_reports(&reports)?;
-            if json {
-                outln!("{}", to_json(&report)?);
-            } else {
-                out!("{}", embodied::campaign::render_campaign(&report));
-            }
-            if report.violating_runs > 0 {
-                return Err(AppError::Failed(format!(
-                    "{} of {} runs broke a promise",
-                    report.violating_runs, report.runs
-                )));
-            }
-            Ok(())
+            print_campaign(&report, json)
         }
         Command::Campaign { runs, seed, determinism_every, dir, json, keep_logs, .. } => {
             // Injected planner panics are caught and answered; only other panics are printed.
@@ -993,18 +982,7 @@ fn run(cli: Cli) -> Result<(), AppError> {
                 }
             })?;
             let _ = std::fs::remove_dir(&dir);
-            if json {
-                outln!("{}", to_json(&report)?);
-            } else {
-                out!("{}", embodied::campaign::render_campaign(&report));
-            }
-            if report.violating_runs > 0 {
-                return Err(AppError::Failed(format!(
-                    "{} of {} runs broke a promise",
-                    report.violating_runs, report.runs
-                )));
-            }
-            Ok(())
+            print_campaign(&report, json)
         }
         Command::Fuzz { loader, inputs, seed, max_input_s, dir, json } => {
             let loaders: Vec<String> = if loader == "all" {
@@ -1103,4 +1081,17 @@ fn main() -> ExitCode {
             ExitCode::from(e.exit_code())
         }
     }
+}
+
+/// A campaign's report as a table (or JSON); an error (exit status 1) when a run broke a promise.
+fn print_campaign(report: &embodied::campaign::CampaignReport, json: bool) -> Result<(), AppError> {
+    if json {
+        outln!("{}", to_json(report)?);
+    } else {
+        out!("{}", embodied::campaign::render_campaign(report));
+    }
+    if report.violating_runs > 0 {
+        return Err(AppError::Failed(format!("{} of {} runs broke a promise", report.violating_runs, report.runs)));
+    }
+    Ok(())
 }
