@@ -251,10 +251,28 @@ impl CampaignReport {
         self.violations.extend(other.violations.iter().cloned());
     }
 
-    fn add(&mut self, r: &RunReport) {
-        self.runs += 1;
+    /// The report of the one run `r`.
+    fn of_run(r: &RunReport) -> CampaignReport {
+        let mut one = CampaignReport {
+            runs: 1,
+            seed: r.seed,
+            halts: r.halts,
+            stops_blocked: r.stops_blocked,
+            limit_violations: r.limit_violations,
+            map_collisions: r.map_collisions,
+            moving_contacts: r.moving_contacts,
+            resting_contacts: r.resting_contacts,
+            incomplete_logs: usize::from(!r.log_complete),
+            determinism_checked: usize::from(r.deterministic.is_some()),
+            nondeterministic: usize::from(r.deterministic == Some(false)),
+            closest_approach_m: r.closest_approach_m,
+            max_velocity_ratio: r.max_velocity_ratio,
+            max_acceleration_ratio: r.max_acceleration_ratio,
+            longest_halt_s: r.longest_halt_s,
+            ..CampaignReport::default()
+        };
         for (inj, answer) in &r.faults {
-            let c = self.faults.entry(inj.kind.as_str().to_string()).or_default();
+            let c = one.faults.entry(inj.kind.as_str().to_string()).or_default();
             c.injected += 1;
             match answer {
                 Answer::Answered => c.answered += 1,
@@ -262,30 +280,20 @@ impl CampaignReport {
                 Answer::Unanswered => c.unanswered += 1,
             }
         }
-        *self.outcomes.entry(r.outcome.clone()).or_default() += 1;
+        one.outcomes.insert(r.outcome.clone(), 1);
         for robot in &r.robots {
-            *self.robots.entry(robot.clone()).or_default() += 1;
+            *one.robots.entry(robot.clone()).or_default() += 1;
         }
-        self.halts += r.halts;
-        self.stops_blocked += r.stops_blocked;
-        self.limit_violations += r.limit_violations;
-        self.map_collisions += r.map_collisions;
-        self.moving_contacts += r.moving_contacts;
-        self.resting_contacts += r.resting_contacts;
-        self.incomplete_logs += usize::from(!r.log_complete);
-        if let Some(d) = r.deterministic {
-            self.determinism_checked += 1;
-            self.nondeterministic += usize::from(!d);
-        }
-        self.closest_approach_m = self.closest_approach_m.min(r.closest_approach_m);
-        self.max_velocity_ratio = self.max_velocity_ratio.max(r.max_velocity_ratio);
-        self.max_acceleration_ratio = self.max_acceleration_ratio.max(r.max_acceleration_ratio);
-        self.longest_halt_s = self.longest_halt_s.max(r.longest_halt_s);
         if r.violated() {
-            self.violating_runs += 1;
+            one.violating_runs = 1;
             let log = r.kept_log.as_ref().map(|p| format!(" (log kept: {p})")).unwrap_or_default();
-            self.violations.push((r.seed, format!("{}{log}", r.problems[0])));
+            one.violations.push((r.seed, format!("{}{log}", r.problems[0])));
         }
+        one
+    }
+
+    fn add(&mut self, r: &RunReport) {
+        self.merge(&Self::of_run(r));
     }
 }
 

@@ -160,14 +160,23 @@ impl CarryAgent {
             }
             let extend = screw.max_speed.min(((screw.max_length - l) / dt).max(0.0));
             let retract = screw.max_speed.min(((l - screw.min_length) / dt).max(0.0));
-            for (a, b) in [(g.clone(), extend), (-g, retract)] {
-                let most: f64 = a.iter().enumerate().map(|(j, a)| if *a > 0.0 { a * hi[j] } else { a * lo[j] }).sum();
-                if most <= b {
+            // The row `sign * g`, made only when the box could violate it.
+            for (sign, b) in [(1.0, extend), (-1.0, retract)] {
+                let bound = |upper: bool| -> f64 {
+                    g.iter()
+                        .enumerate()
+                        .map(|(j, g)| {
+                            let a = sign * g;
+                            if (a > 0.0) == upper { a * hi[j] } else { a * lo[j] }
+                        })
+                        .sum()
+                };
+                if bound(true) <= b {
                     continue;
                 }
-                let least: f64 = a.iter().enumerate().map(|(j, a)| if *a > 0.0 { a * lo[j] } else { a * hi[j] }).sum();
+                let least = bound(false);
                 let b = if least > b { least + 1e-9 * (1.0 + least.abs()) } else { b };
-                found.push((b - least, VelocityDamper::new(a, b)));
+                found.push((b - least, VelocityDamper::new(&g * sign, b)));
             }
         }
         found.sort_by(|x, y| x.0.total_cmp(&y.0));
