@@ -5,7 +5,9 @@
 //!   configurations. Target: median <= 1 us per call.
 //! - `batch8/ur5-table-pick/{free,random,along-motion}/{8-single,batch}`: eight configurations
 //!   checked as one batch (`CollisionModel::any_collides_with`) against eight single checks.
-//!   Target: a free batch <= 800 ns (100 ns per configuration).
+//!   Target: a free batch <= 800 ns (100 ns per configuration). `.../f32-settle`: the same eight
+//!   in one single-precision batch (`CollisionModel::settle_batch`, what the certificate's
+//!   first pieces go through).
 //! - `collides|distance/two-irp6-20-obstacles`: the two-arm IRp-6 cell among 20 boxes/cylinders.
 //! - `collides/two-irp6-400-obstacles/free[/no-grid]`: the cell among 400 small obstacles, with
 //!   the general path's obstacle grid and without it.
@@ -116,6 +118,13 @@ fn ur5_table_pick(c: &mut Criterion) {
             b.iter(|| {
                 i = (i + 1) % set.len();
                 black_box(model.any_collides_with(black_box(&set[i]), &mut scratch))
+            })
+        });
+        let mut i = 0;
+        c.bench_function(&format!("batch8/ur5-table-pick/{name}/f32-settle"), |b| {
+            b.iter(|| {
+                i = (i + 1) % set.len();
+                black_box(model.settle_batch(black_box(&set[i]), 0.0, &mut scratch))
             })
         });
     }

@@ -466,17 +466,23 @@ fn batch_robots() -> Vec<Robot> {
 /// Configurations within about `gap` (rad) of contact: the boundary between a colliding and
 /// a free configuration found by bisection, then nudged either side by up to `gap`.
 fn near_contact(model: &CollisionModel, robot: &Robot, rng: &mut Rng, gap: f64) -> Option<Vec<f64>> {
+    near_boundary(robot, rng, gap, |q| model.collides(q))
+}
+
+/// Configurations within about `gap` (rad) of where `side` changes between two random
+/// configurations (bisection), nudged either side by up to `gap`; `None` when both are on one side.
+fn near_boundary(robot: &Robot, rng: &mut Rng, gap: f64, side: impl Fn(&[f64]) -> bool) -> Option<Vec<f64>> {
     let space = robot.config_space();
     let a = robot.random_configuration(rng);
     let b = robot.random_configuration(rng);
-    let (ca, cb) = (model.collides(&a), model.collides(&b));
-    if ca == cb {
+    let ca = side(&a);
+    if ca == side(&b) {
         return None;
     }
     let (mut lo, mut hi) = (0.0, 1.0);
     for _ in 0..60 {
         let mid = 0.5 * (lo + hi);
-        if model.collides(&space.interpolate(&a, &b, mid)) == ca {
+        if side(&space.interpolate(&a, &b, mid)) == ca {
             lo = mid;
         } else {
             hi = mid;
@@ -568,18 +574,27 @@ fn batched_checks_reject_bad_input_and_fall_back_on_meshes() {
 /// cylinders, balls and capsules.
 #[test]
 fn certificate_is_sound_under_dense_sampling_on_sphere_robots() {
+    certificates_are_sound_under_dense_sampling(|seed| closed_clutter(seed + 20, 12), 70, false);
+}
+
+/// Certificates of random motions (short and long, so that the first level has 16 pieces)
+/// among the obstacles `env(seed)`, seeds 0-2, on every batch robot: each one certified is free
+/// when sampled every 0.0005 rad by the general path, and some are certified, some refused.
+/// `batches`: whether the models must use single-precision batches (or must not).
+fn certificates_are_sound_under_dense_sampling(env: impl Fn(u64) -> Environment, rng_seed: u64, batches: bool) {
     for (which, robot) in batch_robots().iter().enumerate() {
         let space = robot.config_space();
         let (mut certified, mut refused) = (0, 0);
         for seed in 0..3 {
-            let model = CollisionModel::new(robot, closed_clutter(seed + 20, 12));
+            let model = CollisionModel::new(robot, env(seed));
+            assert_eq!(model.certifies_in_batches(), batches);
             let general = model.clone().general_path_only();
-            let mut rng = Rng::new(seed + 70);
+            assert!(!general.certifies_in_batches());
+            let mut rng = Rng::new(seed + rng_seed);
             let mut tried = 0;
             while tried < 60 {
                 let qa = robot.random_configuration(&mut rng);
                 let far = robot.random_configuration(&mut rng);
-                // Long motions too, so that the first level has 16 pieces.
                 let qb = space.interpolate(&qa, &far, [0.2, 0.5, 1.0][tried % 3]);
                 if model.collides(&qa) || model.collides(&qb) {
                     continue;
@@ -634,4 +649,141 @@ fn a_long_grazing_slide_is_refused_within_the_check_cap() {
     let model = CollisionModel::new(&robot, Environment::new().with(far));
     let (free, checks) = model.certify(&[0.0], &[2.0], 1e-4, false, &mut model.scratch());
     assert!(free && checks < 100, "{free} {checks}");
+}
+
+/// [`clutter`] with balls, boxes and cylinders only: the obstacles the single-precision
+/// batches answer.
+fn solid_clutter(seed: u64, n: usize) -> Environment {
+    let mut env = Environment::new();
+    for o in clutter(seed, 2 * n).obstacles() {
+        if matches!(o.shape, Shape::Sphere { .. } | Shape::Cuboid { .. } | Shape::Cylinder { .. }) && env.len() < n {
+            env.add(o.clone());
+        }
+    }
+    env
+}
+
+/// Configurations within about `gap` (rad) of where the clearance crosses `margin`.
+fn near_clearance(model: &CollisionModel, robot: &Robot, rng: &mut Rng, margin: f64, gap: f64) -> Option<Vec<f64>> {
+    near_boundary(robot, rng, gap, |q| model.distance(q).distance > margin)
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(24))]
+
+    /// What a single-precision batch settles is true in double precision: a configuration it
+    /// calls free has more than the margin of clearance (the general path's distance), one it
+    /// calls colliding collides; on random configurations and on configurations within a hair
+    /// of the margin or of contact, on the UR5, an arm with every joint form and a long chain.
+    #[test]
+    fn single_precision_batches_settle_only_the_truth(
+        which in 0usize..3, seed in any::<u64>(), lanes in 1usize..=8, gap_exp in 3i32..13, m in 0usize..3,
+    ) {
+        let robot = &batch_robots()[which];
+        let model = CollisionModel::new(robot, solid_clutter(seed % 50, 10));
+        prop_assert!(model.certifies_in_batches());
+        let margin = [0.0, 1e-3, 0.03][m];
+        let mut rng = Rng::new(seed);
+        let mut s = model.scratch();
+        let dof = robot.dof();
+        let gap = 10f64.powi(-gap_exp);
+        for _ in 0..12 {
+            let mut qs = Vec::new();
+            for lane in 0..lanes {
+                let q = match lane % 3 {
+                    0 => near_clearance(&model, robot, &mut rng, margin, gap),
+                    1 => near_contact(&model, robot, &mut rng, gap),
+                    _ => None,
+                };
+                qs.extend(q.unwrap_or_else(|| robot.random_configuration(&mut rng)));
+            }
+            let settled = model.settle_batch(&qs, margin, &mut s).unwrap();
+            prop_assert_eq!((settled.free | settled.colliding) >> lanes, 0);
+            prop_assert_eq!(settled.free & settled.colliding, 0);
+            for (i, q) in qs.chunks(dof).enumerate() {
+                if settled.free & (1 << i) != 0 {
+                    let d = model.distance(q).distance;
+                    prop_assert!(d > margin - 1e-9, "lane {} called free with clearance {} < {}: {:?}", i, d, margin, q);
+                    prop_assert!(!model.collides_with(q, &mut s));
+                }
+                if settled.colliding & (1 << i) != 0 {
+                    prop_assert!(model.collides_with(q, &mut s), "lane {} called colliding: {:?}", i, q);
+                }
+            }
+        }
+    }
+}
+
+/// The batches settle nearly everything that is not within a hair of the question, so the
+/// certificate gains from them: on the UR5 among obstacles, batches of eight random free
+/// configurations are settled free, and a batch holding one colliding configuration among
+/// free ones finds a contact.
+#[test]
+fn single_precision_batches_settle_random_configurations() {
+    let robot = ur5();
+    let dof = robot.dof();
+    let (mut free, mut settled_free, mut with_contact, mut found) = (0, 0, 0, 0);
+    for seed in 0..6 {
+        let model = CollisionModel::new(&robot, solid_clutter(seed, 10));
+        let mut s = model.scratch();
+        let mut rng = Rng::new(seed + 40);
+        let (mut frees, mut colliding) = (Vec::new(), Vec::new());
+        while frees.len() < 8 * 40 || colliding.len() < 40 {
+            let q = robot.random_configuration(&mut rng);
+            if model.collides_with(&q, &mut s) {
+                colliding.push(q);
+            } else {
+                frees.push(q);
+            }
+        }
+        for (k, batch) in frees.chunks(8).take(40).enumerate() {
+            let qs: Vec<f64> = batch.concat();
+            let settled = model.settle_batch(&qs, 0.0, &mut s).unwrap();
+            free += 8;
+            settled_free += settled.free.count_ones();
+            assert_eq!(settled.colliding, 0);
+            // The same with one lane swapped for a colliding configuration.
+            let mut qs = qs;
+            let lane = k % 8;
+            qs[lane * dof..(lane + 1) * dof].copy_from_slice(&colliding[k]);
+            let settled = model.settle_batch(&qs, 0.0, &mut s).unwrap();
+            with_contact += 1;
+            found += (settled.colliding == 1 << lane) as usize;
+            assert_eq!(settled.free & (1 << lane), 0);
+        }
+    }
+    assert!(settled_free as f64 >= 0.99 * free as f64, "{settled_free} of {free} free configurations settled");
+    assert!(found as f64 >= 0.95 * with_contact as f64, "{found} of {with_contact} contacts found");
+}
+
+/// The certificate with single-precision batches stays sound under dense sampling: among
+/// balls, boxes and cylinders, where the batches are used.
+#[test]
+fn certificate_with_batches_is_sound_under_dense_sampling() {
+    certificates_are_sound_under_dense_sampling(|seed| solid_clutter(seed + 20, 12), 90, true);
+}
+
+#[test]
+fn settle_batch_refuses_bad_input_and_models_without_batches() {
+    let robot = ur5();
+    let dof = robot.dof();
+    let model = CollisionModel::new(&robot, solid_clutter(2, 8));
+    let with_capsules = CollisionModel::new(&robot, closed_clutter(2, 15));
+    assert!(!with_capsules.certifies_in_batches());
+    let mut s = model.scratch();
+    let mut rng = Rng::new(5);
+    let qs: Vec<f64> = (0..9).flat_map(|_| robot.random_configuration(&mut rng)).collect();
+    assert!(model.settle_batch(&qs, 0.0, &mut s).is_none());
+    assert!(model.settle_batch(&qs[..dof + 1], 0.0, &mut s).is_none());
+    assert!(model.settle_batch(&[], 0.0, &mut s).is_none());
+    assert!(model.settle_batch(&qs[..dof], -1.0, &mut s).is_none());
+    assert!(model.settle_batch(&qs[..dof], f64::NAN, &mut s).is_none());
+    assert!(with_capsules.settle_batch(&qs[..dof], 0.0, &mut s).is_none());
+    // A configuration that is not finite settles nothing.
+    let mut nan = qs[..2 * dof].to_vec();
+    nan[dof + 2] = f64::NAN;
+    assert_eq!(
+        model.settle_batch(&nan, 0.0, &mut s),
+        Some(embodied_models::collision::BatchSettled { free: 0, colliding: 0 })
+    );
 }

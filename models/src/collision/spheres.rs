@@ -28,6 +28,7 @@ use super::{Inflation, ObstacleGeom, RobotGeom, Value, World};
 
 mod arms;
 mod batch;
+pub(crate) mod lanes;
 mod table;
 
 pub(crate) use batch::LANES;
@@ -178,6 +179,8 @@ pub(crate) struct SphereGeom {
     /// Per group pair, the cells of its relative joints proven free, if it has a table: see
     /// [`table`].
     tables: Vec<Option<std::sync::Arc<table::CellTable>>>,
+    /// The same robot in single precision, for batches of the motion certificate (see [`lanes`]).
+    lanes: lanes::Lanes,
 }
 
 /// An obstacle in the closed form the sphere test needs.
@@ -461,6 +464,8 @@ pub(crate) struct SphereScratch {
     pub(crate) batch: batch::BatchScratch,
     /// Configurations of a batch, one after another.
     pub(crate) batch_q: Vec<f64>,
+    /// The single-precision batch's working memory (see [`lanes`]).
+    pub(crate) lanes: lanes::LaneScratch,
 }
 
 /// One thing an inflated query found *near*: its grown shapes touch, its exact ones do not. A
@@ -494,6 +499,7 @@ impl SphereScratch {
             items: Vec::new(),
             batch: batch::BatchScratch::new(),
             batch_q: Vec::new(),
+            lanes: lanes::LaneScratch::new(),
         }
     }
 }
@@ -808,7 +814,9 @@ impl SphereGeom {
             arms,
             fixed,
             tables: Vec::new(),
+            lanes: lanes::Lanes::empty(),
         };
+        fast.lanes = lanes::Lanes::new(&fast);
         if prove_cells {
             fast.build_tables(&g.pair_lever, g.dof);
         }

@@ -125,7 +125,7 @@ fn at(p: &P, i: usize) -> [f64; 3] {
 /// lanes so that each step is one vector loop: the very operations of the scalar kernel, in
 /// its order, so the same bits.
 #[inline(always)]
-fn sin_cos_lanes(x: &V) -> (V, V) {
+pub(super) fn sin_cos_lanes(x: &V) -> (V, V) {
     use super::{COS_C, PIO2_1, PIO2_2, PIO2_2T, SIN_ROUND, SIN_S};
     let (s, c) = (SIN_S, COS_C);
     let mut shifted = [0.0; LANES];

@@ -1,0 +1,680 @@
+//! Eight configurations at once in single precision, for the motion certificate: which of
+//! them are *certainly free* when every sphere of link `l` is grown by a margin `m_l` against
+//! obstacles and every self pair `p` by `m_p` (the inflated query of
+//! [`super::SphereGeom::check`], with the link and pair margins only).
+//!
+//! After VAMP (Thomason, Kingston and Kavraki, "Motions in Microseconds via Vectorized
+//! Sampling-Based Planning", ICRA 2024): one `f32x8` lane per configuration (the `wide` crate,
+//! two SSE registers on the x86-64 baseline, one AVX register where the build has it), the
+//! forward kinematics as the robot's prepared program over the lanes (a signed permutation or
+//! a matrix per body, the joint turning about the frame's z axis), group, link and sphere
+//! bounding tests as lane masks, and an early end as soon as no lane can be free. The answer
+//! is one-sided: a lane it calls free is free; any other lane is left to the double-precision
+//! query, which also lists what is near (see [`super::Item`]). So the batch may only save work,
+//! never change what the certificate proves.
+//!
+//! # Why single precision stays sound
+//!
+//! Let `u = 2^-24` (the unit roundoff of `f32`, round to nearest; Rust never fuses a multiply
+//! and an add). Joint values and their sines and cosines are computed in `f64` (as the scalar
+//! query does) and rounded once to `f32`: an error of at most `u + 2^-50` each.
+//!
+//! *Forward kinematics.* [`Lanes::new`] runs a running error bound through the robot's
+//! program, once per robot, in `f64` (rounded up by a relative 10^-6 at the end). For a dot
+//! product `Σ_{j≤n} x_j y_j` computed from `x̂`, `ŷ` with `|x̂_j - x_j| ≤ e_x`, `|ŷ_j - y_j| ≤
+//! e_y`, `Σ|x_j| ≤ X1`, `Σ|y_j| ≤ Y1` and `Σ|x_j y_j| ≤ XY`, the computed value differs from
+//! the true one by at most `e_x Y1 + e_y X1 + n e_x e_y + γ_n (XY + e_x Y1 + e_y X1 + n e_x
+//! e_y)`, `γ_n = n u / (1 - n u)` (the perturbation expanded, plus recursive summation's bound:
+//! Higham, *Accuracy and Stability of Numerical Algorithms*, 2nd ed., §3.1). Rotation entries
+//! are at most 1 and every row and column is a unit vector (so `X1 ≤ √3` and `XY ≤ 1` for a
+//! row against a column), sines and cosines at most 1 (`|m0 c| + |m1 s| ≤ 1`), a point's
+//! coordinates at most the sum of the translations above it (`|base|` plus each `|pre_t|` and
+//! `|post_t|`, and each prismatic travel up to [`PRISMATIC_BOUND`]). Applied to every body's
+//! rotation and origin and then to every sphere and bounding centre, this gives `e_c`, a bound
+//! on the error of any coordinate of any centre the batch computes, whatever the joint values.
+//!
+//! *Distances.* Each test asks whether a point `p` (a sphere's or bounding sphere's centre) is
+//! farther than `R` (its radius plus the margin) from a solid, or two centres farther than `R`
+//! apart. Its distance is the norm of a *gap vector* `a` of `k ≤ 3` components: a box's
+//! `max(|l_i| - h_i, 0)` with `l = Rᵀ(p - t)`; a cylinder's `max(|(l_0, l_1)| - r, 0)` and
+//! `max(|l_2| - h, 0)`; a ball's `max(|p - c| - r, 0)`; two centres' difference. Suppose the
+//! true distance is at most `R`. Then every quantity in the formula is bounded: `|p - t| ≤
+//! |h| + R` and so on, so each component is computed with an error of at most `η` (below), and
+//! the computed sum of squares `s` is at most `(1 + γ_3)(R + √3 η)²`. The batch calls a lane
+//! free only when `s` exceeds that threshold (computed in `f64` and rounded *up* to `f32`):
+//! so the true distance exceeds `R`. With `T` the largest coordinate of an obstacle's centre,
+//! `H` its largest size (half extent, radius, half height) and `R_max` the largest `R` of the
+//! query, the component error is at most
+//!
+//! `η = 3 e_c + 32 u (T + H + R_max)`:
+//!
+//! for a box `l`'s components carry at most `√3` times the centre's error plus the rounding of
+//! `p - t` (`u(|t| + |p - t|)` per coordinate), of the rotation's entries (`u` each) and of the
+//! products and sums (`γ_3 |p - t|`), and the subtraction of `h` adds `u(2h + R)`: `√3 e_c +
+//! 1.8 u T + 14 u H + 8 u R` in all. A cylinder's radial component takes the norm of two of
+//! those (`√2 √3 e_c ≤ 2.5 e_c`) and a square root (`u(r + R)`); a ball's and a self pair's
+//! fewer. The tests compare both exact question and computation on random and near-contact
+//! configurations against the `f64` query, and check that a lane called free is free there.
+//!
+//! Robots whose prismatic joints travel more than [`PRISMATIC_BOUND`], or a configuration that
+//! is not finite, get no free lane (the `f64` query answers).
+
+use wide::{CmpLe, f32x8};
+
+use super::batch::sin_cos_lanes;
+use super::{Check, SIN_COS_RANGE, Solid, SphereGeom, sin_cos};
+
+/// Configurations per batch.
+pub(crate) const LANES: usize = 8;
+
+/// The largest prismatic joint travel (m) the error bound covers.
+pub(crate) const PRISMATIC_BOUND: f64 = 16.0;
+
+type F = f32x8;
+/// A point per lane (struct of arrays).
+type P = [F; 3];
+/// A rotation per lane, row-major.
+type R = [F; 9];
+
+const U: f64 = 1.0 / 16_777_216.0;
+
+const fn gamma(n: f64) -> f64 {
+    n * U / (1.0 - n * U)
+}
+
+/// The error bound of a dot product: see the module documentation.
+fn dot_err(ex: f64, ey: f64, x1: f64, y1: f64, xy: f64, n: f64) -> f64 {
+    let e = ex * y1 + ey * x1 + n * ex * ey;
+    e + gamma(n) * (xy + e)
+}
+
+/// `x` rounded to the nearest `f32`.
+fn f(x: f64) -> f32 {
+    x as f32
+}
+
+/// An `f32` at most `x`.
+fn down(x: f64) -> f32 {
+    let y = x as f32;
+    if (y as f64) > x { y.next_down() } else { y }
+}
+
+/// An `f32` at least `x` (for thresholds).
+fn up(x: f64) -> f32 {
+    let y = x as f32;
+    if (y as f64) < x { y.next_up() } else { y }
+}
+
+#[derive(Debug, Clone)]
+enum Pre {
+    Perm([usize; 3], [f32; 3]),
+    Mat([f32; 9]),
+}
+
+#[derive(Debug, Clone)]
+struct Body {
+    parent: usize,
+    pre: Pre,
+    pre_t: [F; 3],
+    prismatic: bool,
+    axis: [f32; 3],
+    post: Option<([f32; 9], [F; 3])>,
+}
+
+/// A sphere robot's program and geometry in single precision, with its error bound.
+#[derive(Debug, Clone)]
+pub(crate) struct Lanes {
+    base_r: [f32; 9],
+    base_t: [F; 3],
+    /// Bodies 1.. (body 0 is the base).
+    bodies: Vec<Body>,
+    prismatic: Vec<bool>,
+    /// Sphere centres in their body frames, each coordinate in every lane.
+    balls: Vec<[F; 3]>,
+    /// Per link: bounding centre (body frame).
+    links: Vec<[F; 3]>,
+    /// Per group: bounding centre.
+    groups: Vec<[F; 3]>,
+    /// The self pairs between bodies: (pair, outer link, inner link), grouped by group pair.
+    pairs: Vec<[u32; 3]>,
+    /// Per group pair, its range of `pairs`.
+    pair_ranges: Vec<std::ops::Range<usize>>,
+    /// Bound on the error of any coordinate of any centre the batch computes (m).
+    pub(crate) centre_err: f64,
+}
+
+/// Obstacles in single precision, and what their rounding adds to the error bound.
+#[derive(Debug, Clone)]
+pub(crate) struct Solids32 {
+    solids: Vec<Solid32>,
+    /// Per solid, a sphere holding it: centre, radius (tested before the solid itself).
+    bound: Vec<([F; 3], f64)>,
+    /// The largest obstacle coordinate and size (`T + H` of the module documentation).
+    scale: f64,
+}
+
+#[derive(Debug, Clone)]
+enum Solid32 {
+    Ball { c: [F; 3], r: F },
+    Cuboid { rt: [F; 9], t: [F; 3], half: [F; 3] },
+    Cylinder { rt: [F; 9], t: [F; 3], r: F, hh: F },
+}
+
+impl Solids32 {
+    /// The obstacles, or `None` when one has no closed form here (capsules, meshes).
+    pub(crate) fn new(solids: &[Solid]) -> Option<Solids32> {
+        let mut scale: f64 = 0.0;
+        let mut bound = Vec::with_capacity(solids.len());
+        let m9 = |m: &nalgebra::Matrix3<f64>| std::array::from_fn(|k| splat(f(m[(k / 3, k % 3)])));
+        let v3 = |v: &nalgebra::Vector3<f64>| [splat(f(v.x)), splat(f(v.y)), splat(f(v.z))];
+        let out = solids
+            .iter()
+            .map(|s| {
+                Some(match s {
+                    Solid::Ball { c, r } => {
+                        scale = scale.max(c.amax() + r);
+                        bound.push((v3(c), *r));
+                        Solid32::Ball { c: v3(c), r: splat(f(*r)) }
+                    }
+                    Solid::Cuboid { rt, t, half } => {
+                        scale = scale.max(t.amax() + half.amax());
+                        bound.push((v3(t), half.norm()));
+                        Solid32::Cuboid { rt: m9(rt), t: v3(t), half: v3(half) }
+                    }
+                    Solid::Cylinder { rt, t, r, hh } => {
+                        scale = scale.max(t.amax() + r.max(*hh));
+                        bound.push((v3(t), r.hypot(*hh)));
+                        Solid32::Cylinder { rt: m9(rt), t: v3(t), r: splat(f(*r)), hh: splat(f(*hh)) }
+                    }
+                    Solid::Capsule { .. } | Solid::Other => return None,
+                })
+            })
+            .collect::<Option<Vec<_>>>()?;
+        scale.is_finite().then_some(Solids32 { solids: out, bound, scale })
+    }
+}
+
+/// What a batch grows the spheres by: each sphere of link `l` by `link[l]` against obstacles,
+/// self pair `p` by `pair[p]`; the self-collision tables may prove a group pair over
+/// `q ± step` (as the inflated query; `None`: no tables).
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct LaneMargins<'a> {
+    pub link: &'a [f64],
+    pub pair: &'a [f64],
+    pub step: Option<&'a [f64]>,
+}
+
+/// The answer of a batch: bit `i` for lane `i`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) struct Lanes8 {
+    /// Lanes certainly free (inflated).
+    pub free: u32,
+    /// Lanes certainly in contact (exact); when not empty, the batch stopped there and `free`
+    /// is empty.
+    pub hit: u32,
+}
+
+/// Working memory of the single-precision batch.
+#[derive(Debug, Clone)]
+pub(crate) struct LaneScratch {
+    rot: Vec<R>,
+    pos: Vec<P>,
+    group_c: Vec<P>,
+    link_c: Vec<P>,
+    link_posed: Vec<bool>,
+    centre: Vec<P>,
+    posed: Vec<bool>,
+}
+
+impl LaneScratch {
+    pub(crate) const fn new() -> Self {
+        Self {
+            rot: Vec::new(),
+            pos: Vec::new(),
+            group_c: Vec::new(),
+            link_c: Vec::new(),
+            link_posed: Vec::new(),
+            centre: Vec::new(),
+            posed: Vec::new(),
+        }
+    }
+}
+
+#[inline(always)]
+fn splat(x: f32) -> F {
+    F::splat(x)
+}
+
+/// `rot * c + pos` per lane, as `mul3v(rot, c) + pos`.
+#[inline(always)]
+fn place(rot: &R, pos: &P, c: &[F; 3]) -> P {
+    let [x, y, z] = *c;
+    [
+        rot[0] * x + rot[1] * y + rot[2] * z + pos[0],
+        rot[3] * x + rot[4] * y + rot[5] * z + pos[1],
+        rot[6] * x + rot[7] * y + rot[8] * z + pos[2],
+    ]
+}
+
+/// `rot * m` for a constant matrix `m` (row-major).
+#[inline(always)]
+fn mul_m(rot: &R, m: &[f32; 9]) -> R {
+    std::array::from_fn(|k| {
+        let (r, c) = (k / 3, k % 3);
+        rot[3 * r] * splat(m[c]) + rot[3 * r + 1] * splat(m[3 + c]) + rot[3 * r + 2] * splat(m[6 + c])
+    })
+}
+
+/// Lanes where the sum of squares `s` is at most the threshold `t` (possibly touching).
+#[inline(always)]
+fn within(s: F, t: f32) -> u32 {
+    s.cmp_le(splat(t)).move_mask() as u32
+}
+
+/// Squared gap of each lane's point to a solid (see the module documentation).
+#[inline(always)]
+fn gap2(solid: &Solid32, p: &P) -> F {
+    let zero = F::ZERO;
+    match solid {
+        Solid32::Ball { c, r } => {
+            let (dx, dy, dz) = (p[0] - c[0], p[1] - c[1], p[2] - c[2]);
+            let d = (dx * dx + dy * dy + dz * dz).sqrt() - *r;
+            let d = d.max(zero);
+            d * d
+        }
+        Solid32::Cuboid { rt, t, half } => {
+            let l = local(rt, t, p);
+            let ax = (l[0].abs() - half[0]).max(zero);
+            let ay = (l[1].abs() - half[1]).max(zero);
+            let az = (l[2].abs() - half[2]).max(zero);
+            ax * ax + ay * ay + az * az
+        }
+        Solid32::Cylinder { rt, t, r, hh } => {
+            let l = local(rt, t, p);
+            let ar = ((l[0] * l[0] + l[1] * l[1]).sqrt() - *r).max(zero);
+            let az = (l[2].abs() - *hh).max(zero);
+            ar * ar + az * az
+        }
+    }
+}
+
+/// `rt * (p - t)` per lane.
+#[inline(always)]
+fn local(rt: &[F; 9], t: &[F; 3], p: &P) -> P {
+    let (x, y, z) = (p[0] - t[0], p[1] - t[1], p[2] - t[2]);
+    [rt[0] * x + rt[1] * y + rt[2] * z, rt[3] * x + rt[4] * y + rt[5] * z, rt[6] * x + rt[7] * y + rt[8] * z]
+}
+
+#[inline(always)]
+fn dist2(a: &P, b: &P) -> F {
+    let (dx, dy, dz) = (a[0] - b[0], a[1] - b[1], a[2] - b[2]);
+    dx * dx + dy * dy + dz * dz
+}
+
+impl Lanes {
+    /// No program: every batch leaves all its lanes to the `f64` query.
+    pub(super) fn empty() -> Lanes {
+        Lanes {
+            base_r: [0.0; 9],
+            base_t: [F::ZERO; 3],
+            bodies: Vec::new(),
+            prismatic: Vec::new(),
+            balls: Vec::new(),
+            links: Vec::new(),
+            groups: Vec::new(),
+            pairs: Vec::new(),
+            pair_ranges: Vec::new(),
+            centre_err: f64::INFINITY,
+        }
+    }
+
+    /// The single-precision program of `g` (its bodies already turned so that each joint
+    /// spins about z), with its error bound.
+    pub(super) fn new(g: &SphereGeom) -> Lanes {
+        let m9 = |m: &nalgebra::Matrix3<f64>| std::array::from_fn(|k| f(m[(k / 3, k % 3)]));
+        let v3 = |v: &nalgebra::Vector3<f64>| [f(v.x), f(v.y), f(v.z)];
+        let bodies: Vec<Body> = g
+            .bodies
+            .iter()
+            .skip(1)
+            .map(|b| Body {
+                parent: b.parent,
+                pre: match &b.pre_perm {
+                    Some((perm, sign)) => Pre::Perm(*perm, [f(sign[0]), f(sign[1]), f(sign[2])]),
+                    None => Pre::Mat(m9(&b.pre_r)),
+                },
+                pre_t: v3(&b.pre_t).map(splat),
+                prismatic: b.prismatic,
+                axis: v3(&b.axis),
+                post: b.post.as_ref().map(|(r, t)| (m9(r), v3(t).map(splat))),
+            })
+            .collect();
+        // The running error bound (module documentation): per body, the error of a rotation
+        // entry, of an origin coordinate, and the largest origin coordinate.
+        let sc = U + 2f64.powi(-50);
+        let s3 = 3f64.sqrt();
+        let n = g.bodies.len();
+        let (mut er, mut ep, mut mp) = (vec![0.0; n], vec![0.0; n], vec![0.0; n]);
+        let t_err = |t: &nalgebra::Vector3<f64>| U * t.amax();
+        // A point `r t + p` from a rotation with entry error `e_r`, an origin with error `e_p`
+        // and magnitude `m_p`: its coordinates' error.
+        let point = |e_r: f64, e_p: f64, m_p: f64, t: &nalgebra::Vector3<f64>| {
+            let t1 = t.abs().sum();
+            let dot = dot_err(e_r, t_err(t), s3, t1, t.norm(), 3.0);
+            // The last addition of the origin.
+            dot + e_p + gamma(1.0) * (t.norm() + dot + m_p + e_p)
+        };
+        er[0] = U;
+        ep[0] = t_err(&g.base_t);
+        mp[0] = g.base_t.amax();
+        for (k, b) in g.bodies.iter().enumerate().skip(1) {
+            let p = b.parent;
+            let em = match b.pre_perm {
+                Some(_) => er[p],
+                None => dot_err(er[p], U, s3, s3, 1.0, 3.0),
+            };
+            let mut r_err = if b.prismatic { em } else { dot_err(em, sc, 2f64.sqrt(), 2f64.sqrt(), 1.0, 2.0).max(em) };
+            let mut p_err = point(er[p], ep[p], mp[p], &b.pre_t);
+            let mut m = mp[p] + b.pre_t.norm();
+            if b.prismatic {
+                // `m (axis v)`, `|v| ≤ PRISMATIC_BOUND`, then added to the origin.
+                let a = b.axis * PRISMATIC_BOUND;
+                let a_err = gamma(3.0) * a.amax();
+                let dot = dot_err(em, a_err, s3, a.abs().sum(), a.norm(), 3.0);
+                p_err += dot + gamma(1.0) * (m + a.norm() + p_err + dot);
+                m += a.norm();
+            }
+            if let Some((qr, qt)) = &b.post {
+                p_err = point(r_err, p_err, m, qt);
+                m += qt.norm();
+                let _ = qr;
+                r_err = dot_err(r_err, U, s3, s3, 1.0, 3.0);
+            }
+            er[k] = r_err;
+            ep[k] = p_err;
+            mp[k] = m;
+        }
+        let mut centre_err: f64 = 0.0;
+        for l in &g.links {
+            let b = l.body;
+            centre_err = centre_err.max(point(er[b], ep[b], mp[b], &l.c));
+            for c in &g.centre[l.first..l.end] {
+                centre_err = centre_err.max(point(er[b], ep[b], mp[b], c));
+            }
+        }
+        for gr in &g.groups {
+            let b = gr.body;
+            centre_err = centre_err.max(point(er[b], ep[b], mp[b], &gr.c));
+        }
+        let centre_err = if centre_err.is_finite() { centre_err * (1.0 + 1e-6) } else { f64::INFINITY };
+        let mut pairs = Vec::new();
+        let mut pair_ranges = Vec::new();
+        for gp in &g.group_pairs {
+            let first = pairs.len();
+            for run in &g.runs[gp.runs.clone()] {
+                for rp in &g.run_pairs[run.pairs.clone()] {
+                    pairs.push([rp.pair, run.outer as u32, rp.link]);
+                }
+            }
+            pair_ranges.push(first..pairs.len());
+        }
+        Lanes {
+            base_r: m9(&g.base_r),
+            base_t: v3(&g.base_t).map(splat),
+            bodies,
+            prismatic: g.bodies.iter().skip(1).map(|b| b.prismatic).collect(),
+            balls: g.centre.iter().map(|c| v3(c).map(splat)).collect(),
+            links: g.links.iter().map(|l| v3(&l.c).map(splat)).collect(),
+            groups: g.groups.iter().map(|gr| v3(&gr.c).map(splat)).collect(),
+            pairs,
+            pair_ranges,
+            centre_err,
+        }
+    }
+}
+
+impl SphereGeom {
+    /// Of the [`LANES`] configurations `qs` (`dof` values each, one after another), the lanes
+    /// certainly free when grown by `margins` (see [`LaneMargins`]): bit `i` for lane `i`. See
+    /// the module documentation; lanes not set may or may not be free. A lane certainly in
+    /// contact (exactly, without margins) ends the batch: then only `hit` is set.
+    pub(crate) fn free_lanes(
+        &self,
+        qs: &[f64],
+        dof: usize,
+        obstacles: &Solids32,
+        margins: LaneMargins<'_>,
+        s: &mut LaneScratch,
+    ) -> Lanes8 {
+        let LaneMargins { link: link_m, pair: pair_m, step } = margins;
+        let none = Lanes8 { free: 0, hit: 0 };
+        let lanes = &self.lanes;
+        if self.fixed != Check::Free || qs.len() != LANES * dof || !lanes.centre_err.is_finite() {
+            return none;
+        }
+        // The largest radius any test asks about, and the component error bound η.
+        let max_link_m = link_m.iter().copied().fold(0.0, f64::max);
+        let max_pair_m = pair_m.iter().copied().fold(0.0, f64::max);
+        let max_group_r = self.groups.iter().map(|g| g.r).fold(0.0, f64::max);
+        let r_max = (max_group_r + max_link_m).max(2.0 * max_group_r + max_pair_m);
+        let eta = 3.0 * lanes.centre_err + 32.0 * U * (obstacles.scale + r_max);
+        if !eta.is_finite() {
+            return none;
+        }
+        let grow = 3f64.sqrt() * eta;
+        let thr = |r: f64| up((1.0 + gamma(3.0)) * (r + grow) * (r + grow));
+        // Certainly in contact: at most this (rounded down), see the module documentation.
+        let contact = |r: f64| {
+            let r = r - grow;
+            if r > 0.0 { down((1.0 - gamma(3.0)) * r * r) } else { -1.0 }
+        };
+        if !self.pose_lanes(qs, dof, s) {
+            return none;
+        }
+        for (gi, g) in self.groups.iter().enumerate() {
+            s.group_c[gi] = place(&s.rot[g.body], &s.pos[g.body], &lanes.groups[gi]);
+        }
+        let mut live: u32 = (1 << LANES) - 1;
+        // Against obstacles: group, link, sphere.
+        for (gi, g) in self.groups.iter().enumerate() {
+            let links = &self.group_links[g.first..g.end];
+            let eg = links.iter().map(|&l| link_m[l as usize]).fold(0.0, f64::max);
+            let gc = s.group_c[gi];
+            let tg = thr(g.r + eg);
+            for (o, (bc, br)) in obstacles.solids.iter().zip(&obstacles.bound) {
+                // The spheres around the group and the solid first.
+                if live & within(dist2(&gc, bc), thr(g.r + eg + br)) == 0 {
+                    continue;
+                }
+                let mg = live & within(gap2(o, &gc), tg);
+                if mg == 0 {
+                    continue;
+                }
+                for &l in links {
+                    let l = l as usize;
+                    let link = &self.links[l];
+                    let lc = self.lane_link_centre(l, s);
+                    let ml = mg & within(gap2(o, &lc), thr(link.r + link_m[l]));
+                    if ml == 0 {
+                        continue;
+                    }
+                    self.pose_lane_link(l, s);
+                    for k in link.first..link.end {
+                        let d2 = gap2(o, &s.centre[k]);
+                        let mk = ml & within(d2, thr(self.radius[k] + link_m[l]));
+                        if mk != 0 {
+                            let hit = mk & within(d2, contact(self.radius[k]));
+                            if hit != 0 {
+                                return Lanes8 { free: 0, hit };
+                            }
+                        }
+                        live &= !mk;
+                        if live == 0 {
+                            return none;
+                        }
+                    }
+                }
+            }
+        }
+        // Self pairs, by group pair (as the scalar query): the two group spheres, the cell
+        // table, then each pair's link spheres and spheres.
+        for (k, gp) in self.group_pairs.iter().enumerate() {
+            let Some(range) = lanes.pair_ranges.get(k) else { break };
+            let pairs = &lanes.pairs[range.clone()];
+            let eg = pairs.iter().map(|pr| pair_m[pr[0] as usize]).fold(0.0, f64::max);
+            let mut near = live & within(dist2(&s.group_c[gp.outer], &s.group_c[gp.inner]), thr(gp.rr + eg));
+            if near == 0 {
+                continue;
+            }
+            // The lanes whose cells the table does not prove free, then whose spheres come near.
+            if let (Some(Some(table)), Some(step)) = (self.tables.get(k), step) {
+                for i in 0..LANES {
+                    if near & (1 << i) != 0 && table.proves_box(&qs[i * dof..(i + 1) * dof], step) {
+                        near &= !(1 << i);
+                    }
+                }
+                if near == 0 {
+                    continue;
+                }
+            }
+            let mut touch = 0;
+            for &[p, a, b] in pairs {
+                let (p, a, b) = (p as usize, a as usize, b as usize);
+                let m = pair_m[p];
+                let (la, lb) = (&self.links[a], &self.links[b]);
+                let ca = self.lane_link_centre(a, s);
+                let cb = self.lane_link_centre(b, s);
+                let close = near & !touch & within(dist2(&ca, &cb), thr(la.r + lb.r + m));
+                if close == 0 {
+                    continue;
+                }
+                self.pose_lane_link(a, s);
+                self.pose_lane_link(b, s);
+                for i in la.first..la.end {
+                    for j in lb.first..lb.end {
+                        let d2 = dist2(&s.centre[i], &s.centre[j]);
+                        let r = self.radius[i] + self.radius[j];
+                        let t = close & within(d2, thr(r + m));
+                        if t != 0 {
+                            let hit = t & within(d2, contact(r));
+                            if hit != 0 {
+                                return Lanes8 { free: 0, hit };
+                            }
+                            touch |= t;
+                        }
+                    }
+                }
+                if touch == near {
+                    break;
+                }
+            }
+            live &= !touch;
+            if live == 0 {
+                return none;
+            }
+        }
+        Lanes8 { free: live, hit: 0 }
+    }
+
+    /// Bodies of the configurations `qs`; `false` when a joint value is not finite or a
+    /// prismatic travel exceeds [`PRISMATIC_BOUND`].
+    fn pose_lanes(&self, qs: &[f64], dof: usize, s: &mut LaneScratch) -> bool {
+        let lanes = &self.lanes;
+        let n = self.bodies.len();
+        s.rot.resize(n, [F::ZERO; 9]);
+        s.pos.resize(n, [F::ZERO; 3]);
+        s.group_c.resize(self.groups.len(), [F::ZERO; 3]);
+        s.link_c.resize(self.links.len(), [F::ZERO; 3]);
+        s.link_posed.clear();
+        s.link_posed.resize(self.links.len(), false);
+        s.centre.resize(self.centre.len(), [F::ZERO; 3]);
+        s.posed.clear();
+        s.posed.resize(self.links.len(), false);
+        s.rot[0] = lanes.base_r.map(splat);
+        s.pos[0] = lanes.base_t;
+        for (k, (b, a)) in lanes.bodies.iter().zip(&self.angles).enumerate() {
+            let mut v = [0.0f64; LANES];
+            let mut finite = true;
+            for (i, v) in v.iter_mut().enumerate() {
+                let x = qs.get(i * dof + a.dof).copied().unwrap_or(0.0);
+                *v = (x * a.scale + a.add) + a.offset;
+                finite &= v.abs() < SIN_COS_RANGE;
+            }
+            if !finite || (lanes.prismatic[k] && v.iter().any(|x| x.abs() > PRISMATIC_BOUND)) {
+                return false;
+            }
+            let k = k + 1;
+            let (done_r, todo_r) = s.rot.split_at_mut(k);
+            let (done_p, todo_p) = s.pos.split_at_mut(k);
+            let (pr, pp) = (&done_r[b.parent], &done_p[b.parent]);
+            let (out_r, out_p) = (&mut todo_r[0], &mut todo_p[0]);
+            *out_p = place(pr, pp, &b.pre_t);
+            // `pr * pre` into the output, row by row (few values live at once).
+            match &b.pre {
+                Pre::Perm(perm, sign) => {
+                    for r in 0..3 {
+                        for c in 0..3 {
+                            out_r[3 * r + c] = pr[3 * r + perm[c]] * splat(sign[c]);
+                        }
+                    }
+                }
+                Pre::Mat(m) => *out_r = mul_m(pr, m),
+            }
+            if b.prismatic {
+                let vf = F::from(v.map(|x| x as f32));
+                let ax = [splat(b.axis[0]) * vf, splat(b.axis[1]) * vf, splat(b.axis[2]) * vf];
+                for r in 0..3 {
+                    let along = out_r[3 * r] * ax[0] + out_r[3 * r + 1] * ax[1] + out_r[3 * r + 2] * ax[2];
+                    out_p[r] += along;
+                }
+            } else {
+                let (sn, cs) = if v.iter().all(|x| x.abs() < SIN_COS_RANGE) {
+                    sin_cos_lanes(&v)
+                } else {
+                    let mut sn = [0.0; LANES];
+                    let mut cs = [0.0; LANES];
+                    for i in 0..LANES {
+                        (sn[i], cs[i]) = sin_cos(v[i]);
+                    }
+                    (sn, cs)
+                };
+                let (sn, cs) = (F::from(sn.map(|x| x as f32)), F::from(cs.map(|x| x as f32)));
+                for r in 0..3 {
+                    let (c0, c1) = (out_r[3 * r], out_r[3 * r + 1]);
+                    out_r[3 * r] = c0 * cs + c1 * sn;
+                    out_r[3 * r + 1] = c1 * cs - c0 * sn;
+                }
+            }
+            if let Some((qr, qt)) = &b.post {
+                *out_p = place(out_r, out_p, qt);
+                *out_r = mul_m(out_r, qr);
+            }
+        }
+        true
+    }
+
+    /// World centre of link `l`'s bounding sphere per lane, once per batch.
+    #[inline(always)]
+    fn lane_link_centre(&self, l: usize, s: &mut LaneScratch) -> P {
+        if !s.link_posed[l] {
+            s.link_posed[l] = true;
+            let b = self.links[l].body;
+            s.link_c[l] = place(&s.rot[b], &s.pos[b], &self.lanes.links[l]);
+        }
+        s.link_c[l]
+    }
+
+    /// World centres of link `l`'s spheres per lane, once per batch.
+    #[inline(always)]
+    fn pose_lane_link(&self, l: usize, s: &mut LaneScratch) {
+        if s.posed[l] {
+            return;
+        }
+        s.posed[l] = true;
+        let link = &self.links[l];
+        let (rot, pos) = (&s.rot[link.body], &s.pos[link.body]);
+        for k in link.first..link.end {
+            s.centre[k] = place(rot, pos, &self.lanes.balls[k]);
+        }
+    }
+}
