@@ -135,6 +135,9 @@ pub(crate) struct Lanes {
     links: Vec<[F; 3]>,
     /// Per group: bounding centre.
     groups: Vec<[F; 3]>,
+    /// Sphere radii and link bounding radii, rounded up.
+    radius_up: Vec<f32>,
+    link_r_up: Vec<f32>,
     /// The self pairs between bodies: (pair, outer link, inner link), grouped by group pair.
     pairs: Vec<[u32; 3]>,
     /// Per group pair, its range of `pairs`.
@@ -148,7 +151,7 @@ pub(crate) struct Lanes {
 pub(crate) struct Solids32 {
     solids: Vec<Solid32>,
     /// Per solid, a sphere holding it: centre, radius (tested before the solid itself).
-    bound: Vec<([F; 3], f64)>,
+    bound: Vec<([F; 3], f32)>,
     /// The largest obstacle coordinate and size (`T + H` of the module documentation).
     scale: f64,
 }
@@ -173,17 +176,17 @@ impl Solids32 {
                 Some(match s {
                     Solid::Ball { c, r } => {
                         scale = scale.max(c.amax() + r);
-                        bound.push((v3(c), *r));
+                        bound.push((v3(c), up(*r)));
                         Solid32::Ball { c: v3(c), r: splat(f(*r)) }
                     }
                     Solid::Cuboid { rt, t, half } => {
                         scale = scale.max(t.amax() + half.amax());
-                        bound.push((v3(t), half.norm()));
+                        bound.push((v3(t), up(half.norm() * (1.0 + 1e-12))));
                         Solid32::Cuboid { rt: m9(rt), t: v3(t), half: v3(half) }
                     }
                     Solid::Cylinder { rt, t, r, hh } => {
                         scale = scale.max(t.amax() + r.max(*hh));
-                        bound.push((v3(t), r.hypot(*hh)));
+                        bound.push((v3(t), up(r.hypot(*hh) * (1.0 + 1e-12))));
                         Solid32::Cylinder { rt: m9(rt), t: v3(t), r: splat(f(*r)), hh: splat(f(*hh)) }
                     }
                     Solid::Capsule { .. } | Solid::Other => return None,
@@ -224,6 +227,8 @@ pub(crate) struct LaneScratch {
     link_posed: Vec<bool>,
     centre: Vec<P>,
     posed: Vec<bool>,
+    /// Per link, its margin plus the rounding allowance, rounded up.
+    link_g: Vec<f32>,
 }
 
 impl LaneScratch {
@@ -236,6 +241,7 @@ impl LaneScratch {
             link_posed: Vec::new(),
             centre: Vec::new(),
             posed: Vec::new(),
+            link_g: Vec::new(),
         }
     }
 }
@@ -263,6 +269,19 @@ fn mul_m(rot: &R, m: &[f32; 9]) -> R {
         let (r, c) = (k / 3, k % 3);
         rot[3 * r] * splat(m[c]) + rot[3 * r + 1] * splat(m[3 + c]) + rot[3 * r + 2] * splat(m[6 + c])
     })
+}
+
+/// `(1 + 2^-21)`: see [`thr`].
+const WIDEN: f32 = 1.0 + 1.0 / 2_097_152.0;
+
+/// A threshold at least `(1 + γ_3)(a + b + c)²` for `a`, `b`, `c` ≥ 0 (each already holding its
+/// share of the rounding allowance, rounded up), in three `f32` operations and a square: the
+/// two sums and the product lose at most a factor `(1 - u)³` before the square, which squares
+/// it and loses another `(1 - u)`, and `(1 - u)^7 (1 + 8u)² > 1 + γ_3`.
+#[inline(always)]
+fn thr(a: f32, b: f32, c: f32) -> f32 {
+    let x = ((a + b) + c) * WIDEN;
+    x * x
 }
 
 /// Lanes where the sum of squares `s` is at most the threshold `t` (possibly touching).
@@ -322,6 +341,8 @@ impl Lanes {
             balls: Vec::new(),
             links: Vec::new(),
             groups: Vec::new(),
+            radius_up: Vec::new(),
+            link_r_up: Vec::new(),
             pairs: Vec::new(),
             pair_ranges: Vec::new(),
             centre_err: f64::INFINITY,
@@ -426,6 +447,8 @@ impl Lanes {
             balls: g.centre.iter().map(|c| v3(c).map(splat)).collect(),
             links: g.links.iter().map(|l| v3(&l.c).map(splat)).collect(),
             groups: g.groups.iter().map(|gr| v3(&gr.c).map(splat)).collect(),
+            radius_up: g.radius.iter().map(|&r| up(r)).collect(),
+            link_r_up: g.links.iter().map(|l| up(l.r)).collect(),
             pairs,
             pair_ranges,
             centre_err,
@@ -462,7 +485,8 @@ impl SphereGeom {
             return none;
         }
         let grow = 3f64.sqrt() * eta;
-        let thr = |r: f64| up((1.0 + gamma(3.0)) * (r + grow) * (r + grow));
+        s.link_g.clear();
+        s.link_g.extend(link_m.iter().map(|m| up(m + grow)));
         // Certainly in contact: at most this (rounded down), see the module documentation.
         let contact = |r: f64| {
             let r = r - grow;
@@ -480,10 +504,11 @@ impl SphereGeom {
             let links = &self.group_links[g.first..g.end];
             let eg = links.iter().map(|&l| link_m[l as usize]).fold(0.0, f64::max);
             let gc = s.group_c[gi];
-            let tg = thr(g.r + eg);
+            let gg = up(g.r + eg + grow);
+            let tg = thr(gg, 0.0, 0.0);
             for (o, (bc, br)) in obstacles.solids.iter().zip(&obstacles.bound) {
                 // The spheres around the group and the solid first.
-                if live & within(dist2(&gc, bc), thr(g.r + eg + br)) == 0 {
+                if live & within(dist2(&gc, bc), thr(gg, *br, 0.0)) == 0 {
                     continue;
                 }
                 let mg = live & within(gap2(o, &gc), tg);
@@ -494,14 +519,15 @@ impl SphereGeom {
                     let l = l as usize;
                     let link = &self.links[l];
                     let lc = self.lane_link_centre(l, s);
-                    let ml = mg & within(gap2(o, &lc), thr(link.r + link_m[l]));
+                    let lg = s.link_g[l];
+                    let ml = mg & within(gap2(o, &lc), thr(lanes.link_r_up[l], lg, 0.0));
                     if ml == 0 {
                         continue;
                     }
                     self.pose_lane_link(l, s);
                     for k in link.first..link.end {
                         let d2 = gap2(o, &s.centre[k]);
-                        let mk = ml & within(d2, thr(self.radius[k] + link_m[l]));
+                        let mk = ml & within(d2, thr(lanes.radius_up[k], lg, 0.0));
                         if mk != 0 {
                             let hit = mk & within(d2, contact(self.radius[k]));
                             if hit != 0 {
@@ -522,7 +548,8 @@ impl SphereGeom {
             let Some(range) = lanes.pair_ranges.get(k) else { break };
             let pairs = &lanes.pairs[range.clone()];
             let eg = pairs.iter().map(|pr| pair_m[pr[0] as usize]).fold(0.0, f64::max);
-            let mut near = live & within(dist2(&s.group_c[gp.outer], &s.group_c[gp.inner]), thr(gp.rr + eg));
+            let tg = thr(up(gp.rr + eg + grow), 0.0, 0.0);
+            let mut near = live & within(dist2(&s.group_c[gp.outer], &s.group_c[gp.inner]), tg);
             if near == 0 {
                 continue;
             }
@@ -544,7 +571,9 @@ impl SphereGeom {
                 let (la, lb) = (&self.links[a], &self.links[b]);
                 let ca = self.lane_link_centre(a, s);
                 let cb = self.lane_link_centre(b, s);
-                let close = near & !touch & within(dist2(&ca, &cb), thr(la.r + lb.r + m));
+                let pg = up(m + grow);
+                let tl = thr(lanes.link_r_up[a], lanes.link_r_up[b], pg);
+                let close = near & !touch & within(dist2(&ca, &cb), tl);
                 if close == 0 {
                     continue;
                 }
@@ -554,7 +583,7 @@ impl SphereGeom {
                     for j in lb.first..lb.end {
                         let d2 = dist2(&s.centre[i], &s.centre[j]);
                         let r = self.radius[i] + self.radius[j];
-                        let t = close & within(d2, thr(r + m));
+                        let t = close & within(d2, thr(lanes.radius_up[i], lanes.radius_up[j], pg));
                         if t != 0 {
                             let hit = t & within(d2, contact(r));
                             if hit != 0 {
