@@ -1435,7 +1435,10 @@ impl CollisionModel {
     /// pre-filter. There, too, the halves of a sub-interval that could not be certified are
     /// checked against only what was near over the whole (sphere-obstacle and sphere-sphere
     /// pairs): everything else is already certified free over both. A sub-interval that still
-    /// cannot be certified when its margin is below `tolerance` (m) makes the answer `false`:
+    /// cannot be certified when its margin is below `tolerance` (m) makes the answer `false`
+    /// (among balls, boxes and cylinders the sphere path first checks finer pieces eight at a
+    /// time in single precision, with a proven rounding allowance, and only what those batches
+    /// cannot prove free goes through the checks above; see [`Self::certifies_in_batches`]):
     /// motions that pass closer than about `tolerance` to contact are rejected, never let through.
     ///
     /// Configurations of the wrong length, non-finite values, or a `tolerance` that is not
