@@ -93,6 +93,16 @@ fn f(x: f64) -> f32 {
     x as f32
 }
 
+/// A matrix rounded to `f32`, row-major.
+fn m9(m: &nalgebra::Matrix3<f64>) -> [f32; 9] {
+    std::array::from_fn(|k| f(m[(k / 3, k % 3)]))
+}
+
+/// A vector rounded to `f32`.
+fn v3(v: &nalgebra::Vector3<f64>) -> [f32; 3] {
+    [f(v.x), f(v.y), f(v.z)]
+}
+
 /// An `f32` at most `x`.
 fn down(x: f64) -> f32 {
     let y = x as f32;
@@ -128,7 +138,6 @@ pub(crate) struct Lanes {
     base_t: [F; 3],
     /// Bodies 1.. (body 0 is the base).
     bodies: Vec<Body>,
-    prismatic: Vec<bool>,
     /// Sphere centres in their body frames, each coordinate in every lane.
     balls: Vec<[F; 3]>,
     /// Per link: bounding centre (body frame).
@@ -168,8 +177,8 @@ impl Solids32 {
     pub(crate) fn new(solids: &[Solid]) -> Option<Solids32> {
         let mut scale: f64 = 0.0;
         let mut bound = Vec::with_capacity(solids.len());
-        let m9 = |m: &nalgebra::Matrix3<f64>| std::array::from_fn(|k| splat(f(m[(k / 3, k % 3)])));
-        let v3 = |v: &nalgebra::Vector3<f64>| [splat(f(v.x)), splat(f(v.y)), splat(f(v.z))];
+        let m9 = |m: &nalgebra::Matrix3<f64>| m9(m).map(splat);
+        let v3 = |v: &nalgebra::Vector3<f64>| v3(v).map(splat);
         let out = solids
             .iter()
             .map(|s| {
@@ -337,7 +346,6 @@ impl Lanes {
             base_r: [0.0; 9],
             base_t: [F::ZERO; 3],
             bodies: Vec::new(),
-            prismatic: Vec::new(),
             balls: Vec::new(),
             links: Vec::new(),
             groups: Vec::new(),
@@ -352,8 +360,6 @@ impl Lanes {
     /// The single-precision program of `g` (its bodies already turned so that each joint
     /// spins about z), with its error bound.
     pub(super) fn new(g: &SphereGeom) -> Lanes {
-        let m9 = |m: &nalgebra::Matrix3<f64>| std::array::from_fn(|k| f(m[(k / 3, k % 3)]));
-        let v3 = |v: &nalgebra::Vector3<f64>| [f(v.x), f(v.y), f(v.z)];
         let bodies: Vec<Body> = g
             .bodies
             .iter()
@@ -405,10 +411,9 @@ impl Lanes {
                 p_err += dot + gamma(1.0) * (m + a.norm() + p_err + dot);
                 m += a.norm();
             }
-            if let Some((qr, qt)) = &b.post {
+            if let Some((_, qt)) = &b.post {
                 p_err = point(r_err, p_err, m, qt);
                 m += qt.norm();
-                let _ = qr;
                 r_err = dot_err(r_err, U, s3, s3, 1.0, 3.0);
             }
             er[k] = r_err;
@@ -443,7 +448,6 @@ impl Lanes {
             base_r: m9(&g.base_r),
             base_t: v3(&g.base_t).map(splat),
             bodies,
-            prismatic: g.bodies.iter().skip(1).map(|b| b.prismatic).collect(),
             balls: g.centre.iter().map(|c| v3(c).map(splat)).collect(),
             links: g.links.iter().map(|l| v3(&l.c).map(splat)).collect(),
             groups: g.groups.iter().map(|gr| v3(&gr.c).map(splat)).collect(),
@@ -629,7 +633,7 @@ impl SphereGeom {
                 *v = (x * a.scale + a.add) + a.offset;
                 finite &= v.abs() < SIN_COS_RANGE;
             }
-            if !finite || (lanes.prismatic[k] && v.iter().any(|x| x.abs() > PRISMATIC_BOUND)) {
+            if !finite || (b.prismatic && v.iter().any(|x| x.abs() > PRISMATIC_BOUND)) {
                 return false;
             }
             let k = k + 1;
