@@ -315,7 +315,6 @@ fn race<V: StateValidity>(
     goal: &Goal,
     settings: &MotionSettings,
 ) -> Result<MotionPlan, PlanError> {
-    use rayon::prelude::*;
     use std::sync::Arc;
     use std::sync::atomic::{AtomicBool, Ordering};
 
@@ -325,22 +324,39 @@ fn race<V: StateValidity>(
         done => return done,
     }
     let flag = Arc::new(AtomicBool::new(false));
-    let results: Vec<Result<MotionPlan, PlanError>> = (0..settings.racers)
-        .into_par_iter()
-        .map(|k| {
-            let racer = MotionSettings {
-                seed: settings.seed.wrapping_add(k as u64),
-                deadline: settings.deadline.clone().with_race_flag(Arc::clone(&flag)),
-                racers: 1,
-                ..settings.clone()
-            };
-            let result = plan_alone(model, start, goal, &racer, Stages::Search);
-            if result.is_ok() {
-                flag.store(true, Ordering::Relaxed);
-            }
-            result
-        })
-        .collect();
+    let run = |k: usize| {
+        let racer = MotionSettings {
+            seed: settings.seed.wrapping_add(k as u64),
+            deadline: settings.deadline.clone().with_race_flag(Arc::clone(&flag)),
+            racers: 1,
+            ..settings.clone()
+        };
+        let result = plan_alone(model, start, goal, &racer, Stages::Search);
+        if result.is_ok() {
+            flag.store(true, Ordering::Relaxed);
+        }
+        result
+    };
+    // Racer 0 plans on this thread at once; the others are handed to the rayon pool. (A
+    // parallel iterator called from outside the pool would park this thread and wait for two
+    // pool threads to wake up before any planning starts.) A racer that starts after the race is
+    // won stops at its first unit of work.
+    let others: Vec<std::sync::Mutex<Option<Result<MotionPlan, PlanError>>>> =
+        (1..settings.racers).map(|_| std::sync::Mutex::new(None)).collect();
+    let first = rayon::in_place_scope(|scope| {
+        for (k, slot) in others.iter().enumerate() {
+            let run = &run;
+            scope.spawn(move |_| {
+                let result = run(k + 1);
+                if let Ok(mut slot) = slot.lock() {
+                    *slot = Some(result);
+                }
+            });
+        }
+        run(0)
+    });
+    let mut results = vec![first];
+    results.extend(others.into_iter().filter_map(|slot| slot.into_inner().ok().flatten()));
     let mut best: Option<MotionPlan> = None;
     let mut first_error = None;
     for result in results {
