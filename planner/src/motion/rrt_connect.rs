@@ -105,7 +105,7 @@ impl KdIndex {
             let n = n as usize;
             let p = &coords[n * dof..(n + 1) * dof];
             if alive[n] {
-                let d = space.distance_squared(p, q);
+                let d = if WRAP { space.distance_squared(p, q) } else { dist2_below(p, q, found, best.0) };
                 if !found || d < best.0 || (d == best.0 && n < best.1) {
                     best = (d, n);
                     found = true;
@@ -132,6 +132,22 @@ impl KdIndex {
         }
         best
     }
+}
+
+/// The squared Euclidean distance of `p` and `q` (what `ConfigSpace::distance_squared` gives
+/// where no joint wraps, the same sum in the same order), or, when `bounded`, any value above
+/// `limit` as soon as a partial sum exceeds it (squares only add, so the sum would too).
+#[inline(always)]
+fn dist2_below(p: &[f64], q: &[f64], bounded: bool, limit: f64) -> f64 {
+    let mut s = 0.0;
+    for (a, b) in p.iter().zip(q) {
+        let d = b - a;
+        s += d * d;
+        if bounded && s > limit {
+            return s;
+        }
+    }
+    s
 }
 
 /// Slack on a wrapped joint's bound (rad): wrapped differences of unwrapped angles of a few
