@@ -109,6 +109,8 @@ fn generated_problems_load_back_valid_and_on_their_queries() {
             Some(query) => assert!(on_query(query, &problem.start), "{}: start off its query", problem.name),
             None => assert_eq!(problem.start, UR5_START.to_vec(), "{}", problem.name),
         }
+        // The goal is not behind the pedestal from the start (the lift's joint limits).
+        assert!(!embodied::mbm_generate::lift_passes_pedestal(&problem.model, &problem.start, &problem.goal));
         // Start and goal within the limits and collision-free, as bench mbm checks them.
         for q in [&problem.start, &problem.goal] {
             assert!(arm.within_limits(q), "{}", problem.name);

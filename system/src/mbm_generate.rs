@@ -14,7 +14,8 @@
 //!
 //! For one problem: sample a scene; draw a goal pose within the query's tolerances and solve it
 //! with [`Robot::inverse_kinematics`] from random seeds; keep the first solution within the joint
-//! limits, clear of the robot's pedestal and free of collision in that scene ([`CollisionModel`] built exactly as `bench mbm`
+//! limits, clear of the robot's pedestal (and reachable past it from the start) and free of
+//! collision in that scene ([`CollisionModel`] built exactly as `bench mbm`
 //! builds it: the SRDF's and the scene's allowed pairs, the same always/never-colliding pairs).
 //! A scene whose goal (or start) cannot be found in [`IK_CALLS_PER_SCENE`] calls is resampled,
 //! up to [`SCENES_PER_PROBLEM`] times; then generation fails with a clear error. Every problem
@@ -50,7 +51,10 @@
 //!   spherized model and the public scenes leave out. Its validity checks saw it: in the public
 //!   goals no upper-arm sphere is below the base, while without it our IK happily returns goals
 //!   with the upper arm pointing down through it. Starts and goals are kept clear of it; it is
-//!   not written into the scenes (as in the public ones).
+//!   not written into the scenes (as in the public ones). A goal is also refused when the
+//!   shoulder lift would have to swing the upper arm through the pedestal to get there from the
+//!   start ([`lift_passes_pedestal`]): such goals were unreachable for every planner we tried, and
+//!   the public goals never need it.
 //! - The start is MotionBenchMaker's default UR5 state `[1.57, -1.5707, 0, -1.5707, -1.57, 3.14]`
 //!   (gripper joints 0) unless the family has a start query (`table_under_pick`: the gripper under
 //!   the table), which is solved like the goal.
@@ -701,12 +705,17 @@ fn pedestal_allowed() -> Vec<&'static str> {
 /// Whether a sphere of the arm (other than the links allowed to touch it) overlaps the pedestal.
 /// Only spheres are checked (the spherized UR5 has no other collision shapes).
 pub fn touches_pedestal(model: &CollisionModel, q: &[f64]) -> bool {
+    pedestal_contact(model, q, None)
+}
+
+/// [`touches_pedestal`], for the link `only` alone when given.
+fn pedestal_contact(model: &CollisionModel, q: &[f64], only: Option<&str>) -> bool {
     let allowed = pedestal_allowed();
     let (lo, hi) = PEDESTAL;
     model.link_shapes_world(q).iter().any(|o| {
         let link = o.name.split('#').next().unwrap_or_default();
         let Shape::Sphere { radius } = o.shape else { return false };
-        if allowed.contains(&link) {
+        if allowed.contains(&link) || only.is_some_and(|l| l != link) {
             return false;
         }
         let c = o.pose.translation.vector;
@@ -721,30 +730,63 @@ fn valid(model: &CollisionModel, q: &[f64]) -> bool {
     model.robot().within_limits(q) && model.first_collision(q).is_none() && !touches_pedestal(model, q)
 }
 
-/// A configuration reaching `query` in the scene, within the limits and free of collision, from
-/// at most [`IK_CALLS_PER_SCENE`] calls; `None` when none is found. Counts the calls in `calls`.
-fn solve_query(
-    setup: &Setup,
+/// Index of `shoulder_lift_joint` in the arm's configuration, and the link it swings.
+const LIFT: usize = 1;
+const UPPER_ARM: &str = "upper_arm_link";
+/// Steps of the shoulder lift checked between a start and a goal.
+const LIFT_STEPS: usize = 64;
+
+/// Whether the shoulder lift can turn from `from` to `to` without swinging the upper arm through
+/// the pedestal (checked every 1/[`LIFT_STEPS`] of the way, at `to`'s other joint values; the
+/// upper arm's place depends only on the pan and the lift). The lift's limits are +-pi, not a
+/// continuous joint: a goal at lift +3.1 is not reached from the start's -1.57 the short way
+/// round, and the long way (lift through 0 to +pi) points the upper arm down through the
+/// pedestal. The public goals never have such a lift (all 300 at most 0.17); ours did, and no
+/// planner found a path to them.
+pub fn lift_passes_pedestal(model: &CollisionModel, from: &[f64], to: &[f64]) -> bool {
+    let mut q = to.to_vec();
+    (0..=LIFT_STEPS).any(|k| {
+        q[LIFT] = from[LIFT] + (to[LIFT] - from[LIFT]) * k as f64 / LIFT_STEPS as f64;
+        pedestal_contact(model, &q, Some(UPPER_ARM))
+    })
+}
+
+/// The target pose of `query` on one of its objects (drawn) in the sampled scene.
+fn query_target(
     spec: &FamilySpec,
     query: &Query,
     objects: &[(TemplateObject, Isometry3<f64>)],
-    model: &CollisionModel,
     rng: &mut Rng,
-    calls: &mut usize,
-) -> Result<Option<Vec<f64>>, GenerateError> {
+) -> Result<Isometry3<f64>, GenerateError> {
     let name = query.objects[rng.below(query.objects.len())];
     let Some((_, object_pose)) = objects.iter().find(|(t, _)| t.id == name) else {
         return Err(GenerateError::Robot(format!("the template has no object `{name}`")));
     };
-    let target = query.target(object_pose, spec.ee_offset);
+    Ok(query.target(object_pose, spec.ee_offset))
+}
+
+/// A configuration placing the tip within `query`'s tolerances of `target`, within the limits,
+/// free of collision and (from `reach_from`) not behind the pedestal, from at most
+/// [`IK_CALLS_PER_SCENE`] calls; `None` when none is found. Counts the calls in `calls`.
+fn solve_query(
+    setup: &Setup,
+    query: &Query,
+    target: &Isometry3<f64>,
+    model: &CollisionModel,
+    reach_from: Option<&[f64]>,
+    rng: &mut Rng,
+    calls: &mut usize,
+) -> Result<Option<Vec<f64>>, GenerateError> {
     for _ in 0..IK_CALLS_PER_SCENE {
         *calls += 1;
-        let pose = sample_within(query, &target, rng);
+        let pose = sample_within(query, target, rng);
         let seed = setup.ik_arm.random_configuration(rng);
         let options =
             IkOptions { restarts: IK_RESTARTS, seed: rng.next_u64(), closed_form: false, ..IkOptions::default() };
         match setup.ik_arm.inverse_kinematics(setup.tip, &pose, &seed, &options) {
-            Ok(q) if valid(model, &q) => return Ok(Some(q)),
+            Ok(q) if valid(model, &q) && reach_from.is_none_or(|from| !lift_passes_pedestal(model, from, &q)) => {
+                return Ok(Some(q));
+            }
             Ok(_) | Err(ModelError::IkFailed { .. }) => {}
             Err(e) => return Err(e.into()),
         }
@@ -786,16 +828,21 @@ fn generate_problem(
                 failed_on = "start";
                 continue;
             }
-            Some(query) => match solve_query(setup, spec, query, &objects, &model, &mut rng, &mut outcome.ik_calls)? {
-                Some(q) => q,
-                None => {
-                    failed_on = "start";
-                    continue;
+            Some(query) => {
+                let target = query_target(spec, query, &objects, &mut rng)?;
+                match solve_query(setup, query, &target, &model, None, &mut rng, &mut outcome.ik_calls)? {
+                    Some(q) => q,
+                    None => {
+                        failed_on = "start";
+                        continue;
+                    }
                 }
-            },
+            }
         };
         let goal_query = &spec.goal_query;
-        if let Some(goal) = solve_query(setup, spec, goal_query, &objects, &model, &mut rng, &mut outcome.ik_calls)? {
+        let target = query_target(spec, goal_query, &objects, &mut rng)?;
+        let from = Some(start.as_slice());
+        if let Some(goal) = solve_query(setup, goal_query, &target, &model, from, &mut rng, &mut outcome.ik_calls)? {
             return Ok(Problem { objects, start, goal });
         }
         failed_on = "goal";
