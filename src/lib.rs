@@ -14,8 +14,8 @@ pub mod moveit_cli;
 pub use embodied_system::SystemError as AppError;
 pub use embodied_system::{VERSION, generator};
 pub use embodied_system::{
-    batch, bench_qp, campaign, deadlines, error, faults, fuzz, load, log, mbm, ompl_log, plan, plot, scenario, system,
-    verify, view,
+    batch, bench_qp, campaign, deadlines, error, faults, fuzz, load, log, mbm, mbm_generate, ompl_log, plan, plot,
+    scenario, system, verify, view,
 };
 
 /// `println!` that returns [`AppError::Output`] instead of panicking when standard output is

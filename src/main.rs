@@ -352,6 +352,30 @@ enum BenchCommand {
         #[arg(long, value_name = "DIR")]
         ompl_log: Option<PathBuf>,
     },
+    /// Generate MotionBenchMaker-style UR5 problems (cage, bookshelf_tall, bookshelf_thin,
+    /// table_under_pick) as <out>/<family>_ur5/sceneNNNN.yaml and requestNNNN.yaml, the files
+    /// `bench mbm` reads; goals by inverse kinematics, kept only within the joint limits and
+    /// collision-free. The same seed gives the same files.
+    MbmGenerate {
+        #[arg(long)]
+        urdf: PathBuf,
+        #[arg(long)]
+        srdf: PathBuf,
+        /// cage, bookshelf_tall, bookshelf_thin, table_under_pick, or all.
+        #[arg(long)]
+        family: String,
+        /// Problems per family (1 to 9999).
+        #[arg(long, default_value_t = 100)]
+        count: usize,
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Folder of the family folders (created if missing).
+        #[arg(long)]
+        out: PathBuf,
+        /// Print a JSON array of {family, folder, problems, scenes_sampled, ik_calls}.
+        #[arg(long)]
+        json: bool,
+    },
     /// Join the --jsonl files of the shards of `bench mbm --shard` or `plan --batch --shard`
     /// into the report one unsharded run prints. Refuses files that overlap, miss problems or
     /// shards, or ran with different settings or programs.
@@ -802,6 +826,35 @@ fn run(cli: Cli) -> Result<(), AppError> {
                 embodied::ompl_log::write_ompl_logs(&report, dir)?;
             }
             print_mbm(&report, json, out.as_deref(), jsonl.as_deref() == Some(std::path::Path::new("-")))
+        }
+        Command::Bench(BenchCommand::MbmGenerate { urdf, srdf, family, count, seed, out, json }) => {
+            let families = embodied::mbm_generate::parse_families(&family)?;
+            let args = embodied::mbm_generate::GenerateArgs { urdf, srdf, families, count, seed, out };
+            let bar = if json { indicatif::ProgressBar::hidden() } else { progress_bar() };
+            let outcomes = embodied::mbm_generate::generate_mbm(&args, &mut |family, done, total| {
+                bar.set_message(family.folder());
+                bar.set_length(total as u64);
+                bar.set_position(done as u64);
+            });
+            bar.finish_and_clear();
+            let outcomes = outcomes?;
+            let text = if json {
+                to_json(&outcomes)? + "\n"
+            } else {
+                let mut t = format!("{:<24} {:>8} {:>14} {:>9}\n", "family", "problems", "scenes sampled", "IK calls");
+                for o in &outcomes {
+                    t.push_str(&format!(
+                        "{:<24} {:>8} {:>14} {:>9}  {}\n",
+                        o.family,
+                        o.problems,
+                        o.scenes_sampled,
+                        o.ik_calls,
+                        o.folder.display()
+                    ));
+                }
+                t
+            };
+            std::io::Write::write_all(&mut std::io::stdout(), text.as_bytes()).map_err(AppError::Output)
         }
         Command::Bench(BenchCommand::Merge { files, json, out }) => {
             let merged = embodied::batch::read_shards(&files)?;

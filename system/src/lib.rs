@@ -45,6 +45,7 @@ pub mod fuzz;
 pub mod load;
 pub mod log;
 pub mod mbm;
+pub mod mbm_generate;
 pub mod ompl_log;
 pub mod plan;
 pub mod plot;

@@ -461,9 +461,9 @@ fn problem_seed(base: u64, family: &str, index: u32) -> u64 {
 /// Random configurations sampled to find self-collision pairs that are always in contact.
 pub const ALWAYS_COLLIDING_SAMPLES: usize = 2000;
 
-struct Loaded {
-    robot: Robot,
-    srdf: Srdf,
+pub(crate) struct Loaded {
+    pub(crate) robot: Robot,
+    pub(crate) srdf: Srdf,
     always_colliding: Vec<(String, String)>,
     never_colliding: Vec<(String, String)>,
 }
@@ -480,7 +480,7 @@ const NEVER_COLLIDING_CHECKS: usize = 200_000;
 /// which the SRDF written for the mesh model does not disable), which would make every
 /// configuration invalid. Pairs proven never to touch are disabled too (see
 /// [`disable_never_colliding`]).
-fn load_robot(args: &MbmArgs) -> Result<Loaded, AppError> {
+pub(crate) fn load_robot(args: &MbmArgs) -> Result<Loaded, AppError> {
     let mut robot = load_urdf(&args.urdf, Some(&args.srdf))?;
     let srdf = load_srdf(&args.srdf)?;
     let always = disable_always_colliding(&mut robot, ALWAYS_COLLIDING_SAMPLES, 0x5eed);
