@@ -1,0 +1,96 @@
+#!/usr/bin/env python3
+"""MotionBenchMaker folders for VAMP, and VAMP's figures per family.
+
+  mbm_vamp.py convert PROBLEMS_DIR OUT.json
+      Every <family>_ur5/sceneNNNN.yaml + requestNNNN.yaml pair (as `embodied bench mbm` reads them,
+      e.g. the output of `embodied bench mbm-generate`) as the problem file of VAMP's
+      MotionBenchMaker loop (the layout of ../shared/peers/vamp/ur5-public.json: boxes by half
+      extents, cylinders by length and radius, world poses with XYZ Euler angles and quaternions).
+      Needs PyYAML, NumPy and SciPy. On the three public families it reproduces ur5-public.json to
+      1e-15.
+  mbm_vamp.py summarize VAMP_OUT.json
+      Per family: VAMP's planning and planning + simplification p50 / p95 / max and the share
+      within 1 ms, from the output of ../shared/peers/vamp/vamp_run.py.
+"""
+import glob
+import json
+import os
+import sys
+
+ARM = ["shoulder_pan_joint", "shoulder_lift_joint", "elbow_joint",
+       "wrist_1_joint", "wrist_2_joint", "wrist_3_joint"]
+
+
+def convert(root, out):
+    import numpy as np
+    import yaml
+    from scipy.spatial.transform import Rotation
+
+    problems = {}
+    for family in sorted(os.listdir(root)):
+        rows = []
+        for scene_file in sorted(glob.glob(os.path.join(root, family, "scene*.yaml"))):
+            index = int(os.path.basename(scene_file)[5:9])
+            scene = yaml.safe_load(open(scene_file))
+            request = yaml.safe_load(open(os.path.join(root, family, f"request{index:04d}.yaml")))
+            row = {"sphere": [], "cylinder": [], "box": [], "index": index,
+                   "problem": family.removesuffix("_ur5")}
+            for obj in scene["world"]["collision_objects"]:
+                pose = obj.get("pose", {"position": [0, 0, 0], "orientation": [0, 0, 0, 1]})
+                r_obj, t_obj = Rotation.from_quat(pose["orientation"]), np.array(pose["position"])
+                for prim, prim_pose in zip(obj["primitives"], obj["primitive_poses"]):
+                    r = r_obj * Rotation.from_quat(prim_pose["orientation"])
+                    t = r_obj.apply(np.array(prim_pose["position"])) + t_obj
+                    shape = {"name": obj["id"], "position": t.tolist(),
+                             "orientation_euler_xyz": r.as_euler("xyz").tolist(),
+                             "orientation_quat_xyzw": r.as_quat().tolist()}
+                    size = prim["dimensions"]
+                    if prim["type"] == "box":
+                        shape["half_extents"] = [s / 2 for s in size]
+                        row["box"].append(shape)
+                    elif prim["type"] == "cylinder":
+                        shape["length"], shape["radius"] = size[0], size[1]
+                        row["cylinder"].append(shape)
+                    elif prim["type"] == "sphere":
+                        shape["radius"] = size[0]
+                        row["sphere"].append(shape)
+                    else:
+                        sys.exit(f"{scene_file}: object {obj['id']}: no VAMP shape for a {prim['type']}")
+            state = request["start_state"]["joint_state"]
+            start = dict(zip(state["name"], state["position"]))
+            goal = {c["joint_name"]: c["position"]
+                    for c in request["goal_constraints"][0]["joint_constraints"]}
+            row["start"] = [start[j] for j in ARM]
+            row["goals"] = [[goal[j] for j in ARM]]
+            row["valid"] = True
+            rows.append(row)
+        problems[family.removesuffix("_ur5")] = rows
+    json.dump({"robot": "ur5", "joints": ARM, "problems": problems}, open(out, "w"))
+    print({family: len(rows) for family, rows in problems.items()})
+
+
+def pct(xs, q):
+    xs = sorted(xs)
+    return xs[min(len(xs) - 1, max(0, int(round(q * len(xs) + 0.5)) - 1))]
+
+
+def summarize(path):
+    rows = json.load(open(path))["problems"]
+    families = sorted({r["family"] for r in rows})
+    print(f"{'family':<18} {'valid':>5}  {'plan p50/p95/max us, <=1 ms':>34}  {'plan+simplify p50/p95/max us':>30}")
+    for family in families + ["all"]:
+        rs = [r for r in rows if r["valid"] and family in ("all", r["family"])]
+        plan = [r["plan_us"] for r in rs if r.get("solved")]
+        simp = [r["plan_simplify_us"] for r in rs if r.get("solved")]
+        within = sum(t <= 1000 for t in plan) / len(rs)
+        print(f"{family:<18} {len(rs):>5}  {pct(plan, .5):8.0f} {pct(plan, .95):8.0f} {max(plan):8.0f} {100 * within:6.1f}%"
+              f"  {pct(simp, .5):8.0f} {pct(simp, .95):8.0f} {max(simp):8.0f}")
+
+
+if __name__ == "__main__":
+    if len(sys.argv) == 4 and sys.argv[1] == "convert":
+        convert(sys.argv[2], sys.argv[3])
+    elif len(sys.argv) == 3 and sys.argv[1] == "summarize":
+        summarize(sys.argv[2])
+    else:
+        sys.exit(__doc__)
