@@ -137,9 +137,9 @@ impl Deadline {
     }
 
     /// The reason to stop, if any, after `expansions` units of work and `checks` collision
-    /// checks. The budgets are integer compares and are always checked; the cancellation flag
-    /// and the clock are checked only when `read_clock` is set, so that a hot loop can read
-    /// `Instant::now()` every few expansions.
+    /// checks. The budgets are integer compares and the cancellation and race flags one relaxed
+    /// load each, always checked; the clock is read only when `read_clock` is set, so that a hot
+    /// loop can read `Instant::now()` every few expansions.
     #[inline]
     pub(crate) fn check(&self, expansions: u64, checks: u64, read_clock: bool) -> Option<Interrupt> {
         if self.max_expansions.is_some_and(|max| expansions >= max) {
@@ -148,15 +148,15 @@ impl Deadline {
         if self.max_checks.is_some_and(|max| checks >= max) {
             return Some(Interrupt::CheckBudget);
         }
-        if read_clock {
-            if self.cancel.as_ref().is_some_and(|flag| flag.load(Ordering::Relaxed))
-                || self.race.as_ref().is_some_and(|flag| flag.load(Ordering::Relaxed))
-            {
-                return Some(Interrupt::Cancelled);
-            }
-            if self.at.is_some_and(|at| Instant::now() >= at) {
-                return Some(Interrupt::WallClock);
-            }
+        // The flags are one relaxed load each, so they are read every time (a race's loser
+        // stops within one unit of work); the clock only when asked.
+        if self.cancel.as_ref().is_some_and(|flag| flag.load(Ordering::Relaxed))
+            || self.race.as_ref().is_some_and(|flag| flag.load(Ordering::Relaxed))
+        {
+            return Some(Interrupt::Cancelled);
+        }
+        if read_clock && self.at.is_some_and(|at| Instant::now() >= at) {
+            return Some(Interrupt::WallClock);
         }
         None
     }
@@ -243,5 +243,28 @@ impl<'d> Budget<'d> {
     /// Which limit stopped planning (asked of the deadline now if none has yet).
     pub fn cause(&self) -> Interrupt {
         self.stopped.or_else(|| self.deadline.check(self.work, self.checks, true)).unwrap_or(Interrupt::ExpansionBudget)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A race's loser stops at its next unit of work once the race is won, not at its next
+    /// clock read (every 8 units): the flags are read every time.
+    #[test]
+    fn a_raised_race_flag_stops_the_next_unit_of_work() {
+        let flag = Arc::new(AtomicBool::new(false));
+        let deadline = Deadline::none().with_race_flag(Arc::clone(&flag));
+        let mut budget = Budget::new(&deadline);
+        for _ in 0..3 {
+            assert!(!budget.spend(1, 0));
+        }
+        flag.store(true, Ordering::Relaxed);
+        assert!(budget.spend(1, 0), "the unit after the flag is raised stops");
+        assert_eq!(budget.cause(), Interrupt::Cancelled);
+        let cancel = Arc::new(AtomicBool::new(true));
+        let deadline = Deadline::none().with_cancel_flag(cancel);
+        assert!(Budget::new(&deadline).spend(1, 0), "the caller's flag too");
     }
 }

@@ -295,6 +295,11 @@ pub fn plan_motion_with<V: StateValidity>(
     plan_alone(model, start, goal, settings, Stages::All)
 }
 
+/// How long racer 0 of [`MotionSettings::racers`] plans alone before the others start: on the
+/// MotionBenchMaker UR5 problems most searches end within it, and starting the others at once
+/// cost them more in synchronisation than the race won.
+const RACE_HEAD_START: std::time::Duration = std::time::Duration::from_micros(300);
+
 /// Which stages of [`plan_alone`] run.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Stages {
@@ -337,23 +342,38 @@ fn race<V: StateValidity>(
         }
         result
     };
-    // Racer 0 plans on this thread at once; the others are handed to the rayon pool. (A
-    // parallel iterator called from outside the pool would park this thread and wait for two
-    // pool threads to wake up before any planning starts.) A racer that starts after the race is
-    // won stops at its first unit of work.
+    // Racer 0 plans on this thread at once; the others are handed to the rayon pool (a
+    // parallel iterator called from outside the pool would park this thread until two pool
+    // threads woke up) and join the race only after `RACE_HEAD_START`, waiting for it on their
+    // own core: most searches end before, and a racer that has not started planning leaves
+    // at once when the race is won, where one that is certifying a path of its own finishes its
+    // certificate first (the race flag is read between units of work).
+    let begun = std::time::Instant::now();
     let others: Vec<std::sync::Mutex<Option<Result<MotionPlan, PlanError>>>> =
         (1..settings.racers).map(|_| std::sync::Mutex::new(None)).collect();
     let first = rayon::in_place_scope(|scope| {
         for (k, slot) in others.iter().enumerate() {
-            let run = &run;
+            let (run, flag) = (&run, &flag);
             scope.spawn(move |_| {
+                while begun.elapsed() < RACE_HEAD_START {
+                    if flag.load(Ordering::Relaxed) {
+                        return;
+                    }
+                    std::hint::spin_loop();
+                }
                 let result = run(k + 1);
                 if let Ok(mut slot) = slot.lock() {
                     *slot = Some(result);
                 }
             });
         }
-        run(0)
+        let result = run(0);
+        // Won, or out of the race: the waiting racers need not start (an error of racer 0 is
+        // not the race's answer while another may still find a path, so they run then).
+        if result.is_ok() {
+            flag.store(true, Ordering::Relaxed);
+        }
+        result
     });
     let mut results = vec![first];
     results.extend(others.into_iter().filter_map(|slot| slot.into_inner().ok().flatten()));
