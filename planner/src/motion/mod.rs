@@ -229,10 +229,10 @@ pub struct MotionSettings {
     pub rrt_balance: bool,
     /// How RRT-Connect draws its samples.
     pub sampler: Sampler,
-    /// Planners racing on the rayon pool (1: no race): racer `k` plans with the seed
-    /// `seed + k` (racer 0 is the single planner), the first path found stops the others
-    /// through their deadline's race flag. Every racer's path is certified as a lone
-    /// planner's is.
+    /// Planners racing (1: no race): racer `k` plans with the seed `seed + k`; racer 0 (the
+    /// single planner) on the calling thread at once, the others on the rayon pool after a head
+    /// start of 300 µs. The first path found stops the others through their deadline's race
+    /// flag. Every racer's path is certified as a lone planner's is.
     pub racers: usize,
     /// Samples (PRM) or tree nodes (RRT) after which the planner gives up with
     /// [`PlanError::NoPath`]: planning ends even without a deadline.

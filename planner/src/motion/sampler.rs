@@ -99,6 +99,14 @@ impl Draw {
     /// The next configuration into `q`.
     pub fn next_into(&mut self, robot: &Robot, rng: &mut Rng, q: &mut [f64]) {
         match self.sampler {
+            // The same draws as `Robot::random_configuration_into` (`lower + width * u` is its
+            // `rng.range(lower, upper)` to the bit), without its per-joint lookups; robots with
+            // actuator strokes redraw there until the strokes hold.
+            Sampler::Uniform if robot.actuators().is_empty() && q.len() == self.boxes.len() => {
+                for (v, &(lower, width)) in q.iter_mut().zip(&self.boxes) {
+                    *v = lower + width * rng.uniform();
+                }
+            }
             Sampler::Uniform => robot.random_configuration_into(rng, q),
             Sampler::Halton => {
                 self.index += 1;
@@ -138,6 +146,31 @@ mod tests {
             seen[(radical_inverse(i, 2) * 16.0) as usize] += 1;
         }
         assert!(seen.iter().all(|&n| n == 1), "{seen:?}");
+    }
+
+    /// Uniform draws are the robot's own (`Robot::random_configuration_into`) to the bit, with
+    /// and without joint limits (Polycrank's continuous joints), and with actuator strokes (the
+    /// IRp-6, which the fast path leaves to the robot).
+    #[test]
+    fn uniform_draws_are_the_robots_own() {
+        for robot in [
+            embodied_models::builtin::polycrank(),
+            embodied_models::builtin::rnt(),
+            embodied_models::builtin::irp6_postument(),
+        ] {
+            let robot = robot.expect("built-in robot");
+            let (mut a, mut b) = (Rng::new(9), Rng::new(9));
+            let mut draw = Draw::new(Sampler::Uniform, &robot, &mut a);
+            let (mut qa, mut qb) = (vec![0.0; robot.dof()], vec![0.0; robot.dof()]);
+            for _ in 0..200 {
+                draw.next_into(&robot, &mut a, &mut qa);
+                robot.random_configuration_into(&mut b, &mut qb);
+                assert_eq!(
+                    qa.iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
+                    qb.iter().map(|v| v.to_bits()).collect::<Vec<_>>()
+                );
+            }
+        }
     }
 
     #[test]
