@@ -318,19 +318,19 @@ fn extend<V: StateValidity>(
             return Step::Trapped;
         }
     }
-    let q_near = tree.node(near).to_vec();
+    let q_near = tree.node(near);
     match lazy {
         Some(step) => {
             // The certificate covers its ends; a probe does not.
             if reached && !target_checked && !validity.config_free(buf) {
                 return Step::Trapped;
             }
-            if !validity.segment_probed(&q_near, buf, step) {
+            if !validity.segment_probed(q_near, buf, step) {
                 return Step::Trapped;
             }
         }
         None => {
-            if !validity.segment_free(&q_near, buf) {
+            if !validity.segment_free(q_near, buf) {
                 return Step::Trapped;
             }
         }
@@ -367,6 +367,7 @@ pub(crate) fn plan<V: StateValidity>(
     let mut sample = vec![0.0; dof];
     let mut buf = Vec::with_capacity(dof);
     let mut connect_buf = Vec::with_capacity(dof);
+    let mut target = Vec::with_capacity(dof);
     let mut start_is_a = true;
     loop {
         if stats.samples >= settings.max_samples {
@@ -403,7 +404,8 @@ pub(crate) fn plan<V: StateValidity>(
             }
         }
         if let Some(new) = new {
-            let target = a.node(new).to_vec();
+            target.clear();
+            target.extend_from_slice(a.node(new));
             // Connect: b runs straight at the new node until it gets there or is blocked.
             let mut from = None;
             loop {
