@@ -3,13 +3,21 @@
 
 use embodied_system::campaign::{CampaignReport, CampaignSettings, campaign, merge_reports, render_campaign, run_one};
 
-fn dir() -> std::path::PathBuf {
-    std::env::temp_dir().join(format!("embodied-campaign-test-{}", std::process::id()))
+/// A folder of the test's own: tests run in parallel and two of them may run the same seed,
+/// whose log file names only the seed and the process.
+fn dir(test: &str) -> std::path::PathBuf {
+    std::env::temp_dir().join(format!("embodied-campaign-test-{}-{test}", std::process::id()))
 }
 
 #[test]
 fn a_campaign_breaks_no_promise() {
-    let settings = CampaignSettings { runs: 200, seed: 1, determinism_every: 20, dir: dir(), keep_logs: false };
+    let settings = CampaignSettings {
+        runs: 200,
+        seed: 1,
+        determinism_every: 20,
+        dir: dir("a_campaign_breaks_no_promise"),
+        keep_logs: false,
+    };
     let report = campaign(&settings, |_| {}).expect("campaign runs");
     let text = render_campaign(&report);
     println!("{text}");
@@ -24,7 +32,7 @@ fn a_campaign_breaks_no_promise() {
 
 #[test]
 fn a_run_replays_byte_for_byte() {
-    let r = run_one(1_000_007, &dir(), true).expect("run");
+    let r = run_one(1_000_007, &dir("a_run_replays_byte_for_byte"), true).expect("run");
     assert_eq!(r.deterministic, Some(true));
 }
 
@@ -35,7 +43,7 @@ fn a_run_replays_byte_for_byte() {
 #[test]
 fn regression_seeds() {
     for seed in [56, 143, 163, 219, 4463, 5169, 5298, 5323, 5431, 5469] {
-        let r = run_one(seed, &dir(), false).expect("run");
+        let r = run_one(seed, &dir("regression_seeds"), false).expect("run");
         assert!(r.problems.is_empty(), "seed {seed}: {:?}", r.problems);
     }
 }
@@ -45,7 +53,7 @@ fn regression_seeds() {
 /// the give-up step is now the search's collision-check budget.
 #[test]
 fn a_search_past_its_give_up_step_is_stopped() {
-    let r = run_one(5815, &dir(), false).expect("run");
+    let r = run_one(5815, &dir("a_search_past_its_give_up_step_is_stopped"), false).expect("run");
     assert!(r.problems.is_empty(), "seed 5815: {:?}", r.problems);
 }
 
@@ -54,7 +62,13 @@ fn a_search_past_its_give_up_step_is_stopped() {
 /// the files.
 #[test]
 fn chunks_merge_into_the_whole_campaign() {
-    let settings = |runs, seed| CampaignSettings { runs, seed, determinism_every: 0, dir: dir(), keep_logs: false };
+    let settings = |runs, seed| CampaignSettings {
+        runs,
+        seed,
+        determinism_every: 0,
+        dir: dir("chunks_merge_into_the_whole_campaign"),
+        keep_logs: false,
+    };
     let whole = campaign(&settings(6, 40), |_| {}).expect("campaign");
     let through_json = |r: &CampaignReport| -> CampaignReport {
         serde_json::from_str(&serde_json::to_string(r).expect("write")).expect("read back")
