@@ -367,13 +367,10 @@ fn race<V: StateValidity>(
                 }
             });
         }
-        let result = run(0);
-        // Won, or out of the race: the waiting racers need not start (an error of racer 0 is
-        // not the race's answer while another may still find a path, so they run then).
-        if result.is_ok() {
-            flag.store(true, Ordering::Relaxed);
-        }
-        result
+        // A path of racer 0 raises the flag (in `run`), so racers still waiting never start; an
+        // error of racer 0 is not the race's answer while another may still find a path, so
+        // they run then.
+        run(0)
     });
     let mut results = vec![first];
     results.extend(others.into_iter().filter_map(|slot| slot.into_inner().ok().flatten()));
