@@ -319,7 +319,7 @@ enum BenchCommand {
         #[arg(long)]
         shortcut_attempts: Option<usize>,
         /// Planners racing per problem (1: one planner; 2: two differently seeded planners, the
-        /// second joining on the rayon pool after 300 us; the first path wins and stops the other).
+        /// second joining on the rayon pool after 1 ms; the first path wins and stops the other).
         #[arg(long, default_value_t = 1)]
         threads: usize,
         /// RRT-Connect's largest step (rad).

@@ -68,7 +68,7 @@ pub struct MbmArgs {
     /// How RRT-Connect draws samples.
     pub sampler: Sampler,
     /// Planners racing per problem (1: one planner on one thread; 2: two differently seeded
-    /// planners, the second joining on the rayon pool after 300 µs; first path wins).
+    /// planners, the second joining on the rayon pool after 1 ms; first path wins).
     pub threads: usize,
     /// Only these families (all when `None`).
     pub families: Option<Vec<String>>,

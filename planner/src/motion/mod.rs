@@ -231,7 +231,7 @@ pub struct MotionSettings {
     pub sampler: Sampler,
     /// Planners racing (1: no race): racer `k` plans with the seed `seed + k`; racer 0 (the
     /// single planner) on the calling thread at once, the others on the rayon pool after a head
-    /// start of 300 µs. The first path found stops the others through their deadline's race
+    /// start of 1 ms. The first path found stops the others through their deadline's race
     /// flag. Every racer's path is certified as a lone planner's is.
     pub racers: usize,
     /// Samples (PRM) or tree nodes (RRT) after which the planner gives up with
@@ -295,10 +295,12 @@ pub fn plan_motion_with<V: StateValidity>(
     plan_alone(model, start, goal, settings, Stages::All)
 }
 
-/// How long racer 0 of [`MotionSettings::racers`] plans alone before the others start: on the
-/// MotionBenchMaker UR5 problems most searches end within it, and starting the others at once
-/// cost them more in synchronisation than the race won.
-const RACE_HEAD_START: std::time::Duration = std::time::Duration::from_micros(300);
+/// How long racer 0 of [`MotionSettings::racers`] plans alone before the others start. Most
+/// MotionBenchMaker UR5 searches end within it, so they pay nothing for the race; the tail is
+/// where a second seed pays. On the 400 generated narrow-passage problems (four interleaved
+/// runs on the 2-core machine), a head start of 1 ms gave p50 426-464 µs (one core: 426-624),
+/// 300 µs gave 496-719 µs; p95 3.8-4.8 ms either way (one core: 7.8-11.4 ms).
+const RACE_HEAD_START: std::time::Duration = std::time::Duration::from_micros(1000);
 
 /// Which stages of [`plan_alone`] run.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
