@@ -231,18 +231,8 @@ impl Robot {
         let mut trial = seed.to_vec();
         let mut dq = vec![0.0; n];
         let mut frozen = vec![false; n];
-        // The seed, the random restarts, then (only when all of those failed, so every answer
-        // they give is unchanged) restarts near the seed: a seed next to a solution can sit where
-        // every step towards it is refused (a joint limit or a screw's stroke in the way) while a
-        // neighbour of it is not (seen on the IRp-6 on its track).
-        for attempt in 0..=options.restarts + NEAR_RESTARTS {
-            let mut q = if attempt == 0 {
-                seed.to_vec()
-            } else if attempt <= options.restarts {
-                self.random_configuration(&mut rng)
-            } else {
-                self.near_configuration(seed, &limits, &mut rng)
-            };
+        for attempt in 0..=options.restarts {
+            let mut q = if attempt == 0 { seed.to_vec() } else { self.random_configuration(&mut rng) };
             // Levenberg-Marquardt: accept a step only if it lowers the error, adapt the damping.
             let mut lambda = options.damping.max(1e-9);
             let (mut e, mut pos_err, mut rot_err) = residual_of(&mut poses, &q);
@@ -318,25 +308,7 @@ impl Robot {
         Err(ModelError::IkFailed {
             frame: effector.name.clone(),
             residual: best.0,
-            iterations: options.max_iterations * (options.restarts + 1 + NEAR_RESTARTS),
+            iterations: options.max_iterations * (options.restarts + 1),
         })
     }
-
-    /// A configuration within `NEAR_SPREAD` of `seed` in every joint, within the limits and the
-    /// screws' strokes (the seed itself when 20 draws find none).
-    fn near_configuration(&self, seed: &[f64], limits: &[JointLimits], rng: &mut Rng) -> Vec<f64> {
-        for _ in 0..20 {
-            let q: Vec<f64> =
-                seed.iter().zip(limits).map(|(&v, l)| l.clamp(v + rng.range(-NEAR_SPREAD, NEAR_SPREAD))).collect();
-            if self.actuators().iter().all(|a| a.stroke_excess(&q) <= 0.0) {
-                return q;
-            }
-        }
-        seed.to_vec()
-    }
 }
-
-/// Restarts near the seed after the random ones (see [`Robot::inverse_kinematics`]).
-const NEAR_RESTARTS: usize = 10;
-/// How far (rad or m per joint) a restart near the seed may be from it.
-const NEAR_SPREAD: f64 = 0.3;
