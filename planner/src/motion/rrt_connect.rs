@@ -105,10 +105,8 @@ impl KdIndex {
             return best;
         }
         // Branch and bound over the cells of the tree; a cell's bound is its largest gap to `q`
-        // along one joint. (A sum of squared gaps over the joints, Arya and Mount's incremental
-        // distance, visited fewer nodes but cost 28% more instructions over the 296
-        // MotionBenchMaker UR5 problems, whose trees are small.) The near side is walked down
-        // in place; far sides go on the stack only while their bound can still tie the best.
+        // along one joint. The near side is walked down in place; far sides go on the stack
+        // only while their bound can still tie the best.
         let stack = &mut self.stack;
         stack.clear();
         let (mut n, mut bound) = (0usize, 0.0f64);
