@@ -134,6 +134,22 @@ fn ur5_table_pick(c: &mut Criterion) {
     let planner_model = CollisionModel::new(&pruned, table_pick_scene0001());
     eprintln!("ur5: {} self pairs checked as in bench mbm", planner_model.self_collision_pairs().len());
     bench_cycle(c, "collides/ur5-table-pick/free/mbm-pairs", &free, |q| planner_model.collides(q));
+    let mut planner_scratch = planner_model.scratch();
+    let mut i = 0;
+    c.bench_function("batch8/ur5-table-pick/free/8-single/mbm-pairs", |b| {
+        b.iter(|| {
+            i = (i + 1) % free8.len();
+            let qs = black_box(&free8[i]);
+            black_box(qs.chunks_exact(dof).any(|q| planner_model.collides_with(q, &mut planner_scratch)))
+        })
+    });
+    let mut i = 0;
+    c.bench_function("batch8/ur5-table-pick/free/f32-settle/mbm-pairs", |b| {
+        b.iter(|| {
+            i = (i + 1) % free8.len();
+            black_box(planner_model.settle_batch(black_box(&free8[i]), 0.0, &mut planner_scratch))
+        })
+    });
     let general = model.clone().general_path_only();
     bench_cycle(c, "collides/ur5-table-pick/free/general-path", &free, |q| general.collides(q));
     bench_cycle(c, "distance/ur5-table-pick/free", &free, |q| model.distance(q).distance > 0.0);

@@ -583,9 +583,15 @@ impl SphereGeom {
                 }
                 self.pose_lane_link(a, s);
                 self.pose_lane_link(b, s);
+                let rb = lanes.link_r_up[b];
                 for i in la.first..la.end {
+                    // The sphere against the other link's bounding sphere first.
+                    let ci = s.centre[i];
+                    if close & within(dist2(&ci, &cb), thr(lanes.radius_up[i], rb, pg)) == 0 {
+                        continue;
+                    }
                     for j in lb.first..lb.end {
-                        let d2 = dist2(&s.centre[i], &s.centre[j]);
+                        let d2 = dist2(&ci, &s.centre[j]);
                         let r = self.radius[i] + self.radius[j];
                         let t = close & within(d2, thr(lanes.radius_up[i], lanes.radius_up[j], pg));
                         if t != 0 {
