@@ -185,8 +185,9 @@ impl Robot {
     /// Where the end effector has a closed form that covers every joint moving it (the IRp-6 on
     /// its postument), the answer is the closed-form solution nearest `seed`. Otherwise (and for
     /// `position_only`, or when no closed-form solution lies within the limits): damped least
-    /// squares (Levenberg-Marquardt style), clamping every step into the limits, with
-    /// deterministic random restarts. Continuous joints are returned wrapped near the seed.
+    /// squares (Levenberg-Marquardt style), clamping every step into the limits and solving it
+    /// along the joint limits and the ends of screw strokes it meets (so that it slides along
+    /// them), with deterministic random restarts. Continuous joints are returned wrapped near the seed.
     pub fn inverse_kinematics(
         &self,
         ee: usize,
@@ -231,6 +232,7 @@ impl Robot {
         let mut trial = seed.to_vec();
         let mut dq = vec![0.0; n];
         let mut frozen = vec![false; n];
+        let mut active = vec![false; self.actuators().len()];
         for attempt in 0..=options.restarts {
             let mut q = if attempt == 0 { seed.to_vec() } else { self.random_configuration(&mut rng) };
             // Levenberg-Marquardt: accept a step only if it lowers the error, adapt the damping.
@@ -250,19 +252,37 @@ impl Robot {
                 }
                 // Active set: a joint at a bound that the step would push further out is frozen
                 // (its column removed) and the step solved again, so bounds do not stall progress.
+                // Likewise a screw at an end of its stroke: the step is solved in the joint
+                // directions that keep its drive angle (the Jacobian times the projector
+                // `I - w wᵀ / wᵀw`, `w` the angle's weights), so that it slides along that end.
                 let err = e.component_mul(&mask);
                 frozen.fill(false);
+                active.fill(false);
                 let mut solved = false;
                 for _ in 0..3 {
+                    let mut jp = jac.clone();
+                    for (a, _) in self.actuators().iter().zip(&active).filter(|(_, on)| **on) {
+                        let ww: f64 = a.angle.iter().map(|&(_, w)| w * w).sum();
+                        if ww > 0.0 {
+                            let mut jw = Vector6::zeros();
+                            for &(k, w) in &a.angle {
+                                jw += jp.column(k) * w;
+                            }
+                            for &(k, w) in &a.angle {
+                                let col = jp.column(k) - jw * (w / ww);
+                                jp.set_column(k, &col);
+                            }
+                        }
+                    }
                     let mut jjt = Matrix6::identity() * lambda + Matrix6::from_diagonal(&mask.map(|m| 1.0 - m));
                     for c in (0..n).filter(|&c| !frozen[c]) {
-                        let col = jac.column(c).component_mul(&mask);
+                        let col = jp.column(c).component_mul(&mask);
                         jjt += col * col.transpose();
                     }
                     let Some(chol) = jjt.cholesky() else { break };
                     let y = chol.solve(&err);
                     for (c, v) in dq.iter_mut().enumerate() {
-                        *v = if frozen[c] { 0.0 } else { jac.column(c).component_mul(&mask).dot(&y) };
+                        *v = if frozen[c] { 0.0 } else { jp.column(c).component_mul(&mask).dot(&y) };
                     }
                     solved = true;
                     let mut changed = false;
@@ -271,6 +291,16 @@ impl Robot {
                         let at_upper = q[i] >= limits[i].upper - 1e-12 && dq[i] > 0.0;
                         if !frozen[i] && (at_lower || at_upper) {
                             frozen[i] = true;
+                            changed = true;
+                        }
+                    }
+                    for (a, on) in self.actuators().iter().zip(active.iter_mut()) {
+                        let rate = a.rate_along(&q, &dq);
+                        let l = a.length(&q);
+                        let pushing = (l >= a.max_length - STROKE_END && rate > 0.0)
+                            || (l <= a.min_length + STROKE_END && rate < 0.0);
+                        if !*on && pushing {
+                            *on = true;
                             changed = true;
                         }
                     }
@@ -288,10 +318,21 @@ impl Robot {
                 for i in 0..n {
                     trial[i] = limits[i].clamp(q[i] + scale * dq[i]);
                 }
-                let (e2, p2, r2) = residual_of(&mut poses, &trial);
-                let cost2 = p2 * p2 + r2 * r2;
-                // A step out of a screw's stroke is refused like one that does not help.
-                let stroked = self.actuators().iter().all(|a| a.stroke_excess(&trial) <= 1e-9);
+                let (mut e2, mut p2, mut r2) = residual_of(&mut poses, &trial);
+                let mut cost2 = p2 * p2 + r2 * r2;
+                // A step out of a screw's stroke is refused like one that does not help; but
+                // first it is tried again with its share across each screw it leaves cut to end
+                // on that stroke's end: a solution there is reached by sliding along it, which
+                // full steps, all pointing out, never do.
+                let mut stroked = self.actuators().iter().all(|a| a.stroke_excess(&trial) <= 1e-9);
+                if !stroked && onto_strokes(self.actuators(), &q, &trial, scale, &mut dq) {
+                    for i in 0..n {
+                        trial[i] = limits[i].clamp(q[i] + scale * dq[i]);
+                    }
+                    (e2, p2, r2) = residual_of(&mut poses, &trial);
+                    cost2 = p2 * p2 + r2 * r2;
+                    stroked = self.actuators().iter().all(|a| a.stroke_excess(&trial) <= 1e-9);
+                }
                 if cost2 < cost && stroked {
                     q.copy_from_slice(&trial);
                     (e, pos_err, rot_err, cost) = (e2, p2, r2, cost2);
@@ -311,4 +352,44 @@ impl Robot {
             iterations: options.max_iterations * (options.restarts + 1),
         })
     }
+}
+
+/// How near an end of its stroke a screw counts as at it in the IK step, m.
+const STROKE_END: f64 = 1e-6;
+
+/// Change the step `q + scale dq` so that every screw that `trial` (the step as it was) takes out
+/// of its stroke ends it at the end of its stroke instead: the component of `dq` along the
+/// screw's drive-angle weights `w` is set so that the drive angle moves just short of the angle
+/// where the screw has that length (`dq += ((t / scale) - w.dq) / (w.w) w`), or not at all when
+/// no angle gives it. `false` when no screw was changed or nothing of the step remains.
+fn onto_strokes(
+    actuators: &[crate::actuator::ScrewTriangle],
+    q: &[f64],
+    trial: &[f64],
+    scale: f64,
+    dq: &mut [f64],
+) -> bool {
+    let mut any = false;
+    for a in actuators.iter().filter(|a| a.stroke_excess(trial) > 1e-9) {
+        let (mut wd, mut ww) = (0.0, 0.0);
+        for &(k, w) in &a.angle {
+            wd += w * dq.get(k).copied().unwrap_or(0.0);
+            ww += w * w;
+        }
+        if !(ww > 0.0 && scale > 0.0) {
+            continue;
+        }
+        let theta = a.theta(q);
+        let bound = if a.length_at(a.theta(trial)) > a.max_length { a.max_length } else { a.min_length };
+        let end = a.theta_for_length(bound, theta).map_or(0.0, |t| t - theta);
+        // Just short of the end (and never past the step's own direction).
+        let t = if end * wd > 0.0 { end * (1.0 - 1e-6) } else { 0.0 };
+        for &(k, w) in &a.angle {
+            if let Some(v) = dq.get_mut(k) {
+                *v += (t / scale - wd) / ww * w;
+            }
+        }
+        any = true;
+    }
+    any && dq.iter().any(|v| v.abs() > 1e-15)
 }
