@@ -7,7 +7,7 @@ pub(crate) use irp6::IRP6_DH;
 
 use std::f64::consts::TAU;
 
-use nalgebra::{Isometry3, Matrix6, Vector6};
+use nalgebra::{Isometry3, Matrix6, Matrix6xX, Vector6};
 
 use crate::error::ModelError;
 use crate::joint::{JointKind, JointLimits};
@@ -233,6 +233,8 @@ impl Robot {
         let mut dq = vec![0.0; n];
         let mut frozen = vec![false; n];
         let mut active = vec![false; self.actuators().len()];
+        // The Jacobian projected off the drive angles of the screws at a stroke end.
+        let mut projected = Matrix6xX::zeros(n);
         for attempt in 0..=options.restarts {
             let mut q = if attempt == 0 { seed.to_vec() } else { self.random_configuration(&mut rng) };
             // Levenberg-Marquardt: accept a step only if it lowers the error, adapt the damping.
@@ -260,20 +262,26 @@ impl Robot {
                 active.fill(false);
                 let mut solved = false;
                 for _ in 0..3 {
-                    let mut jp = jac.clone();
-                    for (a, _) in self.actuators().iter().zip(&active).filter(|(_, on)| **on) {
-                        let ww: f64 = a.angle.iter().map(|&(_, w)| w * w).sum();
-                        if ww > 0.0 {
-                            let mut jw = Vector6::zeros();
-                            for &(k, w) in &a.angle {
-                                jw += jp.column(k) * w;
-                            }
-                            for &(k, w) in &a.angle {
-                                let col = jp.column(k) - jw * (w / ww);
-                                jp.set_column(k, &col);
+                    let jp = if active.contains(&true) {
+                        projected.copy_from(&jac);
+                        for (a, _) in self.actuators().iter().zip(&active).filter(|(_, on)| **on) {
+                            let angle = || a.angle.iter().filter(|&&(k, _)| k < n);
+                            let ww: f64 = angle().map(|&(_, w)| w * w).sum();
+                            if ww > 0.0 {
+                                let mut jw = Vector6::zeros();
+                                for &(k, w) in angle() {
+                                    jw += projected.column(k) * w;
+                                }
+                                for &(k, w) in angle() {
+                                    let col = projected.column(k) - jw * (w / ww);
+                                    projected.set_column(k, &col);
+                                }
                             }
                         }
-                    }
+                        &projected
+                    } else {
+                        &jac
+                    };
                     let mut jjt = Matrix6::identity() * lambda + Matrix6::from_diagonal(&mask.map(|m| 1.0 - m));
                     for c in (0..n).filter(|&c| !frozen[c]) {
                         let col = jp.column(c).component_mul(&mask);
