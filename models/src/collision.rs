@@ -72,6 +72,7 @@ pub use narrow::{
     Separation, parry_shape_separation, parry_shapes_intersect, shape_separation, shapes_intersect, shapes_within,
 };
 use spheres::lanes::{self, LaneMargins, Solids32};
+use spheres::simd8::Isa;
 use spheres::{Check, Solid, SphereGeom, SphereScratch};
 
 /// How many configurations [`CollisionModel::batch_collisions_with`] checks at once (on the
@@ -651,6 +652,15 @@ impl CollisionScratch {
             margins: Vec::new(),
             spheres: SphereScratch::new(),
         }
+    }
+
+    /// This working memory's single-precision batches (the motion certificate's first pieces,
+    /// [`CollisionModel::settle_batch`]) run on the x86-64 baseline's vector instructions (SSE2)
+    /// even where the CPU has AVX2, which they use by default. The answers are the same, bit
+    /// for bit: for tests and measurements that compare the two.
+    pub fn with_baseline_vectors(mut self) -> Self {
+        self.spheres.lanes.isa = Isa::Baseline;
+        self
     }
 
     /// Size the buffers for a model (no allocation once they are big enough) and start a query.

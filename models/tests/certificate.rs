@@ -504,6 +504,7 @@ proptest! {
         prop_assert!(model.uses_sphere_path());
         let mut rng = Rng::new(seed);
         let mut s = model.scratch();
+        let mut baseline = model.scratch().with_baseline_vectors();
         let dof = robot.dof();
         let gap = 10f64.powi(-gap_exp);
         let (mut near, mut hits) = (0, 0);
@@ -674,7 +675,8 @@ proptest! {
     /// What a single-precision batch settles is true in double precision: a configuration it
     /// calls free has more than the margin of clearance (the general path's distance), one it
     /// calls colliding collides; on random configurations and on configurations within a hair
-    /// of the margin or of contact, on the UR5, an arm with every joint form and a long chain.
+    /// of the margin or of contact, on the UR5, an arm with every joint form and a long chain;
+    /// and the baseline's vector instructions answer exactly as the CPU's widest do.
     #[test]
     fn single_precision_batches_settle_only_the_truth(
         which in 0usize..3, seed in any::<u64>(), lanes in 1usize..=8, gap_exp in 3i32..13, m in 0usize..3,
@@ -685,6 +687,7 @@ proptest! {
         let margin = [0.0, 1e-3, 0.03][m];
         let mut rng = Rng::new(seed);
         let mut s = model.scratch();
+        let mut baseline = model.scratch().with_baseline_vectors();
         let dof = robot.dof();
         let gap = 10f64.powi(-gap_exp);
         for _ in 0..12 {
@@ -698,6 +701,8 @@ proptest! {
                 qs.extend(q.unwrap_or_else(|| robot.random_configuration(&mut rng)));
             }
             let settled = model.settle_batch(&qs, margin, &mut s).unwrap();
+            // The baseline's instructions give the very same answer as the CPU's widest.
+            prop_assert_eq!(model.settle_batch(&qs, margin, &mut baseline), Some(settled));
             prop_assert_eq!((settled.free | settled.colliding) >> lanes, 0);
             prop_assert_eq!(settled.free & settled.colliding, 0);
             for (i, q) in qs.chunks(dof).enumerate() {

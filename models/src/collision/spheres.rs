@@ -29,6 +29,7 @@ use super::{Inflation, ObstacleGeom, RobotGeom, Value, World};
 mod arms;
 mod batch;
 pub(crate) mod lanes;
+pub(crate) mod simd8;
 mod table;
 
 pub(crate) use batch::LANES;

@@ -59,9 +59,8 @@
 //! Robots whose prismatic joints travel more than [`PRISMATIC_BOUND`], or a configuration that
 //! is not finite, get no free lane (the `f64` query answers).
 
-use wide::{CmpLe, f32x8};
-
 use super::batch::sin_cos_lanes;
+use super::simd8::{self, F8, Isa, Kernel, L, Ops};
 use super::{Check, SIN_COS_RANGE, Solid, SphereGeom, sin_cos};
 
 /// Configurations per batch.
@@ -70,11 +69,11 @@ pub(crate) const LANES: usize = 8;
 /// The largest prismatic joint travel (m) the error bound covers.
 pub(crate) const PRISMATIC_BOUND: f64 = 16.0;
 
-type F = f32x8;
+type F<O> = L<O>;
 /// A point per lane (struct of arrays).
-type P = [F; 3];
+type P<O> = [F<O>; 3];
 /// A rotation per lane, row-major.
-type R = [F; 9];
+type R<O> = [F<O>; 9];
 
 const U: f64 = 1.0 / 16_777_216.0;
 
@@ -89,6 +88,7 @@ fn dot_err(ex: f64, ey: f64, x1: f64, y1: f64, xy: f64, n: f64) -> f64 {
 }
 
 /// `x` rounded to the nearest `f32`.
+#[inline(always)]
 fn f(x: f64) -> f32 {
     x as f32
 }
@@ -99,17 +99,20 @@ fn m9(m: &nalgebra::Matrix3<f64>) -> [f32; 9] {
 }
 
 /// A vector rounded to `f32`.
+#[inline(always)]
 fn v3(v: &nalgebra::Vector3<f64>) -> [f32; 3] {
     [f(v.x), f(v.y), f(v.z)]
 }
 
 /// An `f32` at most `x`.
+#[inline(always)]
 fn down(x: f64) -> f32 {
     let y = x as f32;
     if (y as f64) > x { y.next_down() } else { y }
 }
 
 /// An `f32` at least `x` (for thresholds).
+#[inline(always)]
 fn up(x: f64) -> f32 {
     let y = x as f32;
     if (y as f64) < x { y.next_up() } else { y }
@@ -125,25 +128,25 @@ enum Pre {
 struct Body {
     parent: usize,
     pre: Pre,
-    pre_t: [F; 3],
+    pre_t: [f32; 3],
     prismatic: bool,
     axis: [f32; 3],
-    post: Option<([f32; 9], [F; 3])>,
+    post: Option<([f32; 9], [f32; 3])>,
 }
 
 /// A sphere robot's program and geometry in single precision, with its error bound.
 #[derive(Debug, Clone)]
 pub(crate) struct Lanes {
     base_r: [f32; 9],
-    base_t: [F; 3],
+    base_t: [f32; 3],
     /// Bodies 1.. (body 0 is the base).
     bodies: Vec<Body>,
-    /// Sphere centres in their body frames, each coordinate in every lane.
-    balls: Vec<[F; 3]>,
+    /// Sphere centres in their body frames.
+    balls: Vec<[f32; 3]>,
     /// Per link: bounding centre (body frame).
-    links: Vec<[F; 3]>,
+    links: Vec<[f32; 3]>,
     /// Per group: bounding centre.
-    groups: Vec<[F; 3]>,
+    groups: Vec<[f32; 3]>,
     /// Sphere radii and link bounding radii, rounded up.
     radius_up: Vec<f32>,
     link_r_up: Vec<f32>,
@@ -160,16 +163,16 @@ pub(crate) struct Lanes {
 pub(crate) struct Solids32 {
     solids: Vec<Solid32>,
     /// Per solid, a sphere holding it: centre, radius (tested before the solid itself).
-    bound: Vec<([F; 3], f32)>,
+    bound: Vec<([f32; 3], f32)>,
     /// The largest obstacle coordinate and size (`T + H` of the module documentation).
     scale: f64,
 }
 
 #[derive(Debug, Clone)]
 enum Solid32 {
-    Ball { c: [F; 3], r: F },
-    Cuboid { rt: [F; 9], t: [F; 3], half: [F; 3] },
-    Cylinder { rt: [F; 9], t: [F; 3], r: F, hh: F },
+    Ball { c: [f32; 3], r: f32 },
+    Cuboid { rt: [f32; 9], t: [f32; 3], half: [f32; 3] },
+    Cylinder { rt: [f32; 9], t: [f32; 3], r: f32, hh: f32 },
 }
 
 impl Solids32 {
@@ -177,8 +180,6 @@ impl Solids32 {
     pub(crate) fn new(solids: &[Solid]) -> Option<Solids32> {
         let mut scale: f64 = 0.0;
         let mut bound = Vec::with_capacity(solids.len());
-        let m9 = |m: &nalgebra::Matrix3<f64>| m9(m).map(splat);
-        let v3 = |v: &nalgebra::Vector3<f64>| v3(v).map(splat);
         let out = solids
             .iter()
             .map(|s| {
@@ -186,7 +187,7 @@ impl Solids32 {
                     Solid::Ball { c, r } => {
                         scale = scale.max(c.amax() + r);
                         bound.push((v3(c), up(*r)));
-                        Solid32::Ball { c: v3(c), r: splat(f(*r)) }
+                        Solid32::Ball { c: v3(c), r: f(*r) }
                     }
                     Solid::Cuboid { rt, t, half } => {
                         scale = scale.max(t.amax() + half.amax());
@@ -196,7 +197,7 @@ impl Solids32 {
                     Solid::Cylinder { rt, t, r, hh } => {
                         scale = scale.max(t.amax() + r.max(*hh));
                         bound.push((v3(t), up(r.hypot(*hh) * (1.0 + 1e-12))));
-                        Solid32::Cylinder { rt: m9(rt), t: v3(t), r: splat(f(*r)), hh: splat(f(*hh)) }
+                        Solid32::Cylinder { rt: m9(rt), t: v3(t), r: f(*r), hh: f(*hh) }
                     }
                     Solid::Capsule { .. } | Solid::Other => return None,
                 })
@@ -229,15 +230,17 @@ pub(crate) struct Lanes8 {
 /// Working memory of the single-precision batch.
 #[derive(Debug, Clone)]
 pub(crate) struct LaneScratch {
-    rot: Vec<R>,
-    pos: Vec<P>,
-    group_c: Vec<P>,
-    link_c: Vec<P>,
+    rot: Vec<[F8; 9]>,
+    pos: Vec<[F8; 3]>,
+    group_c: Vec<[F8; 3]>,
+    link_c: Vec<[F8; 3]>,
     link_posed: Vec<bool>,
-    centre: Vec<P>,
+    centre: Vec<[F8; 3]>,
     posed: Vec<bool>,
     /// Per link, its margin plus the rounding allowance, rounded up.
     link_g: Vec<f32>,
+    /// The instruction set of the batches (see `simd8`).
+    pub(crate) isa: Isa,
 }
 
 impl LaneScratch {
@@ -251,19 +254,35 @@ impl LaneScratch {
             centre: Vec::new(),
             posed: Vec::new(),
             link_g: Vec::new(),
+            isa: Isa::Best,
         }
     }
 }
 
 #[inline(always)]
-fn splat(x: f32) -> F {
-    F::splat(x)
+fn splat<O: Ops>(o: O, x: f32) -> F<O> {
+    L::splat(o, x)
 }
 
-/// `rot * c + pos` per lane, as `mul3v(rot, c) + pos`.
 #[inline(always)]
-fn place(rot: &R, pos: &P, c: &[F; 3]) -> P {
-    let [x, y, z] = *c;
+fn splat3<O: Ops>(o: O, x: &[f32; 3]) -> P<O> {
+    x.map(|v| L::splat(o, v))
+}
+
+#[inline(always)]
+fn load<O: Ops, const K: usize>(o: O, x: &[F8; K]) -> [F<O>; K] {
+    x.map(|v| L::load(o, v))
+}
+
+#[inline(always)]
+fn store<O: Ops, const K: usize>(x: &[F<O>; K]) -> [F8; K] {
+    x.map(|v| v.store())
+}
+
+/// `rot * c + pos` per lane, as `mul3v(rot, c) + pos`, for a constant `c`.
+#[inline(always)]
+fn place<O: Ops>(o: O, rot: &R<O>, pos: &P<O>, c: &[f32; 3]) -> P<O> {
+    let [x, y, z] = splat3(o, c);
     [
         rot[0] * x + rot[1] * y + rot[2] * z + pos[0],
         rot[3] * x + rot[4] * y + rot[5] * z + pos[1],
@@ -273,10 +292,10 @@ fn place(rot: &R, pos: &P, c: &[F; 3]) -> P {
 
 /// `rot * m` for a constant matrix `m` (row-major).
 #[inline(always)]
-fn mul_m(rot: &R, m: &[f32; 9]) -> R {
+fn mul_m<O: Ops>(o: O, rot: &R<O>, m: &[f32; 9]) -> R<O> {
     std::array::from_fn(|k| {
         let (r, c) = (k / 3, k % 3);
-        rot[3 * r] * splat(m[c]) + rot[3 * r + 1] * splat(m[3 + c]) + rot[3 * r + 2] * splat(m[6 + c])
+        rot[3 * r] * splat(o, m[c]) + rot[3 * r + 1] * splat(o, m[3 + c]) + rot[3 * r + 2] * splat(o, m[6 + c])
     })
 }
 
@@ -295,32 +314,33 @@ fn thr(a: f32, b: f32, c: f32) -> f32 {
 
 /// Lanes where the sum of squares `s` is at most the threshold `t` (possibly touching).
 #[inline(always)]
-fn within(s: F, t: f32) -> u32 {
-    s.cmp_le(splat(t)).move_mask() as u32
+fn within<O: Ops>(s: F<O>, t: f32) -> u32 {
+    s.le_mask(t)
 }
 
 /// Squared gap of each lane's point to a solid (see the module documentation).
 #[inline(always)]
-fn gap2(solid: &Solid32, p: &P) -> F {
-    let zero = F::ZERO;
+fn gap2<O: Ops>(o: O, solid: &Solid32, p: &P<O>) -> F<O> {
+    let zero = splat(o, 0.0);
     match solid {
         Solid32::Ball { c, r } => {
+            let c = splat3(o, c);
             let (dx, dy, dz) = (p[0] - c[0], p[1] - c[1], p[2] - c[2]);
-            let d = (dx * dx + dy * dy + dz * dz).sqrt() - *r;
+            let d = (dx * dx + dy * dy + dz * dz).sqrt() - splat(o, *r);
             let d = d.max(zero);
             d * d
         }
         Solid32::Cuboid { rt, t, half } => {
-            let l = local(rt, t, p);
-            let ax = (l[0].abs() - half[0]).max(zero);
-            let ay = (l[1].abs() - half[1]).max(zero);
-            let az = (l[2].abs() - half[2]).max(zero);
+            let l = local(o, rt, t, p);
+            let ax = (l[0].abs() - splat(o, half[0])).max(zero);
+            let ay = (l[1].abs() - splat(o, half[1])).max(zero);
+            let az = (l[2].abs() - splat(o, half[2])).max(zero);
             ax * ax + ay * ay + az * az
         }
         Solid32::Cylinder { rt, t, r, hh } => {
-            let l = local(rt, t, p);
-            let ar = ((l[0] * l[0] + l[1] * l[1]).sqrt() - *r).max(zero);
-            let az = (l[2].abs() - *hh).max(zero);
+            let l = local(o, rt, t, p);
+            let ar = ((l[0] * l[0] + l[1] * l[1]).sqrt() - splat(o, *r)).max(zero);
+            let az = (l[2].abs() - splat(o, *hh)).max(zero);
             ar * ar + az * az
         }
     }
@@ -328,13 +348,15 @@ fn gap2(solid: &Solid32, p: &P) -> F {
 
 /// `rt * (p - t)` per lane.
 #[inline(always)]
-fn local(rt: &[F; 9], t: &[F; 3], p: &P) -> P {
+fn local<O: Ops>(o: O, rt: &[f32; 9], t: &[f32; 3], p: &P<O>) -> P<O> {
+    let t = splat3(o, t);
+    let rt = rt.map(|v| splat(o, v));
     let (x, y, z) = (p[0] - t[0], p[1] - t[1], p[2] - t[2]);
     [rt[0] * x + rt[1] * y + rt[2] * z, rt[3] * x + rt[4] * y + rt[5] * z, rt[6] * x + rt[7] * y + rt[8] * z]
 }
 
 #[inline(always)]
-fn dist2(a: &P, b: &P) -> F {
+fn dist2<O: Ops>(a: &P<O>, b: &P<O>) -> F<O> {
     let (dx, dy, dz) = (a[0] - b[0], a[1] - b[1], a[2] - b[2]);
     dx * dx + dy * dy + dz * dz
 }
@@ -344,7 +366,7 @@ impl Lanes {
     pub(super) fn empty() -> Lanes {
         Lanes {
             base_r: [0.0; 9],
-            base_t: [F::ZERO; 3],
+            base_t: [0.0; 3],
             bodies: Vec::new(),
             balls: Vec::new(),
             links: Vec::new(),
@@ -370,10 +392,10 @@ impl Lanes {
                     Some((perm, sign)) => Pre::Perm(*perm, [f(sign[0]), f(sign[1]), f(sign[2])]),
                     None => Pre::Mat(m9(&b.pre_r)),
                 },
-                pre_t: v3(&b.pre_t).map(splat),
+                pre_t: v3(&b.pre_t),
                 prismatic: b.prismatic,
                 axis: v3(&b.axis),
-                post: b.post.as_ref().map(|(r, t)| (m9(r), v3(t).map(splat))),
+                post: b.post.as_ref().map(|(r, t)| (m9(r), v3(t))),
             })
             .collect();
         // The running error bound (module documentation): per body, the error of a rotation
@@ -446,11 +468,11 @@ impl Lanes {
         }
         Lanes {
             base_r: m9(&g.base_r),
-            base_t: v3(&g.base_t).map(splat),
+            base_t: v3(&g.base_t),
             bodies,
-            balls: g.centre.iter().map(|c| v3(c).map(splat)).collect(),
-            links: g.links.iter().map(|l| v3(&l.c).map(splat)).collect(),
-            groups: g.groups.iter().map(|gr| v3(&gr.c).map(splat)).collect(),
+            balls: g.centre.iter().map(v3).collect(),
+            links: g.links.iter().map(|l| v3(&l.c)).collect(),
+            groups: g.groups.iter().map(|gr| v3(&gr.c)).collect(),
             radius_up: g.radius.iter().map(|&r| up(r)).collect(),
             link_r_up: g.links.iter().map(|l| up(l.r)).collect(),
             pairs,
@@ -460,13 +482,49 @@ impl Lanes {
     }
 }
 
+/// One call of [`SphereGeom::free_lanes`], compiled for each instruction set.
+struct Batch<'a> {
+    geom: &'a SphereGeom,
+    qs: &'a [f64],
+    dof: usize,
+    obstacles: &'a Solids32,
+    margins: LaneMargins<'a>,
+    s: &'a mut LaneScratch,
+}
+
+impl Kernel for Batch<'_> {
+    type Output = Lanes8;
+
+    #[inline(always)]
+    fn run<O: Ops>(self, o: O) -> Lanes8 {
+        let Batch { geom, qs, dof, obstacles, margins, s } = self;
+        geom.free_lanes_in(o, qs, dof, obstacles, margins, s)
+    }
+}
+
 impl SphereGeom {
     /// Of the [`LANES`] configurations `qs` (`dof` values each, one after another), the lanes
     /// certainly free when grown by `margins` (see [`LaneMargins`]): bit `i` for lane `i`. See
     /// the module documentation; lanes not set may or may not be free. A lane certainly in
-    /// contact (exactly, without margins) ends the batch: then only `hit` is set.
+    /// contact (exactly, without margins) ends the batch: then only `hit` is set. The
+    /// instruction set is the scratch's (see `simd8`; the answer is the same with either).
     pub(crate) fn free_lanes(
         &self,
+        qs: &[f64],
+        dof: usize,
+        obstacles: &Solids32,
+        margins: LaneMargins<'_>,
+        s: &mut LaneScratch,
+    ) -> Lanes8 {
+        let isa = s.isa;
+        simd8::dispatch(Batch { geom: self, qs, dof, obstacles, margins, s }, isa)
+    }
+
+    /// [`Self::free_lanes`] on the instruction set of `o`.
+    #[inline(always)]
+    fn free_lanes_in<O: Ops>(
+        &self,
+        o: O,
         qs: &[f64],
         dof: usize,
         obstacles: &Solids32,
@@ -496,41 +554,42 @@ impl SphereGeom {
             let r = r - grow;
             if r > 0.0 { down((1.0 - gamma(3.0)) * r * r) } else { -1.0 }
         };
-        if !self.pose_lanes(qs, dof, s) {
+        if !self.pose_lanes(o, qs, dof, s) {
             return none;
         }
         for (gi, g) in self.groups.iter().enumerate() {
-            s.group_c[gi] = place(&s.rot[g.body], &s.pos[g.body], &lanes.groups[gi]);
+            let (rot, pos) = (load(o, &s.rot[g.body]), load(o, &s.pos[g.body]));
+            s.group_c[gi] = store(&place(o, &rot, &pos, &lanes.groups[gi]));
         }
         let mut live: u32 = (1 << LANES) - 1;
         // Against obstacles: group, link, sphere.
         for (gi, g) in self.groups.iter().enumerate() {
             let links = &self.group_links[g.first..g.end];
             let eg = links.iter().map(|&l| link_m[l as usize]).fold(0.0, f64::max);
-            let gc = s.group_c[gi];
+            let gc = load(o, &s.group_c[gi]);
             let gg = up(g.r + eg + grow);
             let tg = thr(gg, 0.0, 0.0);
-            for (o, (bc, br)) in obstacles.solids.iter().zip(&obstacles.bound) {
+            for (ob, (bc, br)) in obstacles.solids.iter().zip(&obstacles.bound) {
                 // The spheres around the group and the solid first.
-                if live & within(dist2(&gc, bc), thr(gg, *br, 0.0)) == 0 {
+                if live & within(dist2(&gc, &splat3(o, bc)), thr(gg, *br, 0.0)) == 0 {
                     continue;
                 }
-                let mg = live & within(gap2(o, &gc), tg);
+                let mg = live & within(gap2(o, ob, &gc), tg);
                 if mg == 0 {
                     continue;
                 }
                 for &l in links {
                     let l = l as usize;
                     let link = &self.links[l];
-                    let lc = self.lane_link_centre(l, s);
+                    let lc = self.lane_link_centre(o, l, s);
                     let lg = s.link_g[l];
-                    let ml = mg & within(gap2(o, &lc), thr(lanes.link_r_up[l], lg, 0.0));
+                    let ml = mg & within(gap2(o, ob, &lc), thr(lanes.link_r_up[l], lg, 0.0));
                     if ml == 0 {
                         continue;
                     }
-                    self.pose_lane_link(l, s);
+                    self.pose_lane_link(o, l, s);
                     for k in link.first..link.end {
-                        let d2 = gap2(o, &s.centre[k]);
+                        let d2 = gap2(o, ob, &load(o, &s.centre[k]));
                         let mk = ml & within(d2, thr(lanes.radius_up[k], lg, 0.0));
                         if mk != 0 {
                             let hit = mk & within(d2, contact(self.radius[k]));
@@ -553,7 +612,7 @@ impl SphereGeom {
             let pairs = &lanes.pairs[range.clone()];
             let eg = pairs.iter().map(|pr| pair_m[pr[0] as usize]).fold(0.0, f64::max);
             let tg = thr(up(gp.rr + eg + grow), 0.0, 0.0);
-            let mut near = live & within(dist2(&s.group_c[gp.outer], &s.group_c[gp.inner]), tg);
+            let mut near = live & within(dist2(&load(o, &s.group_c[gp.outer]), &load(o, &s.group_c[gp.inner])), tg);
             if near == 0 {
                 continue;
             }
@@ -573,25 +632,25 @@ impl SphereGeom {
                 let (p, a, b) = (p as usize, a as usize, b as usize);
                 let m = pair_m[p];
                 let (la, lb) = (&self.links[a], &self.links[b]);
-                let ca = self.lane_link_centre(a, s);
-                let cb = self.lane_link_centre(b, s);
+                let ca = self.lane_link_centre(o, a, s);
+                let cb = self.lane_link_centre(o, b, s);
                 let pg = up(m + grow);
                 let tl = thr(lanes.link_r_up[a], lanes.link_r_up[b], pg);
                 let close = near & !touch & within(dist2(&ca, &cb), tl);
                 if close == 0 {
                     continue;
                 }
-                self.pose_lane_link(a, s);
-                self.pose_lane_link(b, s);
+                self.pose_lane_link(o, a, s);
+                self.pose_lane_link(o, b, s);
                 let rb = lanes.link_r_up[b];
                 for i in la.first..la.end {
                     // The sphere against the other link's bounding sphere first.
-                    let ci = s.centre[i];
+                    let ci = load(o, &s.centre[i]);
                     if close & within(dist2(&ci, &cb), thr(lanes.radius_up[i], rb, pg)) == 0 {
                         continue;
                     }
                     for j in lb.first..lb.end {
-                        let d2 = dist2(&ci, &s.centre[j]);
+                        let d2 = dist2(&ci, &load(o, &s.centre[j]));
                         let r = self.radius[i] + self.radius[j];
                         let t = close & within(d2, thr(lanes.radius_up[i], lanes.radius_up[j], pg));
                         if t != 0 {
@@ -617,20 +676,21 @@ impl SphereGeom {
 
     /// Bodies of the configurations `qs`; `false` when a joint value is not finite or a
     /// prismatic travel exceeds [`PRISMATIC_BOUND`].
-    fn pose_lanes(&self, qs: &[f64], dof: usize, s: &mut LaneScratch) -> bool {
+    #[inline(always)]
+    fn pose_lanes<O: Ops>(&self, o: O, qs: &[f64], dof: usize, s: &mut LaneScratch) -> bool {
         let lanes = &self.lanes;
         let n = self.bodies.len();
-        s.rot.resize(n, [F::ZERO; 9]);
-        s.pos.resize(n, [F::ZERO; 3]);
-        s.group_c.resize(self.groups.len(), [F::ZERO; 3]);
-        s.link_c.resize(self.links.len(), [F::ZERO; 3]);
+        s.rot.resize(n, [F8::ZERO; 9]);
+        s.pos.resize(n, [F8::ZERO; 3]);
+        s.group_c.resize(self.groups.len(), [F8::ZERO; 3]);
+        s.link_c.resize(self.links.len(), [F8::ZERO; 3]);
         s.link_posed.clear();
         s.link_posed.resize(self.links.len(), false);
-        s.centre.resize(self.centre.len(), [F::ZERO; 3]);
+        s.centre.resize(self.centre.len(), [F8::ZERO; 3]);
         s.posed.clear();
         s.posed.resize(self.links.len(), false);
-        s.rot[0] = lanes.base_r.map(splat);
-        s.pos[0] = lanes.base_t;
+        s.rot[0] = lanes.base_r.map(|v| F8([v; LANES]));
+        s.pos[0] = lanes.base_t.map(|v| F8([v; LANES]));
         for (k, (b, a)) in lanes.bodies.iter().zip(&self.angles).enumerate() {
             let mut v = [0.0f64; LANES];
             let mut finite = true;
@@ -642,26 +702,19 @@ impl SphereGeom {
             if !finite || (b.prismatic && v.iter().any(|x| x.abs() > PRISMATIC_BOUND)) {
                 return false;
             }
-            let k = k + 1;
-            let (done_r, todo_r) = s.rot.split_at_mut(k);
-            let (done_p, todo_p) = s.pos.split_at_mut(k);
-            let (pr, pp) = (&done_r[b.parent], &done_p[b.parent]);
-            let (out_r, out_p) = (&mut todo_r[0], &mut todo_p[0]);
-            *out_p = place(pr, pp, &b.pre_t);
-            // `pr * pre` into the output, row by row (few values live at once).
-            match &b.pre {
-                Pre::Perm(perm, sign) => {
-                    for r in 0..3 {
-                        for c in 0..3 {
-                            out_r[3 * r + c] = pr[3 * r + perm[c]] * splat(sign[c]);
-                        }
-                    }
-                }
-                Pre::Mat(m) => *out_r = mul_m(pr, m),
-            }
+            let (pr, pp) = (load(o, &s.rot[b.parent]), load(o, &s.pos[b.parent]));
+            let mut out_p = place(o, &pr, &pp, &b.pre_t);
+            // `pr * pre` (for a signed permutation: the parent's columns, picked and signed).
+            let mut out_r = match &b.pre {
+                Pre::Perm(perm, sign) => std::array::from_fn(|k| {
+                    let (r, c) = (k / 3, k % 3);
+                    pr[3 * r + perm[c]] * splat(o, sign[c])
+                }),
+                Pre::Mat(m) => mul_m(o, &pr, m),
+            };
             if b.prismatic {
-                let vf = F::from(v.map(|x| x as f32));
-                let ax = [splat(b.axis[0]) * vf, splat(b.axis[1]) * vf, splat(b.axis[2]) * vf];
+                let vf = L::load(o, F8(v.map(|x| x as f32)));
+                let ax = [splat(o, b.axis[0]) * vf, splat(o, b.axis[1]) * vf, splat(o, b.axis[2]) * vf];
                 for r in 0..3 {
                     let along = out_r[3 * r] * ax[0] + out_r[3 * r + 1] * ax[1] + out_r[3 * r + 2] * ax[2];
                     out_p[r] += along;
@@ -677,7 +730,8 @@ impl SphereGeom {
                     }
                     (sn, cs)
                 };
-                let (sn, cs) = (F::from(sn.map(|x| x as f32)), F::from(cs.map(|x| x as f32)));
+                let sn = L::load(o, F8(sn.map(|x| x as f32)));
+                let cs = L::load(o, F8(cs.map(|x| x as f32)));
                 for r in 0..3 {
                     let (c0, c1) = (out_r[3 * r], out_r[3 * r + 1]);
                     out_r[3 * r] = c0 * cs + c1 * sn;
@@ -685,35 +739,38 @@ impl SphereGeom {
                 }
             }
             if let Some((qr, qt)) = &b.post {
-                *out_p = place(out_r, out_p, qt);
-                *out_r = mul_m(out_r, qr);
+                out_p = place(o, &out_r, &out_p, qt);
+                out_r = mul_m(o, &out_r, qr);
             }
+            s.rot[k + 1] = store(&out_r);
+            s.pos[k + 1] = store(&out_p);
         }
         true
     }
 
     /// World centre of link `l`'s bounding sphere per lane, once per batch.
     #[inline(always)]
-    fn lane_link_centre(&self, l: usize, s: &mut LaneScratch) -> P {
+    fn lane_link_centre<O: Ops>(&self, o: O, l: usize, s: &mut LaneScratch) -> P<O> {
         if !s.link_posed[l] {
             s.link_posed[l] = true;
             let b = self.links[l].body;
-            s.link_c[l] = place(&s.rot[b], &s.pos[b], &self.lanes.links[l]);
+            let (rot, pos) = (load(o, &s.rot[b]), load(o, &s.pos[b]));
+            s.link_c[l] = store(&place(o, &rot, &pos, &self.lanes.links[l]));
         }
-        s.link_c[l]
+        load(o, &s.link_c[l])
     }
 
     /// World centres of link `l`'s spheres per lane, once per batch.
     #[inline(always)]
-    fn pose_lane_link(&self, l: usize, s: &mut LaneScratch) {
+    fn pose_lane_link<O: Ops>(&self, o: O, l: usize, s: &mut LaneScratch) {
         if s.posed[l] {
             return;
         }
         s.posed[l] = true;
         let link = &self.links[l];
-        let (rot, pos) = (&s.rot[link.body], &s.pos[link.body]);
+        let (rot, pos) = (load(o, &s.rot[link.body]), load(o, &s.pos[link.body]));
         for k in link.first..link.end {
-            s.centre[k] = place(rot, pos, &self.lanes.balls[k]);
+            s.centre[k] = store(&place(o, &rot, &pos, &self.lanes.balls[k]));
         }
     }
 }
