@@ -274,9 +274,13 @@ fn load<O: Ops, const K: usize>(o: O, x: &[F8; K]) -> [F<O>; K] {
     x.map(|v| L::load(o, v))
 }
 
+/// Lane vectors written to working memory one by one (a whole array would go through
+/// `memcpy`).
 #[inline(always)]
-fn store<O: Ops, const K: usize>(x: &[F<O>; K]) -> [F8; K] {
-    x.map(|v| v.store())
+fn store<O: Ops, const K: usize>(x: &[F<O>; K], out: &mut [F8; K]) {
+    for (o, v) in out.iter_mut().zip(x) {
+        *o = v.store();
+    }
 }
 
 /// `rot * c + pos` per lane, as `mul3v(rot, c) + pos`, for a constant `c`.
@@ -559,7 +563,7 @@ impl SphereGeom {
         }
         for (gi, g) in self.groups.iter().enumerate() {
             let (rot, pos) = (load(o, &s.rot[g.body]), load(o, &s.pos[g.body]));
-            s.group_c[gi] = store(&place(o, &rot, &pos, &lanes.groups[gi]));
+            store(&place(o, &rot, &pos, &lanes.groups[gi]), &mut s.group_c[gi]);
         }
         let mut live: u32 = (1 << LANES) - 1;
         // Against obstacles: group, link, sphere.
@@ -742,8 +746,8 @@ impl SphereGeom {
                 out_p = place(o, &out_r, &out_p, qt);
                 out_r = mul_m(o, &out_r, qr);
             }
-            s.rot[k + 1] = store(&out_r);
-            s.pos[k + 1] = store(&out_p);
+            store(&out_r, &mut s.rot[k + 1]);
+            store(&out_p, &mut s.pos[k + 1]);
         }
         true
     }
@@ -755,7 +759,7 @@ impl SphereGeom {
             s.link_posed[l] = true;
             let b = self.links[l].body;
             let (rot, pos) = (load(o, &s.rot[b]), load(o, &s.pos[b]));
-            s.link_c[l] = store(&place(o, &rot, &pos, &self.lanes.links[l]));
+            store(&place(o, &rot, &pos, &self.lanes.links[l]), &mut s.link_c[l]);
         }
         load(o, &s.link_c[l])
     }
@@ -770,7 +774,7 @@ impl SphereGeom {
         let link = &self.links[l];
         let (rot, pos) = (load(o, &s.rot[link.body]), load(o, &s.pos[link.body]));
         for k in link.first..link.end {
-            s.centre[k] = store(&place(o, &rot, &pos, &self.lanes.balls[k]));
+            store(&place(o, &rot, &pos, &self.lanes.balls[k]), &mut s.centre[k]);
         }
     }
 }

@@ -6,7 +6,9 @@
 //! them, without `unsafe` in this crate) and with the `wide` crate's two SSE2 instructions per
 //! operation on the x86-64 baseline elsewhere. Both are the same IEEE single-precision
 //! operations, rounded to nearest, and neither fuses a multiply and an add, so a kernel gives
-//! the same bits either way (the tests run both).
+//! the same bits either way (the tests run both). The double-precision queries of the sphere
+//! path (`SphereGeom::check`) go through the same dispatch without using the lanes: compiled
+//! for AVX2 they take fewer instructions (three-operand forms, fewer register moves).
 //!
 //! Why not one build for AVX2 (`-C target-cpu=x86-64-v3`): the binary would stop with an
 //! illegal instruction on CPUs without it. Why not plain `[f32; 8]` loops compiled for AVX2 by
