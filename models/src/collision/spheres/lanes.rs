@@ -271,7 +271,7 @@ fn splat3<O: Ops>(o: O, x: &[f32; 3]) -> P<O> {
 
 #[inline(always)]
 fn load<O: Ops, const K: usize>(o: O, x: &[F8; K]) -> [F<O>; K] {
-    x.map(|v| L::load(o, v))
+    std::array::from_fn(|k| L::load(o, x[k]))
 }
 
 /// Lane vectors written to working memory one by one (a whole array would go through
@@ -353,10 +353,9 @@ fn gap2<O: Ops>(o: O, solid: &Solid32, p: &P<O>) -> F<O> {
 /// `rt * (p - t)` per lane.
 #[inline(always)]
 fn local<O: Ops>(o: O, rt: &[f32; 9], t: &[f32; 3], p: &P<O>) -> P<O> {
-    let t = splat3(o, t);
-    let rt = rt.map(|v| splat(o, v));
-    let (x, y, z) = (p[0] - t[0], p[1] - t[1], p[2] - t[2]);
-    [rt[0] * x + rt[1] * y + rt[2] * z, rt[3] * x + rt[4] * y + rt[5] * z, rt[6] * x + rt[7] * y + rt[8] * z]
+    let (x, y, z) = (p[0] - splat(o, t[0]), p[1] - splat(o, t[1]), p[2] - splat(o, t[2]));
+    let row = |r: usize| splat(o, rt[3 * r]) * x + splat(o, rt[3 * r + 1]) * y + splat(o, rt[3 * r + 2]) * z;
+    [row(0), row(1), row(2)]
 }
 
 #[inline(always)]
@@ -706,13 +705,16 @@ impl SphereGeom {
             if !finite || (b.prismatic && v.iter().any(|x| x.abs() > PRISMATIC_BOUND)) {
                 return false;
             }
-            let (pr, pp) = (load(o, &s.rot[b.parent]), load(o, &s.pos[b.parent]));
-            let mut out_p = place(o, &pr, &pp, &b.pre_t);
+            // The parent's frame read from memory entry by entry (a picked column is read where
+            // it lies: an array indexed at run time would be copied whole first).
+            let parent = &s.rot[b.parent];
+            let pr: R<O> = std::array::from_fn(|k| L::load(o, parent[k]));
+            let mut out_p = place(o, &pr, &load(o, &s.pos[b.parent]), &b.pre_t);
             // `pr * pre` (for a signed permutation: the parent's columns, picked and signed).
             let mut out_r = match &b.pre {
                 Pre::Perm(perm, sign) => std::array::from_fn(|k| {
                     let (r, c) = (k / 3, k % 3);
-                    pr[3 * r + perm[c]] * splat(o, sign[c])
+                    L::load(o, parent[3 * r + perm[c]]) * splat(o, sign[c])
                 }),
                 Pre::Mat(m) => mul_m(o, &pr, m),
             };
