@@ -1154,8 +1154,15 @@ impl SphereGeom {
             }
         }
         for (oi, (o, solid)) in obstacles.iter().zip(solids).enumerate() {
-            if o.lo.x > hi[0] || o.hi.x < lo[0] || o.lo.y > hi[1] || o.hi.y < lo[1] || o.lo.z > hi[2] || o.hi.z < lo[2]
-            {
+            // One branch for the six comparisons (`|`, not `||`): which of them decides is
+            // unpredictable, whether the obstacle is skipped much less so.
+            let outside = (o.lo.x > hi[0])
+                | (o.hi.x < lo[0])
+                | (o.lo.y > hi[1])
+                | (o.hi.y < lo[1])
+                | (o.lo.z > hi[2])
+                | (o.hi.z < lo[2]);
+            if outside {
                 continue;
             }
             for (gi, g) in self.groups.iter().enumerate() {
