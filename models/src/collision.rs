@@ -616,6 +616,8 @@ pub struct CollisionScratch {
     /// The spans a level of single-precision batches leaves.
     spans_left: Vec<Span>,
     steps: Vec<f64>,
+    /// The joint steps of the segment a certificate checks (signed).
+    delta: Vec<f64>,
     step: Vec<f64>,
     inflation: Vec<f64>,
     margins: Vec<f64>,
@@ -647,6 +649,7 @@ impl CollisionScratch {
             spans: Vec::new(),
             spans_left: Vec::new(),
             steps: Vec::new(),
+            delta: Vec::new(),
             step: Vec::new(),
             inflation: Vec::new(),
             margins: Vec::new(),
@@ -1550,7 +1553,10 @@ impl CollisionModel {
         let mut spans = std::mem::take(&mut s.spans);
         let mut q = std::mem::take(&mut s.q);
         steps.clear();
-        steps.extend((0..dof).map(|i| g.cspace.delta(i, qa[i], qb[i]).abs()));
+        let mut delta = std::mem::take(&mut s.delta);
+        delta.clear();
+        delta.extend((0..dof).map(|i| g.cspace.delta(i, qa[i], qb[i])));
+        steps.extend(delta.iter().map(|d| d.abs()));
         // How far each link's points can travel over the whole segment (against obstacles),
         // then how far each self-collision pair can close in on itself.
         travel.clear();
@@ -1585,7 +1591,7 @@ impl CollisionModel {
         if listed && let (Some(fast), Some(solids32)) = (&self.fast, &self.solids32) {
             let bufs = (&mut margins, &mut step, &mut q);
             let (batches, hit) =
-                self.first_level_in_lanes(fast, solids32, qa, qb, (&travel, &steps, most), &mut spans, bufs, s);
+                self.first_level_in_lanes(fast, solids32, qa, &delta, (&travel, &steps, most), &mut spans, bufs, s);
             checks += batches;
             if hit {
                 // A piece's midpoint is in contact: nothing left to check.
@@ -1611,7 +1617,7 @@ impl CollisionModel {
             for (m, d) in step.iter_mut().zip(&steps) {
                 *m = d * scale;
             }
-            g.cspace.interpolate_into(qa, qb, tm, &mut q);
+            ConfigSpace::step_into(qa, &delta, tm, &mut q);
             checks += 1;
             let inflation = Inflation { link: &margins[..slots], pair: &margins[slots..], step: &step };
             // On the sphere path, a half is checked against only what was near over the whole.
@@ -1641,6 +1647,7 @@ impl CollisionModel {
             }
         }
         s.steps = steps;
+        s.delta = delta;
         s.step = step;
         s.inflation = travel;
         s.margins = margins;
@@ -1660,7 +1667,7 @@ impl CollisionModel {
         fast: &SphereGeom,
         solids32: &Solids32,
         qa: &[f64],
-        qb: &[f64],
+        delta: &[f64],
         (travel, steps, most): (&[f64], &[f64], f64),
         spans: &mut Vec<Span>,
         (margins, step, q): (&mut Vec<f64>, &mut Vec<f64>, &mut Vec<f64>),
@@ -1697,7 +1704,7 @@ impl CollisionModel {
             buf.clear();
             for k in 0..lanes::LANES {
                 let span = chunk[k.min(chunk.len() - 1)];
-                g.cspace.interpolate_into(qa, qb, 0.5 * (span.t0 + span.t1), q);
+                ConfigSpace::step_into(qa, delta, 0.5 * (span.t0 + span.t1), q);
                 buf.extend_from_slice(q);
             }
             let grow = LaneMargins { link: &margins[..slots], pair: &margins[slots..], step: Some(step) };

@@ -61,6 +61,15 @@ impl ConfigSpace {
     pub fn max_joint_step(&self, a: &[f64], b: &[f64]) -> f64 {
         (0..a.len()).map(|i| self.delta(i, a[i], b[i]).abs()).fold(0.0, f64::max)
     }
+    /// `a + t d` per joint, written into `out`: [`Self::interpolate_into`] with the joint steps
+    /// `d` (each [`Self::delta`] from `a` to `b`) worked out once for the many points of one
+    /// segment; the very same numbers.
+    #[inline]
+    pub fn step_into(a: &[f64], d: &[f64], t: f64, out: &mut [f64]) {
+        for ((o, a), d) in out.iter_mut().zip(a).zip(d) {
+            *o = a + t * d;
+        }
+    }
     /// The point at fraction `t` along the shortest way from `a` to `b`, written into `out`.
     /// Continuous joints are left unwrapped (continuing from `a`), so a path stays continuous.
     #[inline]

@@ -140,6 +140,8 @@ pub(crate) struct Validity<'m, V: StateValidity> {
     certify: Option<f64>,
     scratch: V::Scratch,
     buf: Vec<f64>,
+    /// Joint steps of the segment being sampled.
+    delta: Vec<f64>,
     pub collision_checks: u64,
     pub edges_checked: usize,
     /// Collision checks of [`Self::segment_probed`] (also counted in `collision_checks`).
@@ -156,6 +158,7 @@ impl<'m, V: StateValidity> Validity<'m, V> {
             certify: None,
             scratch: model.scratch(),
             buf: vec![0.0; robot.dof()],
+            delta: Vec::new(),
             collision_checks: 0,
             edges_checked: 0,
             probe_checks: 0,
@@ -212,21 +215,27 @@ impl<'m, V: StateValidity> Validity<'m, V> {
         while stride * 2 < n {
             stride *= 2;
         }
+        // The joint steps once; each point is `a + t delta` (what `interpolate_into` computes).
+        let mut delta = std::mem::take(&mut self.delta);
+        delta.clear();
+        delta.extend((0..a.len()).map(|i| self.space.delta(i, a[i], b[i])));
         let mut first_level = true;
         loop {
             let mut i = stride;
             while i < n {
                 if first_level || (i / stride) % 2 == 1 {
                     let t = i as f64 / n as f64;
-                    self.space.interpolate_into(a, b, t, &mut self.buf);
+                    ConfigSpace::step_into(a, &delta, t, &mut self.buf);
                     self.collision_checks += 1;
                     if self.model.collides(&self.buf, &mut self.scratch) {
+                        self.delta = delta;
                         return false;
                     }
                 }
                 i += stride;
             }
             if stride == 1 {
+                self.delta = delta;
                 return true;
             }
             stride /= 2;
