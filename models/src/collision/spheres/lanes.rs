@@ -4,8 +4,8 @@
 //! [`super::SphereGeom::check`], with the link and pair margins only).
 //!
 //! After VAMP (Thomason, Kingston and Kavraki, "Motions in Microseconds via Vectorized
-//! Sampling-Based Planning", ICRA 2024): one `f32x8` lane per configuration (the `wide` crate,
-//! two SSE registers on the x86-64 baseline, one AVX register where the build has it), the
+//! Sampling-Based Planning", ICRA 2024): one `f32` lane of eight per configuration (one AVX2
+//! register where the CPU has it, two SSE registers on the x86-64 baseline: see `simd8`), the
 //! forward kinematics as the robot's prepared program over the lanes (a signed permutation or
 //! a matrix per body, the joint turning about the frame's z axis), group, link and sphere
 //! bounding tests as lane masks, and an early end as soon as no lane can be free. The answer
