@@ -7,7 +7,8 @@
 //!   checked as one batch (`CollisionModel::any_collides_with`) against eight single checks.
 //!   Target: a free batch <= 800 ns (100 ns per configuration). `.../f32-settle`: the same eight
 //!   in one single-precision batch (`CollisionModel::settle_batch`, what the certificate's
-//!   first pieces go through).
+//!   first pieces go through). `.../mbm-pairs/sse2`: the pairs `bench mbm` checks, on the
+//!   x86-64 baseline's instructions where the CPU has AVX2 (`with_baseline_vectors`).
 //! - `collides|distance/two-irp6-20-obstacles`: the two-arm IRp-6 cell among 20 boxes/cylinders.
 //! - `collides/two-irp6-400-obstacles/free[/no-grid]`: the cell among 400 small obstacles, with
 //!   the general path's obstacle grid and without it.
@@ -148,6 +149,24 @@ fn ur5_table_pick(c: &mut Criterion) {
         b.iter(|| {
             i = (i + 1) % free8.len();
             black_box(planner_model.settle_batch(black_box(&free8[i]), 0.0, &mut planner_scratch))
+        })
+    });
+    // The same two on the x86-64 baseline's instructions (SSE2) where the CPU has AVX2: what
+    // the run-time dispatch gains on this machine.
+    let mut baseline = planner_model.scratch().with_baseline_vectors();
+    let mut i = 0;
+    c.bench_function("batch8/ur5-table-pick/free/8-single/mbm-pairs/sse2", |b| {
+        b.iter(|| {
+            i = (i + 1) % free8.len();
+            let qs = black_box(&free8[i]);
+            black_box(qs.chunks_exact(dof).any(|q| planner_model.collides_with(q, &mut baseline)))
+        })
+    });
+    let mut i = 0;
+    c.bench_function("batch8/ur5-table-pick/free/f32-settle/mbm-pairs/sse2", |b| {
+        b.iter(|| {
+            i = (i + 1) % free8.len();
+            black_box(planner_model.settle_batch(black_box(&free8[i]), 0.0, &mut baseline))
         })
     });
     let general = model.clone().general_path_only();

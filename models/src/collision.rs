@@ -657,10 +657,10 @@ impl CollisionScratch {
         }
     }
 
-    /// This working memory's queries on the sphere path (checks, the motion certificate and its
-    /// single-precision batches, [`CollisionModel::settle_batch`]) run on the x86-64 baseline's
-    /// instructions (SSE2) even where the CPU has AVX2, which they use by default. The answers
-    /// are the same, bit for bit: for tests and measurements that compare the two.
+    /// This working memory's single-precision batches (the motion certificate's first pieces,
+    /// [`CollisionModel::settle_batch`]) run on the x86-64 baseline's vector instructions (SSE2)
+    /// even where the CPU has AVX2, which they use by default. The answers are the same, bit
+    /// for bit: for tests and measurements that compare the two.
     pub fn with_baseline_vectors(mut self) -> Self {
         self.spheres.lanes.isa = Isa::Baseline;
         self

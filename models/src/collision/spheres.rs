@@ -855,7 +855,7 @@ impl SphereGeom {
     }
 
     /// Body transforms and link bounding-sphere centres at `q` (of the right length).
-    #[inline(always)]
+    #[inline]
     fn pose(&self, q: &[f64], s: &mut SphereScratch) {
         self.begin(s);
         s.rot[0] = self.base_r;
@@ -945,7 +945,7 @@ impl SphereGeom {
     }
 
     /// World centres of link `l`'s spheres, computed once per query.
-    #[inline(always)]
+    #[inline]
     fn pose_link(&self, l: usize, s: &mut SphereScratch) {
         if s.posed[l] == s.stamp {
             return;
@@ -1004,8 +1004,10 @@ impl SphereGeom {
         inflation: Option<Inflation<'_>>,
         s: &mut SphereScratch,
     ) -> Check {
-        let isa = s.lanes.isa;
-        simd8::dispatch(Query { geom: self, q, obstacles, solids, mode: Mode::Plain(inflation), s }, isa)
+        match inflation {
+            Some(_) => self.check_impl::<true, false>(q, obstacles, solids, inflation, s),
+            None => self.check_impl::<false, false>(q, obstacles, solids, None, s),
+        }
     }
 
     /// An inflated query of the motion certificate that lists what it finds near (see
@@ -1022,13 +1024,13 @@ impl SphereGeom {
         within: Option<std::ops::Range<usize>>,
         s: &mut SphereScratch,
     ) -> Check {
-        let isa = s.lanes.isa;
-        let mode = Mode::Listed(inflation, within);
-        simd8::dispatch(Query { geom: self, q, obstacles, solids, mode, s }, isa)
+        match within {
+            None => self.check_impl::<true, true>(q, obstacles, solids, Some(inflation), s),
+            Some(range) => self.check_items(q, obstacles, solids, inflation, range, s),
+        }
     }
 
     /// [`Self::check_listed`] of the items `range` of `s.items` alone.
-    #[inline(always)]
     fn check_items(
         &self,
         q: &[f64],
@@ -1105,7 +1107,7 @@ impl SphereGeom {
     /// [`Self::check`], compiled separately for exact queries (`GROW` = false), and for the
     /// inflated ones that list every near item rather than stop growing at the first
     /// (`COLLECT`, see [`Self::check_listed`]).
-    #[inline(always)]
+    #[inline]
     fn check_impl<const GROW: bool, const COLLECT: bool>(
         &self,
         q: &[f64],
@@ -1260,7 +1262,7 @@ impl SphereGeom {
     /// body's frame, where each outer sphere is tested against it as stored; the few that reach
     /// it are taken into the inner body's frame, where the inner links' bounding spheres and
     /// spheres are tested as stored.
-    #[inline(always)]
+    #[inline(never)]
     fn self_pass<const GROW: bool, const COLLECT: bool>(
         &self,
         q: &[f64],
@@ -1369,41 +1371,6 @@ impl SphereGeom {
             }
         }
         false
-    }
-}
-
-/// One query of [`SphereGeom::check`] or [`SphereGeom::check_listed`] (`within` set),
-/// compiled for each instruction set `simd8` may choose: double-precision scalar code, which
-/// gains from AVX2's encoding (three operands, fewer moves) rather than from its width.
-struct Query<'a, 'i> {
-    geom: &'a SphereGeom,
-    q: &'a [f64],
-    obstacles: &'a [ObstacleGeom],
-    solids: &'a [Solid],
-    mode: Mode<'i>,
-    s: &'a mut SphereScratch,
-}
-
-/// What a [`Query`] asks.
-enum Mode<'i> {
-    /// [`SphereGeom::check`].
-    Plain(Option<Inflation<'i>>),
-    /// [`SphereGeom::check_listed`].
-    Listed(Inflation<'i>, Option<std::ops::Range<usize>>),
-}
-
-impl simd8::Kernel for Query<'_, '_> {
-    type Output = Check;
-
-    #[inline(always)]
-    fn run<O: simd8::Ops>(self, _: O) -> Check {
-        let Query { geom, q, obstacles, solids, mode, s } = self;
-        match mode {
-            Mode::Plain(Some(inf)) => geom.check_impl::<true, false>(q, obstacles, solids, Some(inf), s),
-            Mode::Plain(None) => geom.check_impl::<false, false>(q, obstacles, solids, None, s),
-            Mode::Listed(inf, None) => geom.check_impl::<true, true>(q, obstacles, solids, Some(inf), s),
-            Mode::Listed(inf, Some(range)) => geom.check_items(q, obstacles, solids, inf, range, s),
-        }
     }
 }
 

@@ -7,8 +7,9 @@
 //! operation on the x86-64 baseline elsewhere. Both are the same IEEE single-precision
 //! operations, rounded to nearest, and neither fuses a multiply and an add, so a kernel gives
 //! the same bits either way (the tests run both). The double-precision queries of the sphere
-//! path (`SphereGeom::check`) go through the same dispatch without using the lanes: compiled
-//! for AVX2 they take fewer instructions (three-operand forms, fewer register moves).
+//! path (`SphereGeom::check`) are not dispatched: compiled for AVX2 they took 8% fewer
+//! instructions but more time (eight single checks 2.2-2.5 µs against 2.06 µs on the baseline;
+//! `bench mbm` p50 172 against 167 µs, interleaved), on a virtualised Xeon with AVX-512.
 //!
 //! Why not one build for AVX2 (`-C target-cpu=x86-64-v3`): the binary would stop with an
 //! illegal instruction on CPUs without it. Why not plain `[f32; 8]` loops compiled for AVX2 by
