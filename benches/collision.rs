@@ -63,7 +63,7 @@ fn samples(robot: &Robot, model: &CollisionModel, n: usize, seed: u64) -> (Vec<V
     (random, free)
 }
 
-fn bench_cycle(c: &mut Criterion, name: &str, qs: &[Vec<f64>], f: impl Fn(&[f64]) -> bool) {
+fn bench_cycle<R>(c: &mut Criterion, name: &str, qs: &[Vec<f64>], mut f: impl FnMut(&[f64]) -> R) {
     let mut i = 0;
     c.bench_function(name, |b| {
         b.iter(|| {
@@ -135,40 +135,18 @@ fn ur5_table_pick(c: &mut Criterion) {
     let planner_model = CollisionModel::new(&pruned, table_pick_scene0001());
     eprintln!("ur5: {} self pairs checked as in bench mbm", planner_model.self_collision_pairs().len());
     bench_cycle(c, "collides/ur5-table-pick/free/mbm-pairs", &free, |q| planner_model.collides(q));
-    let mut planner_scratch = planner_model.scratch();
-    let mut i = 0;
-    c.bench_function("batch8/ur5-table-pick/free/8-single/mbm-pairs", |b| {
-        b.iter(|| {
-            i = (i + 1) % free8.len();
-            let qs = black_box(&free8[i]);
-            black_box(qs.chunks_exact(dof).any(|q| planner_model.collides_with(q, &mut planner_scratch)))
-        })
-    });
-    let mut i = 0;
-    c.bench_function("batch8/ur5-table-pick/free/f32-settle/mbm-pairs", |b| {
-        b.iter(|| {
-            i = (i + 1) % free8.len();
-            black_box(planner_model.settle_batch(black_box(&free8[i]), 0.0, &mut planner_scratch))
-        })
-    });
-    // The same two on the x86-64 baseline's instructions (SSE2) where the CPU has AVX2: what
-    // the run-time dispatch gains on this machine.
-    let mut baseline = planner_model.scratch().with_baseline_vectors();
-    let mut i = 0;
-    c.bench_function("batch8/ur5-table-pick/free/8-single/mbm-pairs/sse2", |b| {
-        b.iter(|| {
-            i = (i + 1) % free8.len();
-            let qs = black_box(&free8[i]);
-            black_box(qs.chunks_exact(dof).any(|q| planner_model.collides_with(q, &mut baseline)))
-        })
-    });
-    let mut i = 0;
-    c.bench_function("batch8/ur5-table-pick/free/f32-settle/mbm-pairs/sse2", |b| {
-        b.iter(|| {
-            i = (i + 1) % free8.len();
-            black_box(planner_model.settle_batch(black_box(&free8[i]), 0.0, &mut baseline))
-        })
-    });
+    // Also on the x86-64 baseline's instructions (SSE2) where the CPU has AVX2 (`/sse2`): what
+    // the run-time dispatch of the batch gains on this machine.
+    let (mut planner_scratch, mut baseline) =
+        (planner_model.scratch(), planner_model.scratch().with_baseline_vectors());
+    for (isa, s) in [("", &mut planner_scratch), ("/sse2", &mut baseline)] {
+        bench_cycle(c, &format!("batch8/ur5-table-pick/free/8-single/mbm-pairs{isa}"), &free8, |qs| {
+            qs.chunks_exact(dof).any(|q| planner_model.collides_with(q, s))
+        });
+        bench_cycle(c, &format!("batch8/ur5-table-pick/free/f32-settle/mbm-pairs{isa}"), &free8, |qs| {
+            planner_model.settle_batch(qs, 0.0, s)
+        });
+    }
     let general = model.clone().general_path_only();
     bench_cycle(c, "collides/ur5-table-pick/free/general-path", &free, |q| general.collides(q));
     bench_cycle(c, "distance/ur5-table-pick/free", &free, |q| model.distance(q).distance > 0.0);

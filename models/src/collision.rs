@@ -1554,8 +1554,7 @@ impl CollisionModel {
         let mut q = std::mem::take(&mut s.q);
         steps.clear();
         let mut delta = std::mem::take(&mut s.delta);
-        delta.clear();
-        delta.extend((0..dof).map(|i| g.cspace.delta(i, qa[i], qb[i])));
+        g.cspace.deltas_into(qa, qb, &mut delta);
         steps.extend(delta.iter().map(|d| d.abs()));
         // How far each link's points can travel over the whole segment (against obstacles),
         // then how far each self-collision pair can close in on itself.

@@ -61,9 +61,15 @@ impl ConfigSpace {
     pub fn max_joint_step(&self, a: &[f64], b: &[f64]) -> f64 {
         (0..a.len()).map(|i| self.delta(i, a[i], b[i]).abs()).fold(0.0, f64::max)
     }
+    /// The signed joint steps from `a` to `b` ([`Self::delta`] of each joint: the short way
+    /// on continuous joints), written over `out`: for [`Self::step_into`].
+    pub fn deltas_into(&self, a: &[f64], b: &[f64], out: &mut Vec<f64>) {
+        out.clear();
+        out.extend((0..a.len()).map(|i| self.delta(i, a[i], b[i])));
+    }
     /// `a + t d` per joint, written into `out`: [`Self::interpolate_into`] with the joint steps
-    /// `d` (each [`Self::delta`] from `a` to `b`) worked out once for the many points of one
-    /// segment; the very same numbers.
+    /// `d` (from [`Self::deltas_into`]) worked out once for the many points of one segment; the
+    /// very same numbers.
     #[inline]
     pub fn step_into(a: &[f64], d: &[f64], t: f64, out: &mut [f64]) {
         for ((o, a), d) in out.iter_mut().zip(a).zip(d) {

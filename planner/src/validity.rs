@@ -207,7 +207,9 @@ impl<'m, V: StateValidity> Validity<'m, V> {
 
     /// Sampled check of the segment's inner points, in bisection order.
     fn sampled(&mut self, a: &[f64], b: &[f64], resolution: f64) -> bool {
-        let n = steps(&self.space, a, b, resolution);
+        // The joint steps once; each point is `a + t delta` (what `interpolate_into` computes).
+        self.space.deltas_into(a, b, &mut self.delta);
+        let n = steps(self.delta.iter().map(|d| d.abs()).fold(0.0, f64::max), resolution);
         if n < 2 {
             return true;
         }
@@ -215,27 +217,21 @@ impl<'m, V: StateValidity> Validity<'m, V> {
         while stride * 2 < n {
             stride *= 2;
         }
-        // The joint steps once; each point is `a + t delta` (what `interpolate_into` computes).
-        let mut delta = std::mem::take(&mut self.delta);
-        delta.clear();
-        delta.extend((0..a.len()).map(|i| self.space.delta(i, a[i], b[i])));
         let mut first_level = true;
         loop {
             let mut i = stride;
             while i < n {
                 if first_level || (i / stride) % 2 == 1 {
                     let t = i as f64 / n as f64;
-                    ConfigSpace::step_into(a, &delta, t, &mut self.buf);
+                    ConfigSpace::step_into(a, &self.delta, t, &mut self.buf);
                     self.collision_checks += 1;
                     if self.model.collides(&self.buf, &mut self.scratch) {
-                        self.delta = delta;
                         return false;
                     }
                 }
                 i += stride;
             }
             if stride == 1 {
-                self.delta = delta;
                 return true;
             }
             stride /= 2;
@@ -244,9 +240,9 @@ impl<'m, V: StateValidity> Validity<'m, V> {
     }
 }
 
-/// Number of equal steps so that no joint moves more than `resolution` per step (at least 1).
-pub(crate) fn steps(space: &ConfigSpace, a: &[f64], b: &[f64], resolution: f64) -> usize {
-    let max = space.max_joint_step(a, b);
+/// Number of equal steps so that no joint moves more than `resolution` per step (at least 1),
+/// for a segment whose largest joint step is `max`.
+fn steps(max: f64, resolution: f64) -> usize {
     let n = (max / resolution).ceil();
     if n.is_finite() && n >= 1.0 { n.min(1e7) as usize } else { 1 }
 }
