@@ -524,6 +524,8 @@ proptest! {
             }
             let mask = model.batch_collisions_with(&qs, &mut s);
             prop_assert_eq!(mask >> lanes, 0);
+            // The baseline vectors (SSE2) answer bit for bit as the best the CPU has.
+            prop_assert_eq!(model.batch_collisions_with(&qs, &mut baseline), mask);
             for (i, q) in qs.chunks(dof).enumerate() {
                 let single = model.collides_with(q, &mut s);
                 prop_assert_eq!(mask & (1 << i) != 0, single, "lane {} of {}: {:?}", i, lanes, q);
