@@ -316,6 +316,18 @@ fn aabb_d2(o: &ObstacleGeom, p: [f64; 3]) -> f64 {
     dx * dx + dy * dy + dz * dz
 }
 
+/// Whether a sphere at `c` of radius `r` is clear of obstacle `o`'s world box by more than a
+/// relative 1e-9 and an absolute 1e-12 m: [`may_touch`]'s prefilter of turned boxes and
+/// cylinders, cheaper than their distance (no rotation), and never true where the distance
+/// test would pass (the box holds the solid; the slack is far above the rounding of either).
+/// On the 296 public MotionBenchMaker UR5 problems, planning instructions 529.1 M -> 519.6 M;
+/// on 10 generated cage problems 207.4 M -> 202.9 M; paths identical.
+#[inline(always)]
+fn far_from_box(o: &ObstacleGeom, p: [f64; 3], r: f64) -> bool {
+    let r = r * (1.0 + 1e-9) + 1e-12;
+    aabb_d2(o, p) > r * r
+}
+
 /// Whether a sphere at `c` of radius `r` may touch the solid (of obstacle `o`): exact for balls
 /// and boxes, the box around a cylinder in its own frame, else the obstacle's world box. Tighter
 /// than the world box at the same cost (a box turned 49° about z, as in MotionBenchMaker's
@@ -325,8 +337,10 @@ fn may_touch(solid: &Solid, o: &ObstacleGeom, c: &Vector3<f64>, r: f64) -> bool 
     let p = [c.x, c.y, c.z];
     match solid {
         Solid::Ball { c, r: rb } => ball_d2(c, *rb, p) <= r * r,
-        Solid::Cuboid { rt, t, half } => cuboid_d2(rt, t, half, p) <= r * r,
-        Solid::Cylinder { rt, t, r: rc, hh } => box_d2(local(rt, t, p), [*rc, *rc, *hh]) <= r * r,
+        Solid::Cuboid { rt, t, half } => !far_from_box(o, p, r) && cuboid_d2(rt, t, half, p) <= r * r,
+        Solid::Cylinder { rt, t, r: rc, hh } => {
+            !far_from_box(o, p, r) && box_d2(local(rt, t, p), [*rc, *rc, *hh]) <= r * r
+        }
         _ => aabb_d2(o, p) <= r * r,
     }
 }
