@@ -316,7 +316,7 @@ fn aabb_d2(o: &ObstacleGeom, p: [f64; 3]) -> f64 {
     dx * dx + dy * dy + dz * dz
 }
 
-/// Whether a sphere at `c` of radius `r` is clear of obstacle `o`'s world box by more than a
+/// Whether a sphere at `p` of radius `r` is clear of obstacle `o`'s world box by more than a
 /// relative 1e-9 and an absolute 1e-12 m: [`may_touch`]'s prefilter of turned boxes and
 /// cylinders, cheaper than their distance (no rotation), and never true where the distance
 /// test would pass (the box holds the solid; the slack is far above the rounding of either).

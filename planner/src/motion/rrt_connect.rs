@@ -176,12 +176,14 @@ fn dist2_below(p: &[f64], q: &[f64], limit: f64) -> f64 {
 /// domain turns most samples away: on the 100 generated cage problems, 65 nodes in both trees
 /// at the median when a path is found (219 at most), on the 296 public MotionBenchMaker UR5
 /// problems 12 (107 at most), where the k-d tree's descent and bookkeeping cost more than the
-/// distances they save.
+/// distances they save. Planning instructions on 10 cage problems: 234.1 M with the k-d tree
+/// throughout, 216.2 M scanning below 32 nodes, 207.4 M below 128 (and below 256, and always).
 const SCAN_BELOW: usize = 128;
 
 /// The living node of `coords` (`q.len()` values each) nearest to `q` as (squared distance,
 /// index), ties to the lowest index: exactly [`KdIndex::nearest`]'s answer where no joint wraps
-/// (the same partial sums, in the same order). `DOF`, when not 0, is `q.len()`.
+/// (the same partial sums, in the same order). `DOF`, when not 0, is `q.len()`; `q` is not
+/// empty (a tree over no joints has no k-d tree and never comes here).
 fn scan<const DOF: usize>(coords: &[f64], alive: &[bool], q: &[f64]) -> (f64, usize) {
     let dof = if DOF == 0 { q.len() } else { DOF };
     let q = &q[..dof];
