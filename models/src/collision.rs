@@ -921,6 +921,35 @@ impl CollisionModel {
         qs.chunks(BATCH_LANES * dof).any(|chunk| self.batch_mask::<true>(chunk, scratch) != 0)
     }
 
+    /// Whether any of the configurations `qs` (any number of them, one after another)
+    /// collides, exactly as [`Self::collides_with`] of each would say: on the sphere path among
+    /// balls, boxes and cylinders, eight at a time in single precision ([`Self::settle_batch`]
+    /// with no margin), the few configurations a batch leaves unsettled one by one; elsewhere
+    /// one by one. Configurations are taken in order and the first contact ends the query.
+    pub fn any_collides_settled(&self, qs: &[f64], scratch: &mut CollisionScratch) -> bool {
+        let dof = self.geom.dof;
+        if dof == 0 || !qs.len().is_multiple_of(dof) {
+            return self.any_collides_with(qs, scratch);
+        }
+        for chunk in qs.chunks(BATCH_LANES * dof) {
+            let Some(settled) = self.settle_batch(chunk, 0.0, scratch) else {
+                if chunk.chunks_exact(dof).any(|q| self.collides_with(q, scratch)) {
+                    return true;
+                }
+                continue;
+            };
+            if settled.colliding != 0 {
+                return true;
+            }
+            for (i, q) in chunk.chunks_exact(dof).enumerate() {
+                if settled.free & (1 << i) == 0 && self.collides_with(q, scratch) {
+                    return true;
+                }
+            }
+        }
+        false
+    }
+
     /// Whether the motion certificate checks its first pieces in single-precision batches
     /// (the sphere path among balls, boxes and cylinders only; see `spheres::lanes` in the
     /// source).
@@ -956,13 +985,12 @@ impl CollisionModel {
         for _ in n..lanes::LANES {
             buf.extend_from_slice(&qs[(n - 1) * dof..]);
         }
-        s.margins.clear();
-        s.margins.resize(g.links.len() + g.self_pairs.len(), margin);
-        s.step.clear();
-        s.step.resize(dof, 0.0);
-        let (link_m, pair_m) = s.margins.split_at(g.links.len());
+        if s.step.len() != dof || s.step.iter().any(|&v| v != 0.0) {
+            s.step.clear();
+            s.step.resize(dof, 0.0);
+        }
         let step = (margin == 0.0).then_some(&s.step[..]);
-        let grow = LaneMargins { link: link_m, pair: pair_m, step };
+        let grow = LaneMargins { link: &[], pair: &[], uniform: Some(margin), step };
         let answer = fast.free_lanes(&buf, dof, solids32, grow, &mut s.spheres.lanes);
         s.spheres.batch_q = buf;
         let used = (1u32 << n) - 1;
@@ -1706,7 +1734,8 @@ impl CollisionModel {
                 ConfigSpace::step_into(qa, delta, 0.5 * (span.t0 + span.t1), q);
                 buf.extend_from_slice(q);
             }
-            let grow = LaneMargins { link: &margins[..slots], pair: &margins[slots..], step: Some(step) };
+            let grow =
+                LaneMargins { link: &margins[..slots], pair: &margins[slots..], uniform: None, step: Some(step) };
             let answer = fast.free_lanes(&buf, dof, solids32, grow, &mut s.spheres.lanes);
             batches += 1;
             if answer.hit & ((1u32 << chunk.len()) - 1) != 0 {

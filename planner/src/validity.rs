@@ -14,7 +14,8 @@
 //!
 //! `Validity::segment_probed` is the cheap, incomplete test of lazy RRT-Connect: plain
 //! collision checks of sampled configurations, before a segment is certified (or instead of it,
-//! for tree edges that never end up on a path).
+//! for tree edges that never end up on a path). Its points go to the model together
+//! ([`StateValidity::any_collides`]), so that a model may check them in vector lanes.
 
 use embodied_models::collision::{CollisionModel, CollisionScratch};
 use embodied_models::{ConfigSpace, Robot};
@@ -64,6 +65,17 @@ pub trait StateValidity: Sync {
     /// Whether `q` is invalid (in collision). A `q` of the wrong length is invalid.
     fn collides(&self, q: &[f64], scratch: &mut Self::Scratch) -> bool;
 
+    /// Whether any of the configurations `qs` (whole configurations, one after another) is
+    /// invalid: [`Self::collides`] of each by default; an implementation may check them
+    /// together (in vector lanes) as long as the answer is the same.
+    fn any_collides(&self, qs: &[f64], scratch: &mut Self::Scratch) -> bool {
+        let dof = self.robot().dof();
+        if dof == 0 {
+            return !qs.is_empty() && self.collides(qs, scratch);
+        }
+        qs.chunks(dof).any(|q| self.collides(q, scratch))
+    }
+
     /// Why `q` is invalid, in words (for errors: "link `a` and obstacle `b`"); `None` when valid.
     fn first_collision(&self, q: &[f64]) -> Option<String>;
 
@@ -100,6 +112,10 @@ impl StateValidity for CollisionModel {
 
     fn collides(&self, q: &[f64], scratch: &mut CollisionScratch) -> bool {
         self.collides_with(q, scratch)
+    }
+
+    fn any_collides(&self, qs: &[f64], scratch: &mut CollisionScratch) -> bool {
+        self.any_collides_settled(qs, scratch)
     }
 
     fn first_collision(&self, q: &[f64]) -> Option<String> {
@@ -142,6 +158,8 @@ pub(crate) struct Validity<'m, V: StateValidity> {
     buf: Vec<f64>,
     /// Joint steps of the segment being sampled.
     delta: Vec<f64>,
+    /// Configurations of one probe, one after another.
+    points: Vec<f64>,
     pub collision_checks: u64,
     pub edges_checked: usize,
     /// Collision checks of [`Self::segment_probed`] (also counted in `collision_checks`).
@@ -159,6 +177,7 @@ impl<'m, V: StateValidity> Validity<'m, V> {
             scratch: model.scratch(),
             buf: vec![0.0; robot.dof()],
             delta: Vec::new(),
+            points: Vec::new(),
             collision_checks: 0,
             edges_checked: 0,
             probe_checks: 0,
@@ -197,11 +216,30 @@ impl<'m, V: StateValidity> Validity<'m, V> {
     }
 
     /// No sampled configuration of the segment `a`-`b` collides, at `resolution` (largest joint
-    /// step), ends excluded. A probe, not a certificate: an obstacle between samples is missed.
-    pub fn segment_probed(&mut self, a: &[f64], b: &[f64], resolution: f64) -> bool {
-        let before = self.collision_checks;
-        let free = self.sampled(a, b, resolution);
-        self.probe_checks += self.collision_checks - before;
+    /// step), ends excluded; with `check_end`, the end `b` is checked first (within the position
+    /// limits and free). A probe, not a certificate: an obstacle between samples is missed. The
+    /// inner points go to the model in one query ([`StateValidity::any_collides`]: in vector
+    /// lanes for a [`CollisionModel`] on the sphere path), in bisection order.
+    pub fn segment_probed(&mut self, a: &[f64], b: &[f64], resolution: f64, check_end: bool) -> bool {
+        // The end alone first: a blocked extension usually ends there, for one check.
+        if check_end && !self.config_free(b) {
+            return false;
+        }
+        self.space.deltas_into(a, b, &mut self.delta);
+        let n = steps(self.delta.iter().map(|d| d.abs()).fold(0.0, f64::max), resolution);
+        let mut points = std::mem::take(&mut self.points);
+        points.clear();
+        let (delta, buf) = (&self.delta, &mut self.buf);
+        bisection_order(n, |i| {
+            ConfigSpace::step_into(a, delta, i as f64 / n as f64, buf);
+            points.extend_from_slice(buf);
+            true
+        });
+        let checks = (points.len() / a.len().max(1)) as u64;
+        self.collision_checks += checks;
+        self.probe_checks += checks;
+        let free = points.is_empty() || !self.model.any_collides(&points, &mut self.scratch);
+        self.points = points;
         free
     }
 
@@ -210,33 +248,41 @@ impl<'m, V: StateValidity> Validity<'m, V> {
         // The joint steps once; each point is `a + t delta` (what `interpolate_into` computes).
         self.space.deltas_into(a, b, &mut self.delta);
         let n = steps(self.delta.iter().map(|d| d.abs()).fold(0.0, f64::max), resolution);
-        if n < 2 {
+        let (delta, buf) = (&self.delta, &mut self.buf);
+        let (model, scratch, checks) = (self.model, &mut self.scratch, &mut self.collision_checks);
+        bisection_order(n, |i| {
+            ConfigSpace::step_into(a, delta, i as f64 / n as f64, buf);
+            *checks += 1;
+            !model.collides(buf, scratch)
+        })
+    }
+}
+
+/// The inner points `1..n` of a segment cut into `n` equal steps, in bisection order (the
+/// largest power-of-two stride below `n` first, then each finer level's new points), while
+/// `visit` returns true; whether every point was visited.
+fn bisection_order(n: usize, mut visit: impl FnMut(usize) -> bool) -> bool {
+    if n < 2 {
+        return true;
+    }
+    let mut stride = 1usize;
+    while stride * 2 < n {
+        stride *= 2;
+    }
+    let mut first_level = true;
+    loop {
+        let mut i = stride;
+        while i < n {
+            if (first_level || (i / stride) % 2 == 1) && !visit(i) {
+                return false;
+            }
+            i += stride;
+        }
+        if stride == 1 {
             return true;
         }
-        let mut stride = 1usize;
-        while stride * 2 < n {
-            stride *= 2;
-        }
-        let mut first_level = true;
-        loop {
-            let mut i = stride;
-            while i < n {
-                if first_level || (i / stride) % 2 == 1 {
-                    let t = i as f64 / n as f64;
-                    ConfigSpace::step_into(a, &self.delta, t, &mut self.buf);
-                    self.collision_checks += 1;
-                    if self.model.collides(&self.buf, &mut self.scratch) {
-                        return false;
-                    }
-                }
-                i += stride;
-            }
-            if stride == 1 {
-                return true;
-            }
-            stride /= 2;
-            first_level = false;
-        }
+        stride /= 2;
+        first_level = false;
     }
 }
 

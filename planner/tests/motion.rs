@@ -623,3 +623,92 @@ fn planner_names_round_trip() {
     let err = "rrt".parse::<PlannerKind>().expect_err("unknown");
     assert!(err.to_string().contains("rrt-connect, lazy-prm"), "{err}");
 }
+
+/// A collision model that answers every query one configuration at a time (the default
+/// [`StateValidity::any_collides`]).
+struct OneByOne(CollisionModel);
+
+impl StateValidity for OneByOne {
+    type Scratch = CollisionScratch;
+
+    fn robot(&self) -> &Robot {
+        self.0.robot()
+    }
+
+    fn scratch(&self) -> CollisionScratch {
+        self.0.scratch()
+    }
+
+    fn collides(&self, q: &[f64], scratch: &mut CollisionScratch) -> bool {
+        self.0.collides_with(q, scratch)
+    }
+
+    fn first_collision(&self, q: &[f64]) -> Option<String> {
+        self.0.first_collision(q).map(|c| c.to_string())
+    }
+
+    fn certify_motion(
+        &self,
+        qa: &[f64],
+        qb: &[f64],
+        tolerance: f64,
+        check_ends: bool,
+        scratch: &mut CollisionScratch,
+    ) -> (bool, u32) {
+        self.0.certify(qa, qb, tolerance, check_ends, scratch)
+    }
+}
+
+/// RRT-Connect's edge probes go to the model together, and the spherized UR5 checks them in
+/// single-precision vector lanes: the paths are exactly those of one-by-one checks, among
+/// boxes turned about z (MotionBenchMaker's form) and tilted ones.
+#[test]
+fn probes_in_vector_lanes_give_the_paths_of_single_checks() {
+    use embodied_models::nalgebra::{Translation3, UnitQuaternion};
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/tests/fixtures");
+    let mut robot = embodied_models::urdf::load_urdf(&dir.join("ur5_spherized.urdf"), Some(&dir.join("ur5.srdf")))
+        .expect("UR5 fixture loads");
+    // Two of its links overlap everywhere (the SRDF was written for the mesh model): disabled
+    // as `bench mbm` does.
+    embodied_models::collision::disable_always_colliding(&mut robot, 2000, 0x5eed);
+    let mut env = Environment::new();
+    let walls = [([0.45, 0.0, 0.35], [0.02, 0.35, 0.35], 0.3, 0.0), ([0.0, 0.5, 0.3], [0.3, 0.02, 0.3], -0.4, 0.2)];
+    for (k, (c, h, yaw, tilt)) in walls.into_iter().enumerate() {
+        let pose = Isometry3::from_parts(
+            Translation3::new(c[0], c[1], c[2]),
+            UnitQuaternion::from_euler_angles(tilt, 0.0, yaw),
+        );
+        env.add(Obstacle::new(format!("wall{k}"), pose, Shape::cuboid(h[0], h[1], h[2])));
+    }
+    let model = CollisionModel::new(&robot, env);
+    assert!(model.certifies_in_batches(), "test setup: the sphere path answers in batches");
+    let single = OneByOne(model.clone());
+    let mut rng = embodied_models::Rng::new(3);
+    let (mut solved, mut detours) = (0, 0);
+    for seed in 0..8 {
+        let (start, goal) = loop {
+            let (a, b) = (robot.random_configuration(&mut rng), robot.random_configuration(&mut rng));
+            if !model.collides(&a) && !model.collides(&b) {
+                break (a, b);
+            }
+        };
+        let settings = MotionSettings { seed, ..settings(PlannerKind::RrtConnect) };
+        let goal_q = Goal::Configuration(goal.clone());
+        let lanes = RrtConnect::new(settings.clone()).plan(&model, &start, &goal_q);
+        let ones = RrtConnect::new(settings.clone()).plan(&single, &start, &goal_q);
+        match (lanes, ones) {
+            (Ok(Outcome::Solved(lanes)), Ok(Outcome::Solved(ones))) => {
+                assert_eq!(lanes.path, ones.path, "seed {seed}");
+                assert_eq!(lanes.stats.samples, ones.stats.samples, "seed {seed}");
+                solved += 1;
+                detours += (lanes.path.len() > 2) as usize;
+                assert_plan_ok(&model, &start, &goal, &lanes.path);
+            }
+            // A goal walled off from the start: both spend the sample budget.
+            (Ok(Outcome::Infeasible), Ok(Outcome::Infeasible)) => {}
+            other => panic!("seed {seed}: {other:?}"),
+        }
+    }
+    assert!(solved >= 4, "test setup: {solved} of 8 solved");
+    assert!(detours > 0, "test setup: some plans leave the straight segment");
+}

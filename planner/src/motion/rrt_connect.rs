@@ -347,26 +347,22 @@ fn extend<V: StateValidity>(
     let reached = d <= range;
     buf.clear();
     buf.resize(tree.dof, 0.0);
-    if reached {
-        validity.space.interpolate_into(tree.node(near), target, 1.0, buf);
-    } else {
-        validity.space.interpolate_into(tree.node(near), target, range / d, buf);
-        if !validity.config_free(buf) {
-            return Step::Trapped;
-        }
-    }
+    let t = if reached { 1.0 } else { range / d };
+    validity.space.interpolate_into(tree.node(near), target, t, buf);
     let q_near = tree.node(near);
     match lazy {
         Some(step) => {
-            // The certificate covers its ends; a probe does not.
-            if reached && !target_checked && !validity.config_free(buf) {
-                return Step::Trapped;
-            }
-            if !validity.segment_probed(q_near, buf, step) {
+            // The end (unless it is the checked target; the certificate covers its ends, a
+            // probe does not), then the probe.
+            let check_end = !reached || !target_checked;
+            if !validity.segment_probed(q_near, buf, step, check_end) {
                 return Step::Trapped;
             }
         }
         None => {
+            if !reached && !validity.config_free(buf) {
+                return Step::Trapped;
+            }
             if !validity.segment_free(q_near, buf) {
                 return Step::Trapped;
             }

@@ -61,7 +61,7 @@
 
 use super::batch::sin_cos_lanes;
 use super::simd8::{self, F8, Isa, Kernel, L, Ops};
-use super::{Check, SIN_COS_RANGE, Solid, SphereGeom, sin_cos};
+use super::{Check, SIN_COS_RANGE, Solid, SphereGeom};
 
 /// Configurations per batch.
 pub(crate) const LANES: usize = 8;
@@ -156,6 +156,8 @@ pub(crate) struct Lanes {
     pair_ranges: Vec<std::ops::Range<usize>>,
     /// Bound on the error of any coordinate of any centre the batch computes (m).
     pub(crate) centre_err: f64,
+    /// The largest group bounding radius (m).
+    max_group_r: f64,
 }
 
 /// Obstacles in single precision, and what their rounding adds to the error bound.
@@ -170,9 +172,24 @@ pub(crate) struct Solids32 {
 
 #[derive(Debug, Clone)]
 enum Solid32 {
-    Ball { c: [f32; 3], r: f32 },
-    Cuboid { rt: [f32; 9], t: [f32; 3], half: [f32; 3] },
-    Cylinder { rt: [f32; 9], t: [f32; 3], r: f32, hh: f32 },
+    Ball {
+        c: [f32; 3],
+        r: f32,
+    },
+    /// `yaw`: the rotation turns about z only (see [`is_yaw`]).
+    Cuboid {
+        rt: [f32; 9],
+        t: [f32; 3],
+        half: [f32; 3],
+        yaw: bool,
+    },
+    Cylinder {
+        rt: [f32; 9],
+        t: [f32; 3],
+        r: f32,
+        hh: f32,
+        yaw: bool,
+    },
 }
 
 impl Solids32 {
@@ -192,12 +209,12 @@ impl Solids32 {
                     Solid::Cuboid { rt, t, half } => {
                         scale = scale.max(t.amax() + half.amax());
                         bound.push((v3(t), up(half.norm() * (1.0 + 1e-12))));
-                        Solid32::Cuboid { rt: m9(rt), t: v3(t), half: v3(half) }
+                        Solid32::Cuboid { rt: m9(rt), t: v3(t), half: v3(half), yaw: is_yaw(&m9(rt)) }
                     }
                     Solid::Cylinder { rt, t, r, hh } => {
                         scale = scale.max(t.amax() + r.max(*hh));
                         bound.push((v3(t), up(r.hypot(*hh) * (1.0 + 1e-12))));
-                        Solid32::Cylinder { rt: m9(rt), t: v3(t), r: f(*r), hh: f(*hh) }
+                        Solid32::Cylinder { rt: m9(rt), t: v3(t), r: f(*r), hh: f(*hh), yaw: is_yaw(&m9(rt)) }
                     }
                     Solid::Capsule { .. } | Solid::Other => return None,
                 })
@@ -212,8 +229,12 @@ impl Solids32 {
 /// `q ± step` (as the inflated query; `None`: no tables).
 #[derive(Debug, Clone, Copy)]
 pub(crate) struct LaneMargins<'a> {
+    /// Per link; not read when `uniform`.
     pub link: &'a [f64],
+    /// Per self pair; not read when `uniform`.
     pub pair: &'a [f64],
+    /// Every link and pair margin is this one (the plain checks of a planner: 0).
+    pub uniform: Option<f64>,
     pub step: Option<&'a [f64]>,
 }
 
@@ -239,6 +260,8 @@ pub(crate) struct LaneScratch {
     posed: Vec<bool>,
     /// Per link, its margin plus the rounding allowance, rounded up.
     link_g: Vec<f32>,
+    /// The uniform margin and allowance `link_g` holds (bits), if it was filled for one.
+    link_g_for: Option<(u64, u64)>,
     /// The instruction set of the batches (see `simd8`).
     pub(crate) isa: Isa,
 }
@@ -254,6 +277,7 @@ impl LaneScratch {
             centre: Vec::new(),
             posed: Vec::new(),
             link_g: Vec::new(),
+            link_g_for: None,
             isa: Isa::Best,
         }
     }
@@ -271,7 +295,7 @@ fn splat3<O: Ops>(o: O, x: &[f32; 3]) -> P<O> {
 
 #[inline(always)]
 fn load<O: Ops, const K: usize>(o: O, x: &[F8; K]) -> [F<O>; K] {
-    std::array::from_fn(|k| L::load(o, x[k]))
+    x.map(|v| L::load(o, v))
 }
 
 /// Lane vectors written to working memory one by one (a whole array would go through
@@ -297,10 +321,11 @@ fn place<O: Ops>(o: O, rot: &R<O>, pos: &P<O>, c: &[f32; 3]) -> P<O> {
 /// `rot * m` for a constant matrix `m` (row-major).
 #[inline(always)]
 fn mul_m<O: Ops>(o: O, rot: &R<O>, m: &[f32; 9]) -> R<O> {
-    std::array::from_fn(|k| {
+    let e = |k: usize| {
         let (r, c) = (k / 3, k % 3);
         rot[3 * r] * splat(o, m[c]) + rot[3 * r + 1] * splat(o, m[3 + c]) + rot[3 * r + 2] * splat(o, m[6 + c])
-    })
+    };
+    [e(0), e(1), e(2), e(3), e(4), e(5), e(6), e(7), e(8)]
 }
 
 /// `(1 + 2^-21)`: see [`thr`].
@@ -334,15 +359,15 @@ fn gap2<O: Ops>(o: O, solid: &Solid32, p: &P<O>) -> F<O> {
             let d = d.max(zero);
             d * d
         }
-        Solid32::Cuboid { rt, t, half } => {
-            let l = local(o, rt, t, p);
+        Solid32::Cuboid { rt, t, half, yaw } => {
+            let l = local(o, rt, t, *yaw, p);
             let ax = (l[0].abs() - splat(o, half[0])).max(zero);
             let ay = (l[1].abs() - splat(o, half[1])).max(zero);
             let az = (l[2].abs() - splat(o, half[2])).max(zero);
             ax * ax + ay * ay + az * az
         }
-        Solid32::Cylinder { rt, t, r, hh } => {
-            let l = local(o, rt, t, p);
+        Solid32::Cylinder { rt, t, r, hh, yaw } => {
+            let l = local(o, rt, t, *yaw, p);
             let ar = ((l[0] * l[0] + l[1] * l[1]).sqrt() - splat(o, *r)).max(zero);
             let az = (l[2].abs() - splat(o, *hh)).max(zero);
             ar * ar + az * az
@@ -350,10 +375,23 @@ fn gap2<O: Ops>(o: O, solid: &Solid32, p: &P<O>) -> F<O> {
     }
 }
 
-/// `rt * (p - t)` per lane.
+/// Whether the rotation `rt` (row-major) turns about z only: its third row and column are
+/// exactly `e_z`. Then `rt * v` takes four products and two sums, and gives the very values of
+/// the full product (the terms dropped are products by zero, and `1 * z` is `z`), up to the
+/// sign of a zero, which the gaps' `abs` and squares ignore. Obstacles placed with a yaw only
+/// (MotionBenchMaker's scenes) take this form.
+fn is_yaw(rt: &[f32; 9]) -> bool {
+    rt[2] == 0.0 && rt[5] == 0.0 && rt[6] == 0.0 && rt[7] == 0.0 && rt[8] == 1.0
+}
+
+/// `rt * (p - t)` per lane; `yaw`: [`is_yaw`] holds for `rt`.
 #[inline(always)]
-fn local<O: Ops>(o: O, rt: &[f32; 9], t: &[f32; 3], p: &P<O>) -> P<O> {
+fn local<O: Ops>(o: O, rt: &[f32; 9], t: &[f32; 3], yaw: bool, p: &P<O>) -> P<O> {
     let (x, y, z) = (p[0] - splat(o, t[0]), p[1] - splat(o, t[1]), p[2] - splat(o, t[2]));
+    if yaw {
+        let (c0, c1, c3, c4) = (splat(o, rt[0]), splat(o, rt[1]), splat(o, rt[3]), splat(o, rt[4]));
+        return [c0 * x + c1 * y, c3 * x + c4 * y, z];
+    }
     let row = |r: usize| splat(o, rt[3 * r]) * x + splat(o, rt[3 * r + 1]) * y + splat(o, rt[3 * r + 2]) * z;
     [row(0), row(1), row(2)]
 }
@@ -379,6 +417,7 @@ impl Lanes {
             pairs: Vec::new(),
             pair_ranges: Vec::new(),
             centre_err: f64::INFINITY,
+            max_group_r: 0.0,
         }
     }
 
@@ -481,7 +520,27 @@ impl Lanes {
             pairs,
             pair_ranges,
             centre_err,
+            max_group_r: g.groups.iter().map(|gr| gr.r).fold(0.0, f64::max),
         }
+    }
+}
+
+/// An `f32` at most `(1 - γ_3)(r - grow)²`: a sum of squares at most this is certainly within
+/// `r` (see the module documentation); -1 when `r ≤ grow`.
+fn contact_thr(r: f64, grow: f64) -> f32 {
+    let r = r - grow;
+    if r > 0.0 { down((1.0 - gamma(3.0)) * r * r) } else { -1.0 }
+}
+
+impl SphereGeom {
+    /// The allowance `√3 η` of a query whose largest link and pair margins are these, among
+    /// `obstacles` (see the module documentation); `None` when it is not finite.
+    fn allowance(&self, obstacles: &Solids32, max_link_m: f64, max_pair_m: f64) -> Option<f64> {
+        let lanes = &self.lanes;
+        let max_group_r = lanes.max_group_r;
+        let r_max = (max_group_r + max_link_m).max(2.0 * max_group_r + max_pair_m);
+        let eta = 3.0 * lanes.centre_err + 32.0 * U * (obstacles.scale + r_max);
+        eta.is_finite().then(|| 3f64.sqrt() * eta)
     }
 }
 
@@ -534,29 +593,33 @@ impl SphereGeom {
         margins: LaneMargins<'_>,
         s: &mut LaneScratch,
     ) -> Lanes8 {
-        let LaneMargins { link: link_m, pair: pair_m, step } = margins;
+        let LaneMargins { link: link_m, pair: pair_m, uniform, step } = margins;
+        if uniform.is_none() && (link_m.len() != self.links.len() || pair_m.len() != self.self_pairs.len()) {
+            return Lanes8 { free: 0, hit: 0 };
+        }
+        let link_margin = |l: usize| uniform.unwrap_or_else(|| link_m[l]);
+        let pair_margin = |p: usize| uniform.unwrap_or_else(|| pair_m[p]);
         let none = Lanes8 { free: 0, hit: 0 };
         let lanes = &self.lanes;
         if self.fixed != Check::Free || qs.len() != LANES * dof || !lanes.centre_err.is_finite() {
             return none;
         }
         // The largest radius any test asks about, and the component error bound η.
-        let max_link_m = link_m.iter().copied().fold(0.0, f64::max);
-        let max_pair_m = pair_m.iter().copied().fold(0.0, f64::max);
-        let max_group_r = self.groups.iter().map(|g| g.r).fold(0.0, f64::max);
-        let r_max = (max_group_r + max_link_m).max(2.0 * max_group_r + max_pair_m);
-        let eta = 3.0 * lanes.centre_err + 32.0 * U * (obstacles.scale + r_max);
-        if !eta.is_finite() {
-            return none;
-        }
-        let grow = 3f64.sqrt() * eta;
-        s.link_g.clear();
-        s.link_g.extend(link_m.iter().map(|m| up(m + grow)));
-        // Certainly in contact: at most this (rounded down), see the module documentation.
-        let contact = |r: f64| {
-            let r = r - grow;
-            if r > 0.0 { down((1.0 - gamma(3.0)) * r * r) } else { -1.0 }
+        let (max_link_m, max_pair_m) = match uniform {
+            Some(m) => (m, m),
+            None => (link_m.iter().copied().fold(0.0, f64::max), pair_m.iter().copied().fold(0.0, f64::max)),
         };
+        let Some(grow) = self.allowance(obstacles, max_link_m, max_pair_m) else { return none };
+
+        // Per link, its margin plus the allowance (for a uniform margin, once per margin).
+        let key = uniform.map(|m| (m.to_bits(), grow.to_bits()));
+        if key.is_none() || s.link_g_for != key || s.link_g.len() != self.links.len() {
+            s.link_g.clear();
+            s.link_g.extend((0..self.links.len()).map(|l| up(link_margin(l) + grow)));
+            s.link_g_for = key;
+        }
+        // Certainly in contact: at most this (rounded down), see the module documentation.
+        let contact = |r: f64| contact_thr(r, grow);
         if !self.pose_lanes(o, qs, dof, s) {
             return none;
         }
@@ -568,7 +631,10 @@ impl SphereGeom {
         // Against obstacles: group, link, sphere.
         for (gi, g) in self.groups.iter().enumerate() {
             let links = &self.group_links[g.first..g.end];
-            let eg = links.iter().map(|&l| link_m[l as usize]).fold(0.0, f64::max);
+            let eg = match uniform {
+                Some(m) => m,
+                None => links.iter().map(|&l| link_m[l as usize]).fold(0.0, f64::max),
+            };
             let gc = load(o, &s.group_c[gi]);
             let gg = up(g.r + eg + grow);
             let tg = thr(gg, 0.0, 0.0);
@@ -613,7 +679,10 @@ impl SphereGeom {
         for (k, gp) in self.group_pairs.iter().enumerate() {
             let Some(range) = lanes.pair_ranges.get(k) else { break };
             let pairs = &lanes.pairs[range.clone()];
-            let eg = pairs.iter().map(|pr| pair_m[pr[0] as usize]).fold(0.0, f64::max);
+            let eg = match uniform {
+                Some(m) => m,
+                None => pairs.iter().map(|pr| pair_m[pr[0] as usize]).fold(0.0, f64::max),
+            };
             let tg = thr(up(gp.rr + eg + grow), 0.0, 0.0);
             let mut near = live & within(dist2(&load(o, &s.group_c[gp.outer]), &load(o, &s.group_c[gp.inner])), tg);
             if near == 0 {
@@ -633,7 +702,7 @@ impl SphereGeom {
             let mut touch = 0;
             for &[p, a, b] in pairs {
                 let (p, a, b) = (p as usize, a as usize, b as usize);
-                let m = pair_m[p];
+                let m = pair_margin(p);
                 let (la, lb) = (&self.links[a], &self.links[b]);
                 let ca = self.lane_link_centre(o, a, s);
                 let cb = self.lane_link_centre(o, b, s);
@@ -708,14 +777,16 @@ impl SphereGeom {
             // The parent's frame read from memory entry by entry (a picked column is read where
             // it lies: an array indexed at run time would be copied whole first).
             let parent = &s.rot[b.parent];
-            let pr: R<O> = std::array::from_fn(|k| L::load(o, parent[k]));
+            let pr: R<O> = load(o, parent);
             let mut out_p = place(o, &pr, &load(o, &s.pos[b.parent]), &b.pre_t);
             // `pr * pre` (for a signed permutation: the parent's columns, picked and signed).
             let mut out_r = match &b.pre {
-                Pre::Perm(perm, sign) => std::array::from_fn(|k| {
-                    let (r, c) = (k / 3, k % 3);
-                    L::load(o, parent[3 * r + perm[c]]) * splat(o, sign[c])
-                }),
+                Pre::Perm(perm, sign) => {
+                    let (s0, s1, s2) = (splat(o, sign[0]), splat(o, sign[1]), splat(o, sign[2]));
+                    let col = |c: usize| [pr[perm[c]], pr[3 + perm[c]], pr[6 + perm[c]]];
+                    let (a, b, c) = (col(0), col(1), col(2));
+                    [a[0] * s0, b[0] * s1, c[0] * s2, a[1] * s0, b[1] * s1, c[1] * s2, a[2] * s0, b[2] * s1, c[2] * s2]
+                }
                 Pre::Mat(m) => mul_m(o, &pr, m),
             };
             if b.prismatic {
@@ -726,16 +797,8 @@ impl SphereGeom {
                     out_p[r] += along;
                 }
             } else {
-                let (sn, cs) = if v.iter().all(|x| x.abs() < SIN_COS_RANGE) {
-                    sin_cos_lanes(&v)
-                } else {
-                    let mut sn = [0.0; LANES];
-                    let mut cs = [0.0; LANES];
-                    for i in 0..LANES {
-                        (sn[i], cs[i]) = sin_cos(v[i]);
-                    }
-                    (sn, cs)
-                };
+                // Every `|v|` is below `SIN_COS_RANGE` (checked above).
+                let (sn, cs) = sin_cos_lanes(&v);
                 let sn = L::load(o, F8(sn.map(|x| x as f32)));
                 let cs = L::load(o, F8(cs.map(|x| x as f32)));
                 for r in 0..3 {
@@ -777,6 +840,48 @@ impl SphereGeom {
         let (rot, pos) = (load(o, &s.rot[link.body]), load(o, &s.pos[link.body]));
         for k in link.first..link.end {
             store(&place(o, &rot, &pos, &self.lanes.balls[k]), &mut s.centre[k]);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use nalgebra::{Isometry3, UnitQuaternion, Vector3};
+
+    use super::super::simd8::Base;
+    use super::*;
+    use crate::collision::World;
+
+    fn cuboid(rot: UnitQuaternion<f64>) -> Solid32 {
+        let iso = Isometry3::from_parts(Vector3::new(0.3, -0.2, 0.5).into(), rot);
+        let solid = Solid::new(&World::Cuboid { iso, half: Vector3::new(0.1, 0.2, 0.05) });
+        let s32 = Solids32::new(&[solid]).expect("a box has a closed form");
+        s32.solids[0].clone()
+    }
+
+    /// A box turned about z only takes the short form of `local`, and it gives the full
+    /// product's values; a tilted box does not take it.
+    #[test]
+    fn yaw_boxes_take_the_short_form_with_the_same_values() {
+        let mut rng = crate::Rng::new(5);
+        for _ in 0..50 {
+            let yaw = rng.range(-3.2, 3.2);
+            let Solid32::Cuboid { rt, t, yaw: short, .. } = cuboid(UnitQuaternion::from_euler_angles(0.0, 0.0, yaw))
+            else {
+                panic!("a cuboid")
+            };
+            assert!(short, "yaw {yaw}: {rt:?}");
+            let p: P<Base> =
+                std::array::from_fn(|_| L::load(Base, F8(std::array::from_fn(|_| rng.range(-2.0, 2.0) as f32))));
+            let (a, b) = (local(Base, &rt, &t, true, &p), local(Base, &rt, &t, false, &p));
+            for k in 0..3 {
+                let (a, b) = (a[k].store().0, b[k].store().0);
+                for i in 0..LANES {
+                    assert_eq!(a[i].abs(), b[i].abs(), "coordinate {k}, lane {i}");
+                }
+            }
+            let tilted = cuboid(UnitQuaternion::from_euler_angles(rng.range(0.1, 1.0), 0.0, yaw));
+            assert!(matches!(tilted, Solid32::Cuboid { yaw: false, .. }));
         }
     }
 }
