@@ -79,6 +79,10 @@ use spheres::{Check, Solid, SphereGeom, SphereScratch};
 /// sphere path, one per vector lane).
 pub const BATCH_LANES: usize = spheres::LANES;
 
+/// The fewest configurations [`CollisionModel::any_collides_settled`] checks in a batch: fewer
+/// are checked one by one.
+const SETTLE_MIN: usize = 3;
+
 /// What [`CollisionModel::settle_batch`] settled: bit `i` for the `i`-th configuration.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct BatchSettled {
@@ -932,7 +936,9 @@ impl CollisionModel {
             return self.any_collides_with(qs, scratch);
         }
         for chunk in qs.chunks(BATCH_LANES * dof) {
-            let Some(settled) = self.settle_batch(chunk, 0.0, scratch) else {
+            // A batch costs about what two or three single checks do, whatever its lanes.
+            let settled = if chunk.len() >= SETTLE_MIN * dof { self.settle_batch(chunk, 0.0, scratch) } else { None };
+            let Some(settled) = settled else {
                 if chunk.chunks_exact(dof).any(|q| self.collides_with(q, scratch)) {
                     return true;
                 }
