@@ -128,6 +128,15 @@ fn ur5_table_pick(c: &mut Criterion) {
                 black_box(model.settle_batch(black_box(&set[i]), 0.0, &mut scratch))
             })
         });
+        // The planner's probe query: the batch, then what it leaves unsettled one by one (the
+        // same answer as `8-single`).
+        let mut i = 0;
+        c.bench_function(&format!("batch8/ur5-table-pick/{name}/any-settled"), |b| {
+            b.iter(|| {
+                i = (i + 1) % set.len();
+                black_box(model.any_collides_settled(black_box(&set[i]), &mut scratch))
+            })
+        });
     }
     // The pairs `embodied bench mbm` checks: also without the pairs proven never to touch.
     let mut pruned = robot.clone();

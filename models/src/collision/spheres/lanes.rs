@@ -610,7 +610,6 @@ impl SphereGeom {
             None => (link_m.iter().copied().fold(0.0, f64::max), pair_m.iter().copied().fold(0.0, f64::max)),
         };
         let Some(grow) = self.allowance(obstacles, max_link_m, max_pair_m) else { return none };
-
         // Per link, its margin plus the allowance (for a uniform margin, once per margin).
         let key = uniform.map(|m| (m.to_bits(), grow.to_bits()));
         if key.is_none() || s.link_g_for != key || s.link_g.len() != self.links.len() {
@@ -774,8 +773,8 @@ impl SphereGeom {
             if !finite || (b.prismatic && v.iter().any(|x| x.abs() > PRISMATIC_BOUND)) {
                 return false;
             }
-            // The parent's frame read from memory entry by entry (a picked column is read where
-            // it lies: an array indexed at run time would be copied whole first).
+            // The parent's frame in registers, built entry by entry (an array built by
+            // `from_fn` went through `memcpy`).
             let parent = &s.rot[b.parent];
             let pr: R<O> = load(o, parent);
             let mut out_p = place(o, &pr, &load(o, &s.pos[b.parent]), &b.pre_t);
