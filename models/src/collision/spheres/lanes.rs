@@ -1,4 +1,5 @@
-//! Eight configurations at once in single precision, for the motion certificate: which of
+//! Eight configurations at once in single precision, for the motion certificate's first pieces
+//! and the planner's edge probes (`CollisionModel::any_collides_settled`): which of
 //! them are *certainly free* when every sphere of link `l` is grown by a margin `m_l` against
 //! obstacles and every self pair `p` by `m_p` (the inflated query of
 //! [`super::SphereGeom::check`], with the link and pair margins only).
@@ -628,8 +629,9 @@ impl SphereGeom {
         }
         let mut live: u32 = (1 << LANES) - 1;
         // Against obstacles: group, link, sphere; the groups farthest down the chain first
-        // (they meet obstacles most often, so a contact ends the batch sooner; the answer does
-        // not depend on the order).
+        // (they meet obstacles most often, so a contact ends the batch sooner). The order may
+        // change which lanes a batch settles, never what its callers conclude: a lane left
+        // unsettled is answered in double precision.
         for (gi, g) in self.groups.iter().enumerate().rev() {
             let links = &self.group_links[g.first..g.end];
             let eg = match uniform {
