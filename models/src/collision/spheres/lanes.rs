@@ -595,16 +595,15 @@ impl SphereGeom {
         s: &mut LaneScratch,
     ) -> Lanes8 {
         let LaneMargins { link: link_m, pair: pair_m, uniform, step } = margins;
-        if uniform.is_none() && (link_m.len() != self.links.len() || pair_m.len() != self.self_pairs.len()) {
-            return Lanes8 { free: 0, hit: 0 };
+        let none = Lanes8 { free: 0, hit: 0 };
+        let lanes = &self.lanes;
+        let margins_fit =
+            uniform.is_some() || (link_m.len() == self.links.len() && pair_m.len() == self.self_pairs.len());
+        if !margins_fit || self.fixed != Check::Free || qs.len() != LANES * dof || !lanes.centre_err.is_finite() {
+            return none;
         }
         let link_margin = |l: usize| uniform.unwrap_or_else(|| link_m[l]);
         let pair_margin = |p: usize| uniform.unwrap_or_else(|| pair_m[p]);
-        let none = Lanes8 { free: 0, hit: 0 };
-        let lanes = &self.lanes;
-        if self.fixed != Check::Free || qs.len() != LANES * dof || !lanes.centre_err.is_finite() {
-            return none;
-        }
         // The largest radius any test asks about, and the component error bound η.
         let (max_link_m, max_pair_m) = match uniform {
             Some(m) => (m, m),
