@@ -504,13 +504,17 @@ impl PathHalt {
         // (within the tolerance) harder leaves only rates a hair above the current one: back
         // up towards the path's own pace; where a sampled trajectory's own next step brakes a
         // hair harder than a limit allows, a hair past it (the window still bounds every joint).
+        // Last, the rate that reaches the path's end in this step: a path braking at a limit
+        // to its end, followed a hair faster than its own pace, needs rates growing without
+        // bound as its speed vanishes there, and only a step that ends at its end still fits.
         let (rate0, max_rate) = (self.rate, self.max_rate);
         let start = [1.0, 1.0 - 1e-9, 1.0 - 1e-7, 1.0 - 1e-5, 1.0 - 1e-3, 0.99, 0.9, 0.75, 0.5, 0.25]
             .into_iter()
             .map(|f| f * rate0)
             .chain([1e-6, 1e-4, 1e-2, 0.1, 0.5, 1.0].into_iter().map(|f| rate0 + f * (max_rate - rate0)))
             .chain([1e-6, 1e-5, 1e-4, 1e-3, 1e-2].into_iter().map(|f| max_rate * (1.0 + f)))
-            .find(|&r| r > 0.0 && feasible(r, &mut next));
+            .chain(std::iter::once((end - s) / dt))
+            .find(|&r| r > 0.0 && r.is_finite() && feasible(r, &mut next));
         let (rate, on_path) = if feasible(0.0, &mut next) {
             (0.0, true)
         } else if let Some(start) = start {

@@ -124,6 +124,38 @@ fn rnt() -> embodied_models::Robot {
     embodied_models::builtin("rnt").expect("built-in robot")
 }
 
+/// Follow the built-in RNT's trajectory through `fractions` of each joint's range (knots only,
+/// as the motion planner delivers plans) to `at` of its duration, then halt along it.
+fn halt_on_the_rnt_plan(fractions: &[Vec<f64>], at: f64) -> Result<usize, TestCaseError> {
+    let robot = rnt();
+    let limits = robot.limits();
+    let waypoints: Vec<Vec<f64>> = fractions
+        .iter()
+        .map(|f| f.iter().zip(&limits).map(|(x, l)| l.lower + x * (l.upper - l.lower)).collect())
+        .collect();
+    let traj: Trajectory = time_parameterize(&waypoints, &robot, 0.0);
+    let follow = (at * traj.duration() / DT) as usize;
+    follow_then_halt(&traj, &limits, follow)
+}
+
+/// A halt begun 0.14 s before the end of a segment that brakes joint 0 at its limit: the
+/// follower's last step leaves the arm 1e-10 off the path, so the halt runs a hair faster than
+/// the path's own pace, and a braking path at rate `r > 1` needs ever larger rates towards its
+/// end (1.0015 one step before it). No rate near the current one fits there; the path's end
+/// does, and the halt must find the smallest rate up to it.
+#[test]
+fn halt_near_the_end_of_a_braking_segment_reaches_the_end_on_the_path() {
+    let fractions = vec![
+        vec![0.05; 6],
+        vec![0.6958398090207563, 0.7464302146540732, 0.9412782624526715, 0.05, 0.05, 0.05],
+        vec![0.9467381720280804, 0.8095275116190801, 0.5216982064676357, 0.05, 0.05, 0.05],
+        vec![0.12292489986376282, 0.05, 0.05, 0.05, 0.05, 0.05],
+    ];
+    let steps = halt_on_the_rnt_plan(&fractions, 0.9935613664323945).expect("the halt stays on the path");
+    // The segment's own stop takes 144 steps; the halt may not take more than a few beyond it.
+    assert!((140..=150).contains(&steps), "{steps} steps to stop");
+}
+
 proptest! {
     #![proptest_config(ProptestConfig { cases: 64, ..ProptestConfig::default() })]
 
@@ -132,16 +164,7 @@ proptest! {
         fractions in prop::collection::vec(prop::collection::vec(0.05f64..0.95, 6), 2..5),
         at in 0.0f64..1.0,
     ) {
-        let robot = rnt();
-        let limits = robot.limits();
-        let waypoints: Vec<Vec<f64>> = fractions
-            .iter()
-            .map(|f| f.iter().zip(&limits).map(|(x, l)| l.lower + x * (l.upper - l.lower)).collect())
-            .collect();
-        // Knots only, as the motion planner delivers plans.
-        let traj: Trajectory = time_parameterize(&waypoints, &robot, 0.0);
-        let follow = (at * traj.duration() / DT) as usize;
-        follow_then_halt(&traj, &limits, follow)?;
+        halt_on_the_rnt_plan(&fractions, at)?;
     }
 
     #[test]
