@@ -627,6 +627,8 @@ impl SphereGeom {
             store(&place(o, &rot, &pos, &lanes.groups[gi]), &mut s.group_c[gi]);
         }
         let mut live: u32 = (1 << LANES) - 1;
+        // No step (the edge probes): a lane's own cell, not a box of cells.
+        let point_cells = step.is_some_and(|st| st.iter().all(|&d| d == 0.0));
         // Against obstacles: group, link, sphere; the groups farthest down the chain first
         // (they meet obstacles most often, so a contact ends the batch sooner). The order may
         // change which lanes a batch settles, never what its callers conclude: a lane left
@@ -693,7 +695,8 @@ impl SphereGeom {
             // The lanes whose cells the table does not prove free, then whose spheres come near.
             if let (Some(Some(table)), Some(step)) = (self.tables.get(k), step) {
                 for i in 0..LANES {
-                    if near & (1 << i) != 0 && table.proves_box(&qs[i * dof..(i + 1) * dof], step) {
+                    let q = &qs[i * dof..(i + 1) * dof];
+                    if near & (1 << i) != 0 && if point_cells { table.proves(q) } else { table.proves_box(q, step) } {
                         near &= !(1 << i);
                     }
                 }
