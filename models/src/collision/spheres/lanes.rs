@@ -768,31 +768,39 @@ impl SphereGeom {
         s.posed.resize(self.links.len(), false);
         s.rot[0] = lanes.base_r.map(|v| F8([v; LANES]));
         s.pos[0] = lanes.base_t.map(|v| F8([v; LANES]));
+        if qs.len() != LANES * dof {
+            return false;
+        }
         for (k, (b, a)) in lanes.bodies.iter().zip(&self.angles).enumerate() {
-            let mut v = [0.0f64; LANES];
-            let mut finite = true;
-            for (i, v) in v.iter_mut().enumerate() {
-                let x = qs.get(i * dof + a.dof).copied().unwrap_or(0.0);
-                *v = (x * a.scale + a.add) + a.offset;
-                finite &= v.abs() < SIN_COS_RANGE;
+            // The joint's value in each lane, read first, then turned into the angle in one
+            // vectorisable pass (reading and arithmetic lane by lane in one loop was not).
+            let mut x = [0.0f64; LANES];
+            if a.dof < dof {
+                for (i, x) in x.iter_mut().enumerate() {
+                    *x = qs[i * dof + a.dof];
+                }
             }
+            let v = x.map(|x| (x * a.scale + a.add) + a.offset);
+            // `fold` with `&`, not `all`: no branch per lane.
+            let finite = v.iter().fold(true, |f, v| f & (v.abs() < SIN_COS_RANGE));
             if !finite || (b.prismatic && v.iter().any(|x| x.abs() > PRISMATIC_BOUND)) {
                 return false;
             }
-            // The parent's frame in registers, built entry by entry (an array built by
-            // `from_fn` went through `memcpy`).
-            let parent = &s.rot[b.parent];
-            let pr: R<O> = load(o, parent);
-            let mut out_p = place(o, &pr, &load(o, &s.pos[b.parent]), &b.pre_t);
-            // `pr * pre` (for a signed permutation: the parent's columns, picked and signed).
+            let parent_r = &s.rot[b.parent];
+            let mut out_p = {
+                // The parent's frame in registers, built entry by entry (an array built by
+                // `from_fn` went through `memcpy`).
+                let pr: R<O> = load(o, parent_r);
+                place(o, &pr, &load(o, &s.pos[b.parent]), &b.pre_t)
+            };
+            // `parent * pre` (for a signed permutation: the parent's columns, picked and
+            // signed, read from memory as picked).
             let mut out_r = match &b.pre {
                 Pre::Perm(perm, sign) => {
-                    let (s0, s1, s2) = (splat(o, sign[0]), splat(o, sign[1]), splat(o, sign[2]));
-                    let col = |c: usize| [pr[perm[c]], pr[3 + perm[c]], pr[6 + perm[c]]];
-                    let (a, b, c) = (col(0), col(1), col(2));
-                    [a[0] * s0, b[0] * s1, c[0] * s2, a[1] * s0, b[1] * s1, c[1] * s2, a[2] * s0, b[2] * s1, c[2] * s2]
+                    let e = |r: usize, c: usize| L::load(o, parent_r[3 * r + perm[c]]) * splat(o, sign[c]);
+                    [e(0, 0), e(0, 1), e(0, 2), e(1, 0), e(1, 1), e(1, 2), e(2, 0), e(2, 1), e(2, 2)]
                 }
-                Pre::Mat(m) => mul_m(o, &pr, m),
+                Pre::Mat(m) => mul_m(o, &load(o, parent_r), m),
             };
             if b.prismatic {
                 let vf = L::load(o, F8(v.map(|x| x as f32)));
