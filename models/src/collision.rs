@@ -1633,6 +1633,9 @@ impl CollisionModel {
             }
         }
         let mut head = 0;
+        // The span length (`scale`'s bits) `margins` and `step` hold; none yet (the batches
+        // used them for their own pieces).
+        let mut margins_for = f64::NAN.to_bits();
         while head < spans.len() {
             if checks >= CERTIFY_MAX_CHECKS {
                 free = false;
@@ -1642,13 +1645,17 @@ impl CollisionModel {
             head += 1;
             let half = 0.5 * (t1 - t0);
             let tm = t0 + half;
-            // A relative and an absolute hair more than the bound, against rounding.
+            // A relative and an absolute hair more than the bound, against rounding. Spans are
+            // taken level by level, so most share the one before's length and its margins.
             let scale = half * (1.0 + 1e-9);
-            for (m, t) in margins.iter_mut().zip(&travel) {
-                *m = t * scale + 1e-12;
-            }
-            for (m, d) in step.iter_mut().zip(&steps) {
-                *m = d * scale;
+            if scale.to_bits() != margins_for {
+                margins_for = scale.to_bits();
+                for (m, t) in margins.iter_mut().zip(&travel) {
+                    *m = t * scale + 1e-12;
+                }
+                for (m, d) in step.iter_mut().zip(&steps) {
+                    *m = d * scale;
+                }
             }
             ConfigSpace::step_into(qa, &delta, tm, &mut q);
             checks += 1;
