@@ -274,6 +274,9 @@ struct RobotGeom {
     /// of joint value `i`. Joints that carry both links (the pair's common ancestors) move
     /// them together and do not count.
     pair_lever: Vec<f64>,
+    /// `lever`'s rows, then `pair_lever`'s, joint by joint: `lever_t[i * rows + r]` is row
+    /// `r`'s arm for joint `i` (a certificate's travel bounds, row by row in vector lanes).
+    lever_t: Vec<f64>,
 }
 
 #[derive(Debug, Clone)]
@@ -441,6 +444,8 @@ impl RobotGeom {
             lever_arms(dof, &kept, &slots, &shapes, a, stop, out);
             lever_arms(dof, &kept, &slots, &shapes, b, stop, out);
         }
+        let rows: Vec<&[f64]> = lever.chunks_exact(dof.max(1)).chain(pair_lever.chunks_exact(dof.max(1))).collect();
+        let lever_t = (0..dof).flat_map(|i| rows.iter().map(move |r| r[i])).collect();
         RobotGeom {
             dof: robot.dof(),
             base: *robot.base(),
@@ -451,6 +456,7 @@ impl RobotGeom {
             cspace: ConfigSpace::new(robot),
             lever,
             pair_lever,
+            lever_t,
         }
     }
 }
@@ -1592,9 +1598,15 @@ impl CollisionModel {
         steps.extend(delta.iter().map(|d| d.abs()));
         // How far each link's points can travel over the whole segment (against obstacles),
         // then how far each self-collision pair can close in on itself.
+        // Joint by joint over all rows at once: each row's sum in joint order from 0, as the
+        // sum of its products would be (the same values), but in vector lanes.
         travel.clear();
-        for arms in g.lever.chunks_exact(dof).chain(g.pair_lever.chunks_exact(dof)) {
-            travel.push(arms.iter().zip(&steps).map(|(a, d)| a * d).sum::<f64>());
+        let rows = g.links.len() + g.self_pairs.len();
+        travel.resize(rows, 0.0);
+        for (arms, &d) in g.lever_t.chunks_exact(rows.max(1)).zip(&steps) {
+            for (t, a) in travel.iter_mut().zip(arms) {
+                *t += a * d;
+            }
         }
         let slots = g.links.len();
         let most = travel.iter().copied().fold(0.0, f64::max);
