@@ -605,6 +605,21 @@ struct Span {
     within: Option<(usize, usize)>,
 }
 
+/// `spans` := the `pieces` (a power of two) equal pieces of [0, 1], middle first, then the
+/// quarters, the eighths...: the ends of a certified segment are free, so a collision is
+/// likeliest in the middle, and a segment that collides is refused after fewer checks. (Piece
+/// `k` of the bit-reversed order, turned so that the first piece comes last.)
+fn bit_reversed_pieces(spans: &mut Vec<Span>, pieces: usize) {
+    let bits = pieces.trailing_zeros();
+    // Exact: `pieces` is a power of two, so are its inverse and the products below.
+    let width = 1.0 / pieces as f64;
+    spans.clear();
+    spans.extend((1..=pieces).map(|k| {
+        let i = (k % pieces).reverse_bits().checked_shr(usize::BITS - bits).unwrap_or(0);
+        Span { t0: i as f64 * width, t1: (i + 1) as f64 * width, within: None }
+    }));
+}
+
 /// Per-thread working memory of a query (link poses, world shapes, candidate lists). Reuse one
 /// per thread to keep queries allocation-free; it adapts itself to whichever model uses it.
 #[derive(Debug, Clone)]
@@ -1623,26 +1638,21 @@ impl CollisionModel {
         while pieces < 1 << CERTIFY_START_LEVELS && most * 0.5 / pieces as f64 > CERTIFY_START_MARGIN {
             pieces *= 2;
         }
-        // Middle first, then the quarters, the eighths...: the ends are free, so a collision is
-        // likeliest in the middle, and a segment that collides is refused after fewer checks.
-        // (Piece `k` of the bit-reversed order, turned so that the first piece comes last.)
-        let bits = pieces.trailing_zeros();
-        spans.extend((1..=pieces).map(|k| {
-            let i = (k % pieces).reverse_bits().checked_shr(usize::BITS - bits).unwrap_or(0);
-            Span { t0: i as f64 / pieces as f64, t1: (i + 1) as f64 / pieces as f64, within: None }
-        }));
         s.spheres.items.clear();
         let mut free = true;
         if listed && let (Some(fast), Some(solids32)) = (&self.fast, &self.solids32) {
+            // The batches cut their own pieces (finer), or leave these to the loop below.
             let bufs = (&mut margins, &mut step, &mut q);
-            let (batches, hit) =
-                self.first_level_in_lanes(fast, solids32, qa, &delta, (&travel, &steps, most), &mut spans, bufs, s);
+            let first = (&travel[..], &steps[..], most, pieces);
+            let (batches, hit) = self.first_level_in_lanes(fast, solids32, qa, &delta, first, &mut spans, bufs, s);
             checks += batches;
             if hit {
                 // A piece's midpoint is in contact: nothing left to check.
                 free = false;
                 spans.clear();
             }
+        } else {
+            bit_reversed_pieces(&mut spans, pieces);
         }
         let mut head = 0;
         // The span length (`scale`'s bits) `margins` and `step` hold; none yet (the batches
@@ -1720,27 +1730,24 @@ impl CollisionModel {
         solids32: &Solids32,
         qa: &[f64],
         delta: &[f64],
-        (travel, steps, most): (&[f64], &[f64], f64),
+        (travel, steps, most, first): (&[f64], &[f64], f64, usize),
         spans: &mut Vec<Span>,
         (margins, step, q): (&mut Vec<f64>, &mut Vec<f64>, &mut Vec<f64>),
         s: &mut CollisionScratch,
     ) -> (u32, bool) {
         let g = &*self.geom;
         let (dof, slots) = (g.dof, g.links.len());
-        // Finer pieces than the double-precision first level: a batch costs about one check.
-        let mut pieces = spans.len();
+        // Finer pieces than the double-precision first level (`first` pieces): a batch costs
+        // about one check.
+        let mut pieces = first;
         while pieces < LANES_MAX_PIECES && most * 0.5 / pieces as f64 > LANES_START_MARGIN {
             pieces *= 2;
         }
         if pieces < LANES_MIN_PIECES {
+            bit_reversed_pieces(spans, first);
             return (0, false);
         }
-        let bits = pieces.trailing_zeros();
-        spans.clear();
-        spans.extend((1..=pieces).map(|k| {
-            let i = (k % pieces).reverse_bits().checked_shr(usize::BITS - bits).unwrap_or(0);
-            Span { t0: i as f64 / pieces as f64, t1: (i + 1) as f64 / pieces as f64, within: None }
-        }));
+        bit_reversed_pieces(spans, pieces);
         // Their margins (as the double-precision loop computes them).
         let scale = 0.5 / pieces as f64 * (1.0 + 1e-9);
         margins.clear();
