@@ -166,6 +166,10 @@ fn a_xacro_file_needs_the_xacro_program() {
         let e = load_description(&p, None, &UrdfOptions::default()).expect_err("no xacro");
         assert!(e.to_string().contains("needs the `xacro` program"), "{e}");
     }
+    // Passed: the temporary folder goes (a failure keeps it for a look).
+    if let Some(dir) = p.parent() {
+        let _ = std::fs::remove_dir_all(dir);
+    }
 }
 
 #[test]

@@ -3,21 +3,19 @@
 
 use embodied_system::campaign::{CampaignReport, CampaignSettings, campaign, merge_reports, render_campaign, run_one};
 
+mod common;
+
 /// A folder of the test's own: tests run in parallel and two of them may run the same seed,
-/// whose log file names only the seed and the process.
-fn dir(test: &str) -> std::path::PathBuf {
-    std::env::temp_dir().join(format!("embodied-campaign-test-{}-{test}", std::process::id()))
+/// whose log file names only the seed and the process. Removed when the test passes.
+fn dir(test: &str) -> common::TempDir {
+    common::TempDir::new(&format!("campaign-{test}"))
 }
 
 #[test]
 fn a_campaign_breaks_no_promise() {
-    let settings = CampaignSettings {
-        runs: 200,
-        seed: 1,
-        determinism_every: 20,
-        dir: dir("a_campaign_breaks_no_promise"),
-        keep_logs: false,
-    };
+    let tmp = dir("a_campaign_breaks_no_promise");
+    let settings =
+        CampaignSettings { runs: 200, seed: 1, determinism_every: 20, dir: tmp.to_path_buf(), keep_logs: false };
     let report = campaign(&settings, |_| {}).expect("campaign runs");
     let text = render_campaign(&report);
     println!("{text}");
@@ -62,13 +60,9 @@ fn a_search_past_its_give_up_step_is_stopped() {
 /// the files.
 #[test]
 fn chunks_merge_into_the_whole_campaign() {
-    let settings = |runs, seed| CampaignSettings {
-        runs,
-        seed,
-        determinism_every: 0,
-        dir: dir("chunks_merge_into_the_whole_campaign"),
-        keep_logs: false,
-    };
+    let tmp = dir("chunks_merge_into_the_whole_campaign");
+    let settings =
+        |runs, seed| CampaignSettings { runs, seed, determinism_every: 0, dir: tmp.to_path_buf(), keep_logs: false };
     let whole = campaign(&settings(6, 40), |_| {}).expect("campaign");
     let through_json = |r: &CampaignReport| -> CampaignReport {
         serde_json::from_str(&serde_json::to_string(r).expect("write")).expect("read back")
