@@ -432,6 +432,10 @@ impl FollowedPath for Trajectory {
 /// path again (no accumulation). It absorbs a sampled trajectory's own rounding at a limit.
 const WINDOW_TOLERANCE: f64 = 1e-7;
 
+/// How far (rad or m) a [`PathHalt`] step may leave the path and still count as on it: the
+/// limiter's clamp of a step outside the windows by `e` moves the joint by at most `e dt`.
+const ON_PATH: f64 = 1e-9;
+
 /// The controlled stop along the path being followed: the path's parameter `s` slows from its
 /// rate (1 while the trajectory is followed at its own pace) to rest, as fast as every joint's
 /// velocity, acceleration and position limits allow. Each step commands the next point of the
@@ -472,10 +476,13 @@ impl PathHalt {
         self.rate == 0.0
     }
 
-    /// The halting command for the measured state `(q, qd)` into `out`. Returns `false` when
-    /// no step along the path fits the limits (the state is not on the path, e.g. the effector
-    /// lagged): the command is then the path's next point all the same, and a
-    /// [`SafetyLimiter`] makes it feasible, leaving the path.
+    /// The halting command for the measured state `(q, qd)` into `out`. Where no step along
+    /// the path fits the limits (at a rest point of the path that falls between two control
+    /// steps and is reached a hair too fast, or with the state off the path, e.g. the effector
+    /// lagged), the command is the path's point that leaves the velocity windows least, and a
+    /// [`SafetyLimiter`] makes it feasible, leaving the path by that excess times `dt`; the
+    /// next step aims at the path again. Returns `false` when that takes the joints more than
+    /// 1e-9 off the path.
     pub fn command_into<P: FollowedPath + ?Sized>(
         &mut self,
         path: &P,
@@ -490,21 +497,25 @@ impl PathHalt {
         next.resize(q.len().max(n), 0.0);
         let end = path.end();
         let s = self.s;
-        let feasible = |r: f64, next: &mut Vec<f64>| -> bool {
+        // How far (rad/s or m/s) the step at rate `r` lies outside the joints' windows, at most.
+        let excess = |r: f64, next: &mut Vec<f64>| -> f64 {
             path.position_into((s + r * dt).min(end), next);
-            (0..n).all(|j| {
+            (0..n).fold(0.0_f64, |e, j| {
                 let v = (next[j] - q[j]) / dt;
                 let (lo, hi) = velocity_window(q[j], qd[j], &limits[j], dt);
-                v >= lo - WINDOW_TOLERANCE && v <= hi + WINDOW_TOLERANCE
+                e.max(lo - v).max(v - hi)
             })
         };
+        let feasible = |r: f64, next: &mut Vec<f64>| -> bool { excess(r, next) <= WINDOW_TOLERANCE };
         // A feasible rate to bisect from: the current one, or (when the path's own timing is
         // a hair over a limit, e.g. a sampled trajectory at full speed) slightly below it.
         // Where the path itself brakes at a joint's limit, an earlier step that braked a hair
         // (within the tolerance) harder leaves only rates a hair above the current one: back
         // up towards the path's own pace; where a sampled trajectory's own next step brakes a
-        // hair harder than a limit allows, a hair past it (the window still bounds every joint).
-        // Last, the rate that reaches the path's end in this step: a path braking at a limit
+        // hair harder than a limit allows, a hair past it (the window still bounds every joint);
+        // where the arm is a hair ahead of a path braking into a rest point, up to five times
+        // the largest rate (a step that reaches the rest point sooner). Last, the rate that
+        // reaches the path's end in this step: a path braking at a limit
         // to its end, followed a hair faster than its own pace, needs rates growing without
         // bound as its speed vanishes there, and only a step that ends at its end still fits.
         let (rate0, max_rate) = (self.rate, self.max_rate);
@@ -513,6 +524,7 @@ impl PathHalt {
             .map(|f| f * rate0)
             .chain([1e-6, 1e-4, 1e-2, 0.1, 0.5, 1.0].into_iter().map(|f| rate0 + f * (max_rate - rate0)))
             .chain([1e-6, 1e-5, 1e-4, 1e-3, 1e-2].into_iter().map(|f| max_rate * (1.0 + f)))
+            .chain([1.02, 1.05, 1.1, 1.2, 1.35, 1.5, 1.75, 2.0, 2.5, 3.0, 4.0, 5.0].into_iter().map(|f| max_rate * f))
             .chain(std::iter::once((end - s) / dt))
             .find(|&r| r > 0.0 && r.is_finite() && feasible(r, &mut next));
         let (rate, on_path) = if feasible(0.0, &mut next) {
@@ -533,7 +545,37 @@ impl PathHalt {
             }
             (hi, true)
         } else {
-            (self.rate, false)
+            // No step fits (a rest point of the path between two control steps that the arm
+            // reaches a hair too fast, or an arm off the path): the step that leaves the
+            // windows least, which the limiter clamps, leaving the path by its excess times
+            // `dt`; the next step aims at the path again. Rates from 0 to past the largest so
+            // far on a grid, then golden-section search around the best.
+            let top = (2.0 * max_rate.max(rate0)).max(1e-3).min((end - s).max(0.0) / dt);
+            const GRID: usize = 64;
+            let (mut best, mut best_e) = (self.rate.min(top), f64::INFINITY);
+            for k in 0..=GRID {
+                let r = top * k as f64 / GRID as f64;
+                let e = excess(r, &mut next);
+                if e < best_e {
+                    (best, best_e) = (r, e);
+                }
+            }
+            let (mut a, mut b) = ((best - top / GRID as f64).max(0.0), (best + top / GRID as f64).min(top));
+            let g = 0.5 * (5f64.sqrt() - 1.0);
+            for _ in 0..40 {
+                let (c, d) = (b - g * (b - a), a + g * (b - a));
+                if excess(c, &mut next) <= excess(d, &mut next) {
+                    b = d;
+                } else {
+                    a = c;
+                }
+            }
+            let r = 0.5 * (a + b);
+            let e = excess(r, &mut next);
+            if e < best_e {
+                (best, best_e) = (r, e);
+            }
+            (best, best_e * dt <= ON_PATH)
         };
         self.s = (s + rate * dt).min(end);
         self.rate = if self.s >= end { 0.0 } else { rate };

@@ -138,6 +138,17 @@ fn halt_on_the_rnt_plan(fractions: &[Vec<f64>], at: f64) -> Result<usize, TestCa
     follow_then_halt(&traj, &limits, follow)
 }
 
+/// [`halt_on_the_rnt_plan`] after `follow` steps.
+fn halt_on_the_rnt_plan_after(fractions: &[Vec<f64>], follow: usize) -> Result<usize, TestCaseError> {
+    let robot = rnt();
+    let limits = robot.limits();
+    let waypoints: Vec<Vec<f64>> = fractions
+        .iter()
+        .map(|f| f.iter().zip(&limits).map(|(x, l)| l.lower + x * (l.upper - l.lower)).collect())
+        .collect();
+    follow_then_halt(&time_parameterize(&waypoints, &robot, 0.0), &limits, follow)
+}
+
 /// A halt begun 0.14 s before the end of a segment that brakes joint 0 at its limit: the
 /// follower's last step leaves the arm 1e-10 off the path, so the halt runs a hair faster than
 /// the path's own pace, and a braking path at rate `r > 1` needs ever larger rates towards its
@@ -154,6 +165,113 @@ fn halt_near_the_end_of_a_braking_segment_reaches_the_end_on_the_path() {
     let steps = halt_on_the_rnt_plan(&fractions, 0.9935613664323945).expect("the halt stays on the path");
     // The segment's own stop takes 144 steps; the halt may not take more than a few beyond it.
     assert!((140..=150).contains(&steps), "{steps} steps to stop");
+}
+
+/// A halt begun 1.27 ms before a rest point of the path (waypoint 3, at 18.07427 s), where
+/// joint 0 brakes at its limit: the follower left it 6.5e-9 rad ahead of the path and a hair
+/// fast, so a step at the path's own pace brakes harder than its limit allows, and only a
+/// faster one (rates 1.1 to 1.8, reaching the rest point sooner) fits.
+#[test]
+fn halt_just_ahead_of_a_rest_point_finds_a_faster_step_on_the_path() {
+    let fractions = vec![
+        vec![
+            0.2404873448472124,
+            0.24756133781601697,
+            0.14108636292195031,
+            0.42559911718354226,
+            0.6323721820916482,
+            0.6612220222191326,
+        ],
+        vec![
+            0.8828734439716114,
+            0.383451448972118,
+            0.6720921503740726,
+            0.5435189553495524,
+            0.22979469766862598,
+            0.5455664969494566,
+        ],
+        vec![
+            0.6113248813771494,
+            0.1406528728485264,
+            0.24327727909709235,
+            0.9499537192338191,
+            0.6657604334522046,
+            0.5671368102753707,
+        ],
+        vec![
+            0.14663795319188033,
+            0.1278926106381949,
+            0.8141885225469784,
+            0.40430941450572894,
+            0.46581122453934265,
+            0.12929988395435774,
+        ],
+        vec![
+            0.37001540361893714,
+            0.2222082474159377,
+            0.17366899388230617,
+            0.804995070369118,
+            0.1853040785277762,
+            0.8365782010388918,
+        ],
+    ];
+    let steps = halt_on_the_rnt_plan_after(&fractions, 18_073).expect("the halt stays on the path");
+    // It stops at the rest point, 1.27 ms on.
+    assert!((2..=4).contains(&steps), "{steps} steps to stop");
+}
+
+/// A halt begun 0.99 ms before a rest point of the path (waypoint 2, at 10.118994 s) that falls
+/// between two control steps: joint 0, braking at its limit, can stop there only by braking
+/// 1.8e-7 rad/s harder than its window allows, and the path turns back beyond it, so no step
+/// along the path fits. The step that leaves the windows least overshoots the rest point by
+/// about 2e-10 rad; the limiter clamps it and the halt goes on along the path.
+#[test]
+fn halt_at_a_rest_point_between_two_steps_stays_within_a_hair_of_the_path() {
+    let fractions = vec![
+        vec![
+            0.09879427978446371,
+            0.47129435000963066,
+            0.5525882118533709,
+            0.837757492358771,
+            0.6526821213244488,
+            0.8631178715522773,
+        ],
+        vec![
+            0.4706624776609378,
+            0.5069973139779048,
+            0.0808183200302009,
+            0.47032643447886224,
+            0.5354701481952567,
+            0.7801090359131163,
+        ],
+        vec![
+            0.8642494678126619,
+            0.8780675046467484,
+            0.7216257905760672,
+            0.15379125886340161,
+            0.46867387522105763,
+            0.7183235795517346,
+        ],
+        vec![
+            0.7081108702058331,
+            0.16362078449549772,
+            0.4851340161501141,
+            0.5592889740542857,
+            0.5939174527924926,
+            0.5821563964527552,
+        ],
+        vec![
+            0.7024359045281402,
+            0.12121521484052279,
+            0.8190684640437105,
+            0.07702320643190415,
+            0.11857814596360573,
+            0.203136409979362,
+        ],
+    ];
+    for follow in [10_116, 10_117, 10_118] {
+        halt_on_the_rnt_plan_after(&fractions, follow).expect("the halt stays on the path");
+    }
 }
 
 proptest! {
