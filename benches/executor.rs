@@ -147,5 +147,93 @@ fn actuators_and_regulator(c: &mut Criterion) {
     g.finish();
 }
 
-criterion_group!(benches, bench, plan_gate, actuators_and_regulator);
+/// One step of the controlled stop along a planned RNT trajectory ([`PathHalt`]): mid-segment
+/// (the current rate fits at once) and 0.99 ms before a rest point that falls between two
+/// control steps, where no step along the path fits and the halt searches for the one that
+/// leaves the velocity windows least.
+fn path_halt(c: &mut Criterion) {
+    let robot = embodied_models::builtin("rnt").expect("built-in robot");
+    let limits = robot.limits();
+    let fractions = [
+        [
+            0.09879427978446371,
+            0.47129435000963066,
+            0.5525882118533709,
+            0.837757492358771,
+            0.6526821213244488,
+            0.8631178715522773,
+        ],
+        [
+            0.4706624776609378,
+            0.5069973139779048,
+            0.0808183200302009,
+            0.47032643447886224,
+            0.5354701481952567,
+            0.7801090359131163,
+        ],
+        [
+            0.8642494678126619,
+            0.8780675046467484,
+            0.7216257905760672,
+            0.15379125886340161,
+            0.46867387522105763,
+            0.7183235795517346,
+        ],
+        [
+            0.7081108702058331,
+            0.16362078449549772,
+            0.4851340161501141,
+            0.5592889740542857,
+            0.5939174527924926,
+            0.5821563964527552,
+        ],
+        [
+            0.7024359045281402,
+            0.12121521484052279,
+            0.8190684640437105,
+            0.07702320643190415,
+            0.11857814596360573,
+            0.203136409979362,
+        ],
+    ];
+    let waypoints: Vec<Vec<f64>> = fractions
+        .iter()
+        .map(|f| f.iter().zip(&limits).map(|(x, l)| l.lower + x * (l.upper - l.lower)).collect())
+        .collect();
+    let traj = embodied_planner::trajectory::time_parameterize(&waypoints, &robot, 0.0);
+    // The rest point of the third waypoint.
+    let rests: Vec<f64> =
+        traj.t.iter().zip(&traj.qd).filter(|(_, v)| v.iter().all(|x| *x == 0.0)).map(|(t, _)| *t).collect();
+    let rest = rests.get(2).copied().unwrap_or(0.5 * traj.duration());
+    let dt = 0.001;
+    let mut g = c.benchmark_group("control-step");
+    g.sample_size(30).measurement_time(Duration::from_secs(2)).warm_up_time(Duration::from_secs(1));
+    for (name, follow) in [("mid-segment", (0.5 * rest / dt) as usize), ("before-a-rest-point", (rest / dt) as usize)] {
+        // Follow the trajectory at its own pace through the limiter, then halt.
+        let start = traj.sample(0.0).0;
+        let mut servo = SafetyLimiter::new(ServoModel::new(limits.clone(), &start).expect("servo"));
+        let mut cmd = JointCommand::hold(&start);
+        for k in 1..=follow {
+            let (next, prev) = (traj.sample(k as f64 * dt).0, traj.sample((k - 1) as f64 * dt).0);
+            cmd.mode = CommandMode::Position;
+            for j in 0..next.len() {
+                cmd.qd[j] = (next[j] - prev[j]) / dt;
+                cmd.q[j] = next[j];
+            }
+            servo.execute(&cmd, dt);
+        }
+        let halt = PathHalt::new(follow as f64 * dt, 1.0);
+        let (q, qd) = (servo.q().to_vec(), servo.qd().to_vec());
+        g.bench_function(BenchmarkId::new("rnt-path-halt", name), |b| {
+            b.iter(|| {
+                let mut h = halt.clone();
+                h.command_into(&traj, black_box(&q), black_box(&qd), &limits, dt, &mut cmd);
+                black_box(cmd.q[0])
+            })
+        });
+    }
+    g.finish();
+}
+
+criterion_group!(benches, bench, plan_gate, actuators_and_regulator, path_halt);
 criterion_main!(benches);
