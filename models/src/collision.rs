@@ -748,6 +748,20 @@ const LANES_START_MARGIN: f64 = 0.08;
 /// See [`LANES_START_MARGIN`].
 const LANES_MAX_PIECES: usize = 64;
 
+/// `k` with its [`LANES_MAX_PIECES`]`.trailing_zeros()` bits reversed, for every `k` below
+/// [`LANES_MAX_PIECES`]; of `2^b` pieces, `k`'s bit reversal is this shifted right by the
+/// difference in bits.
+const BIT_REVERSED: [u8; LANES_MAX_PIECES] = {
+    let bits = LANES_MAX_PIECES.trailing_zeros();
+    let mut out = [0u8; LANES_MAX_PIECES];
+    let mut k = 0;
+    while k < LANES_MAX_PIECES {
+        out[k] = (k.reverse_bits() >> (usize::BITS - bits)) as u8;
+        k += 1;
+    }
+    out
+};
+
 /// Fewer pieces than this are left to the double-precision checks.
 const LANES_MIN_PIECES: usize = 2;
 
@@ -1747,7 +1761,6 @@ impl CollisionModel {
             bit_reversed_pieces(spans, first);
             return (0, false);
         }
-        bit_reversed_pieces(spans, pieces);
         // Their margins (as the double-precision loop computes them).
         let scale = 0.5 / pieces as f64 * (1.0 + 1e-9);
         margins.clear();
@@ -1759,22 +1772,35 @@ impl CollisionModel {
         left.clear();
         let mut batches = 0;
         let mut hit = false;
-        for chunk in spans.chunks(lanes::LANES) {
+        // The pieces in `bit_reversed_pieces`'s order, eight at a time, each lane at its
+        // piece's midpoint; only those the batch leaves become spans.
+        let shift = LANES_MAX_PIECES.trailing_zeros() - pieces.trailing_zeros();
+        let width = 1.0 / pieces as f64;
+        let mut lane_piece = [0usize; lanes::LANES];
+        let mut from = 1;
+        while from <= pieces {
+            let n = lanes::LANES.min(pieces + 1 - from);
             buf.clear();
-            for k in 0..lanes::LANES {
-                let span = chunk[k.min(chunk.len() - 1)];
-                ConfigSpace::step_into(qa, delta, 0.5 * (span.t0 + span.t1), q);
+            for (k, i) in lane_piece.iter_mut().enumerate() {
+                *i = usize::from(BIT_REVERSED[(from + k.min(n - 1)) % pieces]) >> shift;
+                // Exact: the midpoint `(t0 + t1) / 2` of the piece's ends (a power-of-two width).
+                ConfigSpace::step_into(qa, delta, (*i as f64 + 0.5) * width, q);
                 buf.extend_from_slice(q);
             }
+            from += lanes::LANES;
             let grow =
                 LaneMargins { link: &margins[..slots], pair: &margins[slots..], uniform: None, step: Some(step) };
             let answer = fast.free_lanes(&buf, dof, solids32, grow, &mut s.spheres.lanes);
             batches += 1;
-            if answer.hit & ((1u32 << chunk.len()) - 1) != 0 {
+            if answer.hit & ((1u32 << n) - 1) != 0 {
                 hit = true;
                 break;
             }
-            left.extend(chunk.iter().enumerate().filter(|(k, _)| answer.free & (1 << k) == 0).map(|(_, sp)| *sp));
+            for (k, &i) in lane_piece[..n].iter().enumerate() {
+                if answer.free & (1 << k) == 0 {
+                    left.push(Span { t0: i as f64 * width, t1: (i + 1) as f64 * width, within: None });
+                }
+            }
         }
         spans.clear();
         spans.extend_from_slice(&left);
