@@ -899,6 +899,17 @@ impl CollisionModel {
     pub fn scratch(&self) -> CollisionScratch {
         let mut s = CollisionScratch::new();
         s.begin(&self.geom);
+        // Room for a typical certificate, so that planning does not grow them piece by piece.
+        let (dof, rows) = (self.geom.dof, self.geom.links.len() + self.geom.self_pairs.len());
+        for v in [&mut s.q, &mut s.steps, &mut s.step, &mut s.delta] {
+            v.reserve(dof);
+        }
+        s.inflation.reserve(rows);
+        s.margins.reserve(rows);
+        s.spans.reserve(4 * LANES_MAX_PIECES);
+        s.spans_left.reserve(LANES_MAX_PIECES);
+        s.spheres.items.reserve(1024);
+        s.spheres.batch_q.reserve(lanes::LANES * dof);
         s
     }
     /// The self-collision pairs that are checked, as link indices (low, high).

@@ -211,13 +211,15 @@ impl Tree {
     /// linear scan.
     fn new(space: &ConfigSpace, kd: bool) -> Self {
         let dof = space.dof();
+        // Room for the nodes of most searches (trees hold a few dozen at the median).
+        const NODES: usize = 64;
         Self {
             dof,
-            coords: Vec::new(),
-            parent: Vec::new(),
-            certified: Vec::new(),
-            alive: Vec::new(),
-            radius: Vec::new(),
+            coords: Vec::with_capacity(NODES * dof),
+            parent: Vec::with_capacity(NODES),
+            certified: Vec::with_capacity(NODES),
+            alive: Vec::with_capacity(NODES),
+            radius: Vec::with_capacity(NODES),
             kd: (kd && dof > 0).then(|| KdIndex {
                 wraps: (0..dof).map(|i| space.wraps(i)).collect(),
                 any_wrap: (0..dof).any(|i| space.wraps(i)),
