@@ -216,26 +216,35 @@ impl<'m, V: StateValidity> Validity<'m, V> {
     }
 
     /// No sampled configuration of the segment `a`-`b` collides, at `resolution` (largest joint
-    /// step), ends excluded; with `check_end`, the end `b` is checked first (within the position
-    /// limits and free). A probe, not a certificate: an obstacle between samples is missed. The
-    /// inner points go to the model in one query ([`StateValidity::any_collides`]: in vector
-    /// lanes for a [`CollisionModel`] on the sphere path), in bisection order.
+    /// step), ends excluded; with `check_end`, the end `b` too (within the position limits and
+    /// free). A probe, not a certificate: an obstacle between samples is missed. The points go
+    /// to the model in one query ([`StateValidity::any_collides`]: in vector lanes for a
+    /// [`CollisionModel`] on the sphere path), the end first, then the inner points in
+    /// bisection order. (The end checked alone first, then the inner points: on the 296 public
+    /// MotionBenchMaker UR5 problems, where 39% of the extensions end blocked, 3.0% more
+    /// planning instructions; on 10 cage problems, 65% blocked, 3.4% more: a batch of eight
+    /// costs about two single checks.)
     pub fn segment_probed(&mut self, a: &[f64], b: &[f64], resolution: f64, check_end: bool) -> bool {
-        // The end alone first: a blocked extension usually ends there, for one check.
-        if check_end && !self.config_free(b) {
+        // The end within the limits, then in the same query as the inner points, first: a
+        // blocked extension usually ends there, and a batch of lanes checks it with them.
+        if check_end && !self.model.robot().within_limits(b) {
             return false;
         }
         self.space.deltas_into(a, b, &mut self.delta);
         let n = steps(self.delta.iter().map(|d| d.abs()).fold(0.0, f64::max), resolution);
         let mut points = std::mem::take(&mut self.points);
         points.clear();
+        if check_end {
+            self.collision_checks += 1;
+            points.extend_from_slice(b);
+        }
         let (delta, buf) = (&self.delta, &mut self.buf);
         bisection_order(n, |i| {
             ConfigSpace::step_into(a, delta, i as f64 / n as f64, buf);
             points.extend_from_slice(buf);
             true
         });
-        let checks = (points.len() / a.len().max(1)) as u64;
+        let checks = ((points.len() / a.len().max(1)) as u64).saturating_sub(u64::from(check_end));
         self.collision_checks += checks;
         self.probe_checks += checks;
         let free = points.is_empty() || !self.model.any_collides(&points, &mut self.scratch);
@@ -291,4 +300,101 @@ fn bisection_order(n: usize, mut visit: impl FnMut(usize) -> bool) -> bool {
 fn steps(max: f64, resolution: f64) -> usize {
     let n = (max / resolution).ceil();
     if n.is_finite() && n >= 1.0 { n.min(1e7) as usize } else { 1 }
+}
+
+#[cfg(test)]
+mod tests {
+    use embodied_models::collision::{CollisionModel, Environment, Obstacle};
+    use embodied_models::nalgebra::Isometry3;
+    use embodied_models::{Rng, Shape, builtin};
+
+    use super::*;
+
+    /// The probe's answer point by point: the end within the limits and free, then every
+    /// inner point free.
+    fn probe_by_points(model: &CollisionModel, a: &[f64], b: &[f64], resolution: f64, check_end: bool) -> bool {
+        let space = model.robot().config_space();
+        if check_end && (!model.robot().within_limits(b) || model.collides(b)) {
+            return false;
+        }
+        let mut delta = Vec::new();
+        space.deltas_into(a, b, &mut delta);
+        let n = steps(delta.iter().map(|d| d.abs()).fold(0.0, f64::max), resolution);
+        let mut q = vec![0.0; a.len()];
+        (1..n).all(|i| {
+            ConfigSpace::step_into(a, &delta, i as f64 / n as f64, &mut q);
+            !model.collides(&q)
+        })
+    }
+
+    /// The end goes into the same batched query as the inner points: the answer is the
+    /// point-by-point one, blocked ends and limits included, and the counts are the end's one
+    /// check plus one per inner point.
+    #[test]
+    fn a_probe_with_its_end_answers_as_its_points_do() {
+        // The spherized UR5 (its probes in vector lanes) and a built-in arm of boxes and
+        // cylinders (one by one).
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/tests/fixtures");
+        let mut ur5 = embodied_models::urdf::load_urdf(&dir.join("ur5_spherized.urdf"), Some(&dir.join("ur5.srdf")))
+            .expect("UR5 fixture loads");
+        embodied_models::collision::disable_always_colliding(&mut ur5, 2000, 0x5eed);
+        let irp6 = builtin("irp6-postument").expect("robot");
+        let boxes = [
+            (ur5, true, [([0.4, 0.0, 0.3], [0.15, 0.4, 0.3]), ([-0.2, 0.4, 0.4], [0.1, 0.1, 0.4])]),
+            (irp6, false, [([0.9, 0.0, 0.5], [0.2, 0.3, 0.5]), ([-0.2, 0.8, 0.6], [0.1, 0.1, 0.6])]),
+        ];
+        for (robot, batched, obstacles) in boxes {
+            let mut env = Environment::new();
+            for (k, (c, h)) in obstacles.into_iter().enumerate() {
+                env.add(Obstacle::new(
+                    format!("box{k}"),
+                    Isometry3::translation(c[0], c[1], c[2]),
+                    Shape::cuboid(h[0], h[1], h[2]),
+                ));
+            }
+            let model = CollisionModel::new(&robot, env);
+            assert_eq!(model.certifies_in_batches(), batched, "test setup");
+            probes_answer_as_their_points_do(&model);
+        }
+    }
+
+    fn probes_answer_as_their_points_do(model: &CollisionModel) {
+        let robot = model.robot();
+        let mut validity = Validity::new(model, 0.1);
+        let mut rng = Rng::new(7);
+        let (mut a, mut b) = (vec![0.0; robot.dof()], vec![0.0; robot.dof()]);
+        let (mut blocked_ends, mut blocked_inside, mut free) = (0, 0, 0);
+        for k in 0..600 {
+            robot.random_configuration_into(&mut rng, &mut a);
+            while model.collides(&a) {
+                robot.random_configuration_into(&mut rng, &mut a);
+            }
+            robot.random_configuration_into(&mut rng, &mut b);
+            // Short and long segments, and some ends out of the limits.
+            let t = [0.05, 0.2, 0.6, 1.0][k % 4];
+            let mut end: Vec<f64> = a.iter().zip(&b).map(|(x, y)| x + t * (y - x)).collect();
+            if k % 10 == 9 {
+                end[1] = robot.limits()[1].upper + 0.01;
+            }
+            for check_end in [true, false] {
+                let expected = probe_by_points(model, &a, &end, 0.1, check_end);
+                let (checks, probes) = (validity.collision_checks, validity.probe_checks);
+                let got = validity.segment_probed(&a, &end, 0.1, check_end);
+                assert_eq!(got, expected, "segment {k} (end checked: {check_end}): {a:?} -> {end:?}");
+                if check_end && expected {
+                    let inner = validity.probe_checks - probes;
+                    assert_eq!(validity.collision_checks - checks, inner + 1, "segment {k}: checks");
+                }
+                if check_end {
+                    match (expected, model.collides(&end)) {
+                        (true, _) => free += 1,
+                        (false, true) => blocked_ends += 1,
+                        (false, false) => blocked_inside += 1,
+                    }
+                }
+            }
+        }
+        // The segments exercise every answer.
+        assert!(free > 50 && blocked_ends > 50 && blocked_inside > 20, "{free} {blocked_ends} {blocked_inside}");
+    }
 }
