@@ -17,8 +17,9 @@
 //! # Why single precision stays sound
 //!
 //! Let `u = 2^-24` (the unit roundoff of `f32`, round to nearest; Rust never fuses a multiply
-//! and an add). Joint values and their sines and cosines are computed in `f64` (as the scalar
-//! query does) and rounded once to `f32`: an error of at most `u + 2^-50` each.
+//! and an add). Joint values are computed in `f64` (as the scalar query does), and their sines
+//! and cosines in `f32` from the scalar kernel's reduced argument, with an error of at most
+//! [`SIN_COS_ERR`] `= 4u` each (proven at [`sin_cos_f32`]).
 //!
 //! *Forward kinematics.* [`Lanes::new`] runs a running error bound through the robot's
 //! program, once per robot, in `f64` (rounded up by a relative 10^-6 at the end). For a dot
@@ -60,7 +61,6 @@
 //! Robots whose prismatic joints travel more than [`PRISMATIC_BOUND`], or a configuration that
 //! is not finite, get no free lane (the `f64` query answers).
 
-use super::batch::sin_cos_lanes;
 use super::simd8::{self, F8, Isa, Kernel, L, Ops};
 use super::{Check, SIN_COS_RANGE, Solid, SphereGeom};
 
@@ -329,6 +329,70 @@ fn mul_m<O: Ops>(o: O, rot: &R<O>, m: &[f32; 9]) -> R<O> {
     [e(0), e(1), e(2), e(3), e(4), e(5), e(6), e(7), e(8)]
 }
 
+/// The error bound of [`sin_cos_f32`]'s sines and cosines.
+const SIN_COS_ERR: f64 = 4.0 * U;
+
+/// Taylor coefficients of `(sin r - r) / r³` in powers of `r²` (through `r⁹`), and of
+/// `(cos r - 1 + r²/2) / r⁴` (through `r¹⁰`), rounded to `f32`.
+const SIN_T: [f32; 4] = [-1.0 / 6.0, 1.0 / 120.0, -1.0 / 5040.0, 1.0 / 362_880.0];
+const COS_T: [f32; 4] = [1.0 / 24.0, -1.0 / 720.0, 1.0 / 40_320.0, -1.0 / 3_628_800.0];
+
+/// The sine and cosine of every lane's angle (`|x|` below `SIN_COS_RANGE`) in single precision,
+/// each within [`SIN_COS_ERR`] `= 4u` of the exact value.
+///
+/// *Proof.* The scalar kernel's reduction gives `k` and `r`, within `2^-50` of `x - kπ/2`,
+/// `|r| ≤ π/4 (1 + 2^-40)` (as there; the kernel's own error bound rests on it). Rounding `r`
+/// to `f32` moves it by at most `u |r| ≤ 0.79u`, and sine and cosine by no more (their slopes
+/// are at most 1). The Taylor polynomials of degree 9 (sine) and 10 (cosine) differ from
+/// sine and cosine at `|r| ≤ 0.786` by at most the first term left out (the series alternate
+/// with falling terms): `0.786¹¹/11! < 1.8·10⁻⁹ < 0.04u` and `0.786¹²/12! < 0.01u`. Evaluated
+/// in `f32` (Horner's rule in `r²` of degree 3 perturbs each term by at most `γ_6`, Higham,
+/// *Accuracy and Stability*, §5.1): for the sine, the term `S_i r^{2i+3}` of `t = r·r²·P(r²)`
+/// carries at most `10 + i` roundings (Horner's 6, its coefficient's, `r²`'s `i + 1` and the
+/// two products), so `|t̂ - t| ≤ Σ γ_{10+i} |S_i| 0.786^{2i+3} < 0.85u`, and the last sum
+/// `r + t̂` rounds by at most `u |sin r| ≤ 0.71u`: `0.79u + 0.04u + 0.85u + 0.71u < 2.4u` in
+/// all. For the cosine, `1 - r²/2` (the halving exact) errs by at most `0.31u` from `r²`'s
+/// rounding and `u` from the subtraction; the term `C_i r^{2i+4}` of `r⁴·Q(r²)` carries at most
+/// `11 + i` roundings, `|r⁴Q| ≤ 0.016`, so under `0.18u`; the last sum `u`; the argument
+/// `0.79u · 0.71 < 0.56u`: under `3.1u`. The quadrant swaps sine and cosine and flips signs,
+/// exactly. Both bounds are below `4u`; the tests check them against `f64` on dense samples.
+#[inline(always)]
+fn sin_cos_f32(x: &[f64; LANES]) -> ([f32; LANES], [f32; LANES]) {
+    use super::{PIO2_1, PIO2_2, PIO2_2T, SIN_ROUND};
+    let mut r = [0.0f32; LANES];
+    let mut quadrant = [0u32; LANES];
+    for i in 0..LANES {
+        let shifted = x[i] * std::f64::consts::FRAC_2_PI + SIN_ROUND;
+        let k = shifted - SIN_ROUND;
+        r[i] = (((x[i] - k * PIO2_1) - k * PIO2_2) - k * PIO2_2T) as f32;
+        // The low bits of `shifted` hold `k` (two's complement).
+        quadrant[i] = shifted.to_bits() as u32;
+    }
+    let (s, c) = (SIN_T, COS_T);
+    let mut sin = [0.0f32; LANES];
+    let mut cos = [0.0f32; LANES];
+    for i in 0..LANES {
+        let r1 = r[i];
+        let r2 = r1 * r1;
+        let ps = s[0] + r2 * (s[1] + r2 * (s[2] + r2 * s[3]));
+        sin[i] = r1 + r1 * r2 * ps;
+        let pc = c[0] + r2 * (c[1] + r2 * (c[2] + r2 * c[3]));
+        cos[i] = (1.0 - 0.5 * r2) + (r2 * r2) * pc;
+    }
+    let mut out_s = [0.0f32; LANES];
+    let mut out_c = [0.0f32; LANES];
+    for i in 0..LANES {
+        let q = quadrant[i];
+        let swap = 0u32.wrapping_sub(q & 1);
+        let (sb, cb) = (sin[i].to_bits(), cos[i].to_bits());
+        let a = (sb & !swap) | (cb & swap);
+        let b = (cb & !swap) | (sb & swap);
+        out_s[i] = f32::from_bits(a ^ ((q & 2) << 30));
+        out_c[i] = f32::from_bits(b ^ ((q.wrapping_add(1) & 2) << 30));
+    }
+    (out_s, out_c)
+}
+
 /// `(1 + 2^-21)`: see [`thr`].
 const WIDEN: f32 = 1.0 + 1.0 / 2_097_152.0;
 
@@ -443,7 +507,7 @@ impl Lanes {
             .collect();
         // The running error bound (module documentation): per body, the error of a rotation
         // entry, of an origin coordinate, and the largest origin coordinate.
-        let sc = U + 2f64.powi(-50);
+        let sc = SIN_COS_ERR;
         let s3 = 3f64.sqrt();
         let n = g.bodies.len();
         let (mut er, mut ep, mut mp) = (vec![0.0; n], vec![0.0; n], vec![0.0; n]);
@@ -811,9 +875,8 @@ impl SphereGeom {
                 }
             } else {
                 // Every `|v|` is below `SIN_COS_RANGE` (checked above).
-                let (sn, cs) = sin_cos_lanes(&v);
-                let sn = L::load(o, F8(sn.map(|x| x as f32)));
-                let cs = L::load(o, F8(cs.map(|x| x as f32)));
+                let (sn, cs) = sin_cos_f32(&v);
+                let (sn, cs) = (L::load(o, F8(sn)), L::load(o, F8(cs)));
                 for r in 0..3 {
                     let (c0, c1) = (out_r[3 * r], out_r[3 * r + 1]);
                     out_r[3 * r] = c0 * cs + c1 * sn;
@@ -896,5 +959,37 @@ mod tests {
             let tilted = cuboid(UnitQuaternion::from_euler_angles(rng.range(0.1, 1.0), 0.0, yaw));
             assert!(matches!(tilted, Solid32::Cuboid { yaw: false, .. }));
         }
+    }
+
+    /// The single-precision sines and cosines stay within [`SIN_COS_ERR`] of `f64`'s (itself
+    /// within 2^-52 of the exact values) on dense samples of several turns, around every
+    /// multiple of π/4 (where the reduction switches quadrant and the reduced argument is
+    /// largest), and far out; the largest error is reported against the bound.
+    #[test]
+    fn single_precision_sines_and_cosines_are_within_their_bound() {
+        let mut xs: Vec<f64> = (0..400_000).map(|k| -13.0 + 26.0 * k as f64 / 400_000.0).collect();
+        for m in -40..=40 {
+            let c = m as f64 * std::f64::consts::FRAC_PI_4;
+            xs.extend((-200..=200).map(|k| c + k as f64 * 1e-9));
+            xs.extend((-200..=200).map(|k| c + k as f64 * 3e-5));
+        }
+        let mut rng = crate::Rng::new(11);
+        xs.extend((0..100_000).map(|_| rng.range(-1000.0, 1000.0)));
+        xs.extend((0..20_000).map(|_| rng.range(-1_000_000.0, 1_000_000.0)));
+        let bound = SIN_COS_ERR - 2f64.powi(-52);
+        let mut worst: f64 = 0.0;
+        for chunk in xs.chunks_exact(LANES) {
+            let x: [f64; LANES] = std::array::from_fn(|i| chunk[i]);
+            let (sn, cs) = sin_cos_f32(&x);
+            for i in 0..LANES {
+                let (s, c) = x[i].sin_cos();
+                let e = (f64::from(sn[i]) - s).abs().max((f64::from(cs[i]) - c).abs());
+                assert!(e <= bound, "x = {}: sin {} cos {} against {s} {c}", x[i], sn[i], cs[i]);
+                worst = worst.max(e);
+            }
+        }
+        // The bound is not loose by orders of magnitude (it would hide a wrong kernel).
+        assert!(worst > 0.25 * SIN_COS_ERR, "largest error {worst:e} of a bound {SIN_COS_ERR:e}");
+        eprintln!("largest error {:.2}u of {:.0}u", worst / U, SIN_COS_ERR / U);
     }
 }
