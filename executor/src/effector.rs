@@ -515,9 +515,9 @@ impl PathHalt {
         // hair harder than a limit allows, a hair past it (the window still bounds every joint);
         // where the arm is a hair ahead of a path braking into a rest point, up to five times
         // the largest rate (a step that reaches the rest point sooner). Last, the rate that
-        // reaches the path's end in this step: a path braking at a limit
-        // to its end, followed a hair faster than its own pace, needs rates growing without
-        // bound as its speed vanishes there, and only a step that ends at its end still fits.
+        // reaches the path's end in this step: a path braking at a limit to its end, followed a
+        // hair faster than its own pace, needs rates growing without bound as its speed
+        // vanishes there, and only a step that ends at its end still fits.
         let (rate0, max_rate) = (self.rate, self.max_rate);
         let start = [1.0, 1.0 - 1e-9, 1.0 - 1e-7, 1.0 - 1e-5, 1.0 - 1e-3, 0.99, 0.9, 0.75, 0.5, 0.25]
             .into_iter()
@@ -552,7 +552,7 @@ impl PathHalt {
             // far on a grid, then golden-section search around the best.
             let top = (2.0 * max_rate.max(rate0)).max(1e-3).min((end - s).max(0.0) / dt);
             const GRID: usize = 64;
-            let (mut best, mut best_e) = (self.rate.min(top), f64::INFINITY);
+            let (mut best, mut best_e) = (0.0, f64::INFINITY);
             for k in 0..=GRID {
                 let r = top * k as f64 / GRID as f64;
                 let e = excess(r, &mut next);

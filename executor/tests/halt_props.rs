@@ -124,29 +124,29 @@ fn rnt() -> embodied_models::Robot {
     embodied_models::builtin("rnt").expect("built-in robot")
 }
 
-/// Follow the built-in RNT's trajectory through `fractions` of each joint's range (knots only,
-/// as the motion planner delivers plans) to `at` of its duration, then halt along it.
-fn halt_on_the_rnt_plan(fractions: &[Vec<f64>], at: f64) -> Result<usize, TestCaseError> {
+/// The built-in RNT's trajectory through `fractions` of each joint's range (knots only, as the
+/// motion planner delivers plans), and its joint limits.
+fn rnt_plan(fractions: &[Vec<f64>]) -> (Trajectory, Vec<JointLimits>) {
     let robot = rnt();
     let limits = robot.limits();
     let waypoints: Vec<Vec<f64>> = fractions
         .iter()
         .map(|f| f.iter().zip(&limits).map(|(x, l)| l.lower + x * (l.upper - l.lower)).collect())
         .collect();
-    let traj: Trajectory = time_parameterize(&waypoints, &robot, 0.0);
+    (time_parameterize(&waypoints, &robot, 0.0), limits)
+}
+
+/// Follow [`rnt_plan`] to `at` of its duration, then halt along it.
+fn halt_on_the_rnt_plan(fractions: &[Vec<f64>], at: f64) -> Result<usize, TestCaseError> {
+    let (traj, limits) = rnt_plan(fractions);
     let follow = (at * traj.duration() / DT) as usize;
     follow_then_halt(&traj, &limits, follow)
 }
 
-/// [`halt_on_the_rnt_plan`] after `follow` steps.
+/// Follow [`rnt_plan`] for `follow` steps, then halt along it.
 fn halt_on_the_rnt_plan_after(fractions: &[Vec<f64>], follow: usize) -> Result<usize, TestCaseError> {
-    let robot = rnt();
-    let limits = robot.limits();
-    let waypoints: Vec<Vec<f64>> = fractions
-        .iter()
-        .map(|f| f.iter().zip(&limits).map(|(x, l)| l.lower + x * (l.upper - l.lower)).collect())
-        .collect();
-    follow_then_halt(&time_parameterize(&waypoints, &robot, 0.0), &limits, follow)
+    let (traj, limits) = rnt_plan(fractions);
+    follow_then_halt(&traj, &limits, follow)
 }
 
 /// A halt begun 0.14 s before the end of a segment that brakes joint 0 at its limit: the

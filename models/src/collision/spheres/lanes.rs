@@ -340,10 +340,13 @@ const COS_T: [f32; 4] = [1.0 / 24.0, -1.0 / 720.0, 1.0 / 40_320.0, -1.0 / 3_628_
 /// The sine and cosine of every lane's angle (`|x|` below `SIN_COS_RANGE`) in single precision,
 /// each within [`SIN_COS_ERR`] `= 4u` of the exact value.
 ///
-/// *Proof.* The scalar kernel's reduction gives `k` and `r`, within `2^-50` of `x - kπ/2`,
-/// `|r| ≤ π/4 (1 + 2^-40)` (as there; the kernel's own error bound rests on it). Rounding `r`
-/// to `f32` moves it by at most `u |r| ≤ 0.79u`, and sine and cosine by no more (their slopes
-/// are at most 1). The Taylor polynomials of degree 9 (sine) and 10 (cosine) differ from
+/// *Proof.* The reduction is the scalar kernel's, in `f64`: `k` is `x·2/π` (within `2^-32` of
+/// exact for `|x| < 2^20`) rounded to an integer, so `|x - kπ/2| ≤ π/4 + 2^-31 < 0.786`; `k`
+/// times each of the first two parts of π/2 is exact (their trailing zero bits), the first
+/// subtraction is exact (Sterbenz: `x` and `k·PIO2_1` are within a factor of two), and the
+/// other two round by at most `2^-54` each, the third product by far less: `r` is within
+/// `2^-52` of `x - kπ/2`, `|r| < 0.786`. Rounding `r` to `f32` moves it by at most
+/// `u |r| ≤ 0.79u`, and sine and cosine by no more (their slopes are at most 1). The Taylor polynomials of degree 9 (sine) and 10 (cosine) differ from
 /// sine and cosine at `|r| ≤ 0.786` by at most the first term left out (the series alternate
 /// with falling terms): `0.786¹¹/11! < 1.8·10⁻⁹ < 0.04u` and `0.786¹²/12! < 0.01u`. Evaluated
 /// in `f32` (Horner's rule in `r²` of degree 3 perturbs each term by at most `γ_6`, Higham,
