@@ -419,10 +419,7 @@ impl FollowedPath for Trajectory {
         self.duration()
     }
     fn position_into(&self, s: f64, out: &mut [f64]) {
-        let (q, _, _) = self.sample(s);
-        for (o, q) in out.iter_mut().zip(q) {
-            *o = q;
-        }
+        self.sample_position_into(s, out);
     }
 }
 

@@ -51,18 +51,13 @@ impl Trajectory {
         if t >= self.t[n - 1] {
             return (self.q[n - 1].clone(), self.qd[n - 1].clone(), vec![0.0; dof]);
         }
-        let k = self.t.partition_point(|&x| x <= t).saturating_sub(1).min(n - 2);
-        let h = self.t[k + 1] - self.t[k];
-        let s = (t - self.t[k]) / h;
+        let (k, h, s) = self.interval(t);
         let (mut q, mut qd, mut qdd) = (vec![0.0; dof], vec![0.0; dof], vec![0.0; dof]);
+        self.hermite_into(k, h, s, &mut q);
         for i in 0..dof {
             let (p0, p1) = (self.q[k][i], self.q[k + 1][i]);
             let (m0, m1) = (self.qd[k][i] * h, self.qd[k + 1][i] * h);
-            let (s2, s3) = (s * s, s * s * s);
-            q[i] = (2.0 * s3 - 3.0 * s2 + 1.0) * p0
-                + (s3 - 2.0 * s2 + s) * m0
-                + (-2.0 * s3 + 3.0 * s2) * p1
-                + (s3 - s2) * m1;
+            let s2 = s * s;
             qd[i] = ((6.0 * s2 - 6.0 * s) * p0
                 + (3.0 * s2 - 4.0 * s + 1.0) * m0
                 + (-6.0 * s2 + 6.0 * s) * p1
@@ -71,6 +66,51 @@ impl Trajectory {
             qdd[i] = (self.qd[k + 1][i] - self.qd[k][i]) / h;
         }
         (q, qd, qdd)
+    }
+
+    /// The position of [`Self::sample`] at time `t` into `out` (as many values as fit), with no
+    /// allocation: for a control step that asks for many.
+    pub fn sample_position_into(&self, t: f64, out: &mut [f64]) {
+        let n = self.t.len();
+        if n == 0 {
+            return;
+        }
+        let at = if n == 1 || t <= self.t[0] || t.is_nan() {
+            Some(0)
+        } else if t >= self.t[n - 1] {
+            Some(n - 1)
+        } else {
+            None
+        };
+        match at {
+            Some(k) => out.iter_mut().zip(&self.q[k]).for_each(|(o, q)| *o = *q),
+            None => {
+                let (k, h, s) = self.interval(t);
+                self.hermite_into(k, h, s, out);
+            }
+        }
+    }
+
+    /// The sample interval `k` holding `t` (strictly inside the span), its length and `t`'s
+    /// fraction of it.
+    fn interval(&self, t: f64) -> (usize, f64, f64) {
+        let n = self.t.len();
+        let k = self.t.partition_point(|&x| x <= t).saturating_sub(1).min(n - 2);
+        let h = self.t[k + 1] - self.t[k];
+        (k, h, (t - self.t[k]) / h)
+    }
+
+    /// The cubic Hermite position at fraction `s` of interval `k` (length `h`) into `q`.
+    fn hermite_into(&self, k: usize, h: f64, s: f64, q: &mut [f64]) {
+        let (s2, s3) = (s * s, s * s * s);
+        let rows = self.q[k].iter().zip(&self.q[k + 1]).zip(self.qd[k].iter().zip(&self.qd[k + 1]));
+        for (o, ((&p0, &p1), (&v0, &v1))) in q.iter_mut().zip(rows) {
+            let (m0, m1) = (v0 * h, v1 * h);
+            *o = (2.0 * s3 - 3.0 * s2 + 1.0) * p0
+                + (s3 - 2.0 * s2 + s) * m0
+                + (-2.0 * s3 + 3.0 * s2) * p1
+                + (s3 - s2) * m1;
+        }
     }
 }
 
@@ -241,7 +281,35 @@ pub fn time_parameterize(path: &[Vec<f64>], robot: &Robot, sample_dt: f64) -> Tr
 
 #[cfg(test)]
 mod tests {
-    use super::spread;
+    use super::{spread, time_parameterize};
+
+    /// The allocation-free position is `sample`'s to the bit: inside intervals, at knots,
+    /// before the start, after the end and at NaN.
+    #[test]
+    fn position_into_is_the_sampled_position() {
+        let robot = embodied_models::builtin("rnt").expect("built-in robot");
+        let limits = robot.limits();
+        let mut rng = embodied_models::Rng::new(4);
+        for _ in 0..20 {
+            let path: Vec<Vec<f64>> = (0..4)
+                .map(|_| limits.iter().map(|l| rng.range(0.1, 0.9) * (l.upper - l.lower) + l.lower).collect())
+                .collect();
+            for dt in [0.0, 0.01] {
+                let traj = time_parameterize(&path, &robot, dt);
+                let end = traj.duration();
+                let mut times: Vec<f64> = (0..500).map(|_| rng.range(-0.1, end + 0.1)).collect();
+                times.extend(traj.t.iter().copied());
+                times.extend([f64::NAN, -1.0, end, end + 1.0, 0.0]);
+                let mut out = vec![7.0; robot.dof()];
+                for t in times {
+                    traj.sample_position_into(t, &mut out);
+                    let (q, _, _) = traj.sample(t);
+                    let same = q.iter().zip(&out).all(|(a, b)| a.to_bits() == b.to_bits());
+                    assert!(same, "t = {t}: {out:?} against {q:?}");
+                }
+            }
+        }
+    }
 
     #[test]
     fn samples_closer_than_the_gap_are_merged_and_the_end_is_kept() {
