@@ -516,17 +516,17 @@ impl PathHalt {
         // hair faster than its own pace, needs rates growing without bound as its speed
         // vanishes there, and only a step that ends at its end still fits.
         let (rate0, max_rate) = (self.rate, self.max_rate);
-        let start = [1.0, 1.0 - 1e-9, 1.0 - 1e-7, 1.0 - 1e-5, 1.0 - 1e-3, 0.99, 0.9, 0.75, 0.5, 0.25]
+        let mut candidates = [1.0, 1.0 - 1e-9, 1.0 - 1e-7, 1.0 - 1e-5, 1.0 - 1e-3, 0.99, 0.9, 0.75, 0.5, 0.25]
             .into_iter()
             .map(|f| f * rate0)
             .chain([1e-6, 1e-4, 1e-2, 0.1, 0.5, 1.0].into_iter().map(|f| rate0 + f * (max_rate - rate0)))
             .chain([1e-6, 1e-5, 1e-4, 1e-3, 1e-2].into_iter().map(|f| max_rate * (1.0 + f)))
             .chain([1.02, 1.05, 1.1, 1.2, 1.35, 1.5, 1.75, 2.0, 2.5, 3.0, 4.0, 5.0].into_iter().map(|f| max_rate * f))
-            .chain(std::iter::once((end - s) / dt))
-            .find(|&r| r > 0.0 && r.is_finite() && feasible(r, &mut next));
+            .chain(std::iter::once((end - s) / dt));
+        // Tried only when the arm cannot simply stay (at rest the candidates are not needed).
         let (rate, on_path) = if feasible(0.0, &mut next) {
             (0.0, true)
-        } else if let Some(start) = start {
+        } else if let Some(start) = candidates.find(|&r| r > 0.0 && r.is_finite() && feasible(r, &mut next)) {
             // The smallest feasible rate: [lo, hi] with lo infeasible and hi feasible.
             let (mut lo, mut hi) = (0.0, start);
             for _ in 0..40 {

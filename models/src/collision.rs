@@ -610,14 +610,20 @@ struct Span {
 /// likeliest in the middle, and a segment that collides is refused after fewer checks. (Piece
 /// `k` of the bit-reversed order, turned so that the first piece comes last.)
 fn bit_reversed_pieces(spans: &mut Vec<Span>, pieces: usize) {
-    let bits = pieces.trailing_zeros();
     // Exact: `pieces` is a power of two, so are its inverse and the products below.
     let width = 1.0 / pieces as f64;
     spans.clear();
     spans.extend((1..=pieces).map(|k| {
-        let i = (k % pieces).reverse_bits().checked_shr(usize::BITS - bits).unwrap_or(0);
+        let i = piece_in_order(k, pieces);
         Span { t0: i as f64 * width, t1: (i + 1) as f64 * width, within: None }
     }));
+}
+
+/// The piece taken `k`-th (from 1) of `pieces` (a power of two, at most [`LANES_MAX_PIECES`]) in
+/// [`bit_reversed_pieces`]'s order.
+#[inline(always)]
+fn piece_in_order(k: usize, pieces: usize) -> usize {
+    usize::from(BIT_REVERSED[k % pieces]) >> (LANES_MAX_PIECES.trailing_zeros() - pieces.trailing_zeros())
 }
 
 /// Per-thread working memory of a query (link poses, world shapes, candidate lists). Reuse one
@@ -761,6 +767,9 @@ const BIT_REVERSED: [u8; LANES_MAX_PIECES] = {
     }
     out
 };
+
+// Every first level (the double-precision one and the batches') has a table entry per piece.
+const _: () = assert!(1 << CERTIFY_START_LEVELS <= LANES_MAX_PIECES && LANES_MAX_PIECES <= 256);
 
 /// Fewer pieces than this are left to the double-precision checks.
 const LANES_MIN_PIECES: usize = 2;
@@ -1785,7 +1794,6 @@ impl CollisionModel {
         let mut hit = false;
         // The pieces in `bit_reversed_pieces`'s order, eight at a time, each lane at its
         // piece's midpoint; only those the batch leaves become spans.
-        let shift = LANES_MAX_PIECES.trailing_zeros() - pieces.trailing_zeros();
         let width = 1.0 / pieces as f64;
         let mut lane_piece = [0usize; lanes::LANES];
         let mut from = 1;
@@ -1793,7 +1801,7 @@ impl CollisionModel {
             let n = lanes::LANES.min(pieces + 1 - from);
             buf.clear();
             for (k, i) in lane_piece.iter_mut().enumerate() {
-                *i = usize::from(BIT_REVERSED[(from + k.min(n - 1)) % pieces]) >> shift;
+                *i = piece_in_order(from + k.min(n - 1), pieces);
                 // Exact: the midpoint `(t0 + t1) / 2` of the piece's ends (a power-of-two width).
                 ConfigSpace::step_into(qa, delta, (*i as f64 + 0.5) * width, q);
                 buf.extend_from_slice(q);
@@ -1952,4 +1960,29 @@ pub fn disable_never_colliding(robot: &mut Robot, max_relative_dofs: usize, max_
         }
     }
     disabled
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The table's order is the bit reversal of each piece's index, for every power-of-two
+    /// count a first level can have: the middle first, then the quarters, and every piece once.
+    #[test]
+    fn pieces_come_in_bit_reversed_order() {
+        let mut pieces = 1;
+        while pieces <= LANES_MAX_PIECES {
+            let bits = pieces.trailing_zeros();
+            let order: Vec<usize> = (1..=pieces).map(|k| piece_in_order(k, pieces)).collect();
+            let reversed: Vec<usize> = (1..=pieces)
+                .map(|k| (k % pieces).reverse_bits().checked_shr(usize::BITS - bits).unwrap_or(0))
+                .collect();
+            assert_eq!(order, reversed, "{pieces} pieces");
+            let mut sorted = order.clone();
+            sorted.sort_unstable();
+            assert_eq!(sorted, (0..pieces).collect::<Vec<_>>(), "{pieces} pieces, each once");
+            pieces *= 2;
+        }
+        assert_eq!((1..=4).map(|k| piece_in_order(k, 4)).collect::<Vec<_>>(), [2, 1, 3, 0]);
+    }
 }
