@@ -119,9 +119,31 @@ fn up(x: f64) -> f32 {
     if (y as f64) < x { y.next_up() } else { y }
 }
 
+/// A column of a rotation: an index the compiler knows to be below 3 (read from memory as a
+/// one-byte enum), so that `3 * row + column` needs no bounds check.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u8)]
+enum Col {
+    X = 0,
+    Y = 1,
+    Z = 2,
+}
+
+impl Col {
+    fn of(k: usize) -> Col {
+        match k {
+            0 => Col::X,
+            1 => Col::Y,
+            _ => Col::Z,
+        }
+    }
+}
+
 #[derive(Debug, Clone)]
 enum Pre {
-    Perm([usize; 3], [f32; 3]),
+    /// A signed permutation: column `c` of the product is `sign[c]` times the parent's column
+    /// `perm[c]`.
+    Perm([Col; 3], [f32; 3]),
     Mat([f32; 9]),
 }
 
@@ -319,6 +341,16 @@ fn place<O: Ops>(o: O, rot: &R<O>, pos: &P<O>, c: &[f32; 3]) -> P<O> {
     ]
 }
 
+/// Column `c` of the rotation `r` (row-major).
+#[inline(always)]
+fn column<O: Ops>(r: &R<O>, c: Col) -> [F<O>; 3] {
+    match c {
+        Col::X => [r[0], r[3], r[6]],
+        Col::Y => [r[1], r[4], r[7]],
+        Col::Z => [r[2], r[5], r[8]],
+    }
+}
+
 /// `rot * m` for a constant matrix `m` (row-major).
 #[inline(always)]
 fn mul_m<O: Ops>(o: O, rot: &R<O>, m: &[f32; 9]) -> R<O> {
@@ -499,7 +531,7 @@ impl Lanes {
             .map(|b| Body {
                 parent: b.parent,
                 pre: match &b.pre_perm {
-                    Some((perm, sign)) => Pre::Perm(*perm, [f(sign[0]), f(sign[1]), f(sign[2])]),
+                    Some((perm, sign)) => Pre::Perm(perm.map(Col::of), [f(sign[0]), f(sign[1]), f(sign[2])]),
                     None => Pre::Mat(m9(&b.pre_r)),
                 },
                 pre_t: v3(&b.pre_t),
@@ -854,20 +886,50 @@ impl SphereGeom {
                 return false;
             }
             let parent_r = &s.rot[b.parent];
-            let mut out_p = {
-                // The parent's frame in registers, built entry by entry (an array built by
-                // `from_fn` went through `memcpy`).
-                let pr: R<O> = load(o, parent_r);
-                place(o, &pr, &load(o, &s.pos[b.parent]), &b.pre_t)
-            };
+            // The parent's frame in registers, built entry by entry (an array built by
+            // `from_fn` went through `memcpy`).
+            let pr: R<O> = load(o, parent_r);
+            let mut out_p = place(o, &pr, &load(o, &s.pos[b.parent]), &b.pre_t);
+            // A revolute joint after a signed permutation, with nothing after it (every joint
+            // of the UR5): the turn reads the parent's columns as picked and takes their signs
+            // into the sine and cosine. `(s c) x` is `s (c x)` and `s x` exactly for `s = ±1`,
+            // so the entries are the general path's below, to the bit.
+            if let (Pre::Perm(perm, sign), false, None) = (&b.pre, b.prismatic, &b.post) {
+                // Every `|v|` is below `SIN_COS_RANGE` (checked above).
+                let (sn, cs) = sin_cos_f32(&v);
+                let (sn, cs) = (L::load(o, F8(sn)), L::load(o, F8(cs)));
+                let (s0, s1) = (splat(o, sign[0]), splat(o, sign[1]));
+                let (c0, n0, c1, n1) = (cs * s0, sn * s0, cs * s1, sn * s1);
+                let s2 = splat(o, sign[2]);
+                // The columns picked from the registers (indexing memory by the column made the
+                // compiler copy the parent's frame to the stack), and the product as one array
+                // expression (entries assigned in a loop went through `memcpy`).
+                let [a0, a1, a2] = column(&pr, perm[0]);
+                let [b0, b1, b2] = column(&pr, perm[1]);
+                let [d0, d1, d2] = column(&pr, perm[2]);
+                let out_r = [
+                    a0 * c0 + b0 * n1,
+                    b0 * c1 - a0 * n0,
+                    d0 * s2,
+                    a1 * c0 + b1 * n1,
+                    b1 * c1 - a1 * n0,
+                    d1 * s2,
+                    a2 * c0 + b2 * n1,
+                    b2 * c1 - a2 * n0,
+                    d2 * s2,
+                ];
+                store(&out_r, &mut s.rot[k + 1]);
+                store(&out_p, &mut s.pos[k + 1]);
+                continue;
+            }
             // `parent * pre` (for a signed permutation: the parent's columns, picked and
             // signed, read from memory as picked).
             let mut out_r = match &b.pre {
                 Pre::Perm(perm, sign) => {
-                    let e = |r: usize, c: usize| L::load(o, parent_r[3 * r + perm[c]]) * splat(o, sign[c]);
+                    let e = |r: usize, c: usize| L::load(o, parent_r[3 * r + perm[c] as usize]) * splat(o, sign[c]);
                     [e(0, 0), e(0, 1), e(0, 2), e(1, 0), e(1, 1), e(1, 2), e(2, 0), e(2, 1), e(2, 2)]
                 }
-                Pre::Mat(m) => mul_m(o, &load(o, parent_r), m),
+                Pre::Mat(m) => mul_m(o, &pr, m),
             };
             if b.prismatic {
                 let vf = L::load(o, F8(v.map(|x| x as f32)));
@@ -962,6 +1024,98 @@ mod tests {
             let tilted = cuboid(UnitQuaternion::from_euler_angles(rng.range(0.1, 1.0), 0.0, yaw));
             assert!(matches!(tilted, Solid32::Cuboid { yaw: false, .. }));
         }
+    }
+
+    /// A sphere arm with every form of body the batch poses: revolute joints after signed
+    /// permutations with either sign (the fused turn), after a skewed origin (a matrix), a
+    /// prismatic joint and a mimic joint.
+    fn every_body_form() -> crate::Robot {
+        use crate::{JointKind, JointLimits, PlacedShape, RobotBuilder, Shape};
+        let balls = |points: &[[f64; 3]]| -> Vec<PlacedShape> {
+            points
+                .iter()
+                .map(|p| PlacedShape::new(Isometry3::translation(p[0], p[1], p[2]), Shape::sphere(0.04)))
+                .collect()
+        };
+        let at = |x: f64, y: f64, z: f64, r: f64, p: f64, w: f64| {
+            Isometry3::from_parts(Vector3::new(x, y, z).into(), UnitQuaternion::from_euler_angles(r, p, w))
+        };
+        let half = std::f64::consts::FRAC_PI_2;
+        let lim = JointLimits::new(-3.0, 3.0, 1.0, 1.0);
+        let id = Isometry3::identity();
+        let mut b = RobotBuilder::new("every-body-form").base(at(0.1, -0.2, 0.3, 0.0, 0.0, 0.4));
+        let mut parent = b.link("base", balls(&[[0.0, 0.0, 0.05]]));
+        // (origin, axis, kind, after the joint); the last a DH-style turn and shift.
+        let dh = at(0.02, 0.0, 0.01, 0.2, 0.0, 0.0);
+        let joints = [
+            (at(0.0, 0.0, 0.1, 0.0, 0.0, 0.0), Vector3::z(), JointKind::Revolute, id),
+            (at(0.0, 0.13, 0.0, 0.0, half, 0.0), Vector3::y(), JointKind::Revolute, id),
+            (at(0.0, -0.12, 0.42, half, 0.0, 0.0), -Vector3::x(), JointKind::Revolute, id),
+            (at(0.05, 0.0, 0.3, 0.3, -0.7, 1.1), Vector3::z(), JointKind::Revolute, id),
+            (at(0.0, 0.09, 0.0, -half, 0.0, half), Vector3::y(), JointKind::Prismatic, id),
+            (at(0.0, 0.0, 0.09, 0.0, 0.0, 0.0), -Vector3::z(), JointKind::Revolute, dh),
+        ];
+        for (k, (origin, axis, kind, post)) in joints.into_iter().enumerate() {
+            let link = b.link(format!("l{k}"), balls(&[[0.0, 0.0, 0.0], [0.1, 0.02, 0.05], [0.0, 0.2, -0.03]]));
+            b.joint(format!("j{k}"), kind, parent, link, origin, axis, 0.0, post, lim);
+            parent = link;
+        }
+        let finger = b.link("finger", balls(&[[0.03, 0.0, 0.02]]));
+        let j = b.joint(
+            "finger",
+            JointKind::Revolute,
+            parent,
+            finger,
+            at(0.0, 0.0, 0.05, 0.0, half, 0.0),
+            Vector3::z(),
+            0.0,
+            id,
+            lim,
+        );
+        b.mimic(j, "j5".to_string(), -0.5, 0.1);
+        b.build().expect("a valid arm")
+    }
+
+    /// The batch's sphere centres lie within its error bound of the double-precision ones, on
+    /// every form of body (a wrong column, sign or product would be off by centimetres).
+    #[test]
+    fn batch_centres_are_within_their_bound_of_double_precision() {
+        let robot = every_body_form();
+        let geom = SphereGeom::new(&crate::collision::RobotGeom::new(&robot), false).expect("a sphere robot");
+        let bound = geom.lanes.centre_err;
+        assert!(bound.is_finite() && bound > 0.0 && bound < 1e-3, "bound {bound:e}");
+        // The fused turn (a permutation, revolute, nothing after), a permutation on the general
+        // path, and a matrix.
+        let bodies = &geom.lanes.bodies;
+        let fused = |b: &Body| matches!(b.pre, Pre::Perm(..)) && !b.prismatic && b.post.is_none();
+        assert!(bodies.iter().any(fused), "{bodies:?}");
+        assert!(bodies.iter().any(|b| matches!(b.pre, Pre::Perm(..)) && !fused(b)), "{bodies:?}");
+        assert!(bodies.iter().any(|b| matches!(b.pre, Pre::Mat(..))), "{bodies:?}");
+        let dof = robot.dof();
+        let mut rng = crate::Rng::new(17);
+        let mut s = LaneScratch::new();
+        let mut f = super::super::SphereScratch::new();
+        let mut worst: f64 = 0.0;
+        for _ in 0..200 {
+            let qs: Vec<f64> = (0..LANES).flat_map(|_| robot.random_configuration(&mut rng)).collect();
+            assert!(geom.pose_lanes(Base, &qs, dof, &mut s));
+            for l in 0..geom.links.len() {
+                geom.pose_lane_link(Base, l, &mut s);
+            }
+            for (i, q) in qs.chunks(dof).enumerate() {
+                geom.pose(q, &mut f);
+                for (k, c) in geom.centre.iter().enumerate() {
+                    let b = geom.links.iter().find(|l| (l.first..l.end).contains(&k)).expect("a link").body;
+                    let exact = f.rot[b] * c + f.pos[b];
+                    for d in 0..3 {
+                        let e = (f64::from(s.centre[k][d].0[i]) - exact[d]).abs();
+                        assert!(e <= bound, "sphere {k}, coordinate {d}, lane {i}: off by {e:e} (bound {bound:e})");
+                        worst = worst.max(e);
+                    }
+                }
+            }
+        }
+        eprintln!("largest centre error {worst:e} of a bound {bound:e}");
     }
 
     /// The single-precision sines and cosines stay within [`SIN_COS_ERR`] of `f64`'s (itself
