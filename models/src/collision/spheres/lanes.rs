@@ -875,8 +875,8 @@ impl SphereGeom {
             // vectorisable pass (reading and arithmetic lane by lane in one loop was not).
             let mut x = [0.0f64; LANES];
             if a.dof < dof {
-                for (i, x) in x.iter_mut().enumerate() {
-                    *x = qs[i * dof + a.dof];
+                for (x, row) in x.iter_mut().zip(qs.chunks_exact(dof)) {
+                    *x = row[a.dof];
                 }
             }
             let v = x.map(|x| (x * a.scale + a.add) + a.offset);
