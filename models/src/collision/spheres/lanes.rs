@@ -1027,8 +1027,8 @@ mod tests {
     }
 
     /// A sphere arm with every form of body the batch poses: revolute joints after signed
-    /// permutations with either sign (the fused turn), after a skewed origin (a matrix), a
-    /// prismatic joint and a mimic joint.
+    /// permutations with either sign (the fused turn), after a skewed origin (a matrix) and
+    /// with a DH-style turn after the joint, a prismatic joint and a mimic joint.
     fn every_body_form() -> crate::Robot {
         use crate::{JointKind, JointLimits, PlacedShape, RobotBuilder, Shape};
         let balls = |points: &[[f64; 3]]| -> Vec<PlacedShape> {
