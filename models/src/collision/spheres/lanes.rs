@@ -278,9 +278,15 @@ pub(crate) struct LaneScratch {
     pos: Vec<[F8; 3]>,
     group_c: Vec<[F8; 3]>,
     link_c: Vec<[F8; 3]>,
-    link_posed: Vec<bool>,
+    /// Per link, the batch ([`Self::batch`]) whose bounding-sphere centre `link_c` holds.
+    link_posed: Vec<u32>,
     centre: Vec<[F8; 3]>,
-    posed: Vec<bool>,
+    /// Per link, the batch whose sphere centres `centre` holds.
+    posed: Vec<u32>,
+    /// The batch now posed, counted from 1: the marks above need no clearing per batch (a
+    /// clear and fill went through two `memset` calls a batch, and their `vzeroupper`s in the
+    /// AVX2 kernel).
+    batch: u32,
     /// Per link, its margin plus the rounding allowance, rounded up.
     link_g: Vec<f32>,
     /// The uniform margin and allowance `link_g` holds (bits), if it was filled for one.
@@ -299,6 +305,7 @@ impl LaneScratch {
             link_posed: Vec::new(),
             centre: Vec::new(),
             posed: Vec::new(),
+            batch: 0,
             link_g: Vec::new(),
             link_g_for: None,
             isa: Isa::Best,
@@ -860,11 +867,16 @@ impl SphereGeom {
         s.pos.resize(n, [F8::ZERO; 3]);
         s.group_c.resize(self.groups.len(), [F8::ZERO; 3]);
         s.link_c.resize(self.links.len(), [F8::ZERO; 3]);
-        s.link_posed.clear();
-        s.link_posed.resize(self.links.len(), false);
         s.centre.resize(self.centre.len(), [F8::ZERO; 3]);
-        s.posed.clear();
-        s.posed.resize(self.links.len(), false);
+        // A new batch number; the marks start again from 1 when it wraps or the links change.
+        s.batch = s.batch.wrapping_add(1);
+        if s.batch == 0 || s.posed.len() != self.links.len() || s.link_posed.len() != self.links.len() {
+            s.posed.clear();
+            s.posed.resize(self.links.len(), 0);
+            s.link_posed.clear();
+            s.link_posed.resize(self.links.len(), 0);
+            s.batch = 1;
+        }
         s.rot[0] = lanes.base_r.map(|v| F8([v; LANES]));
         s.pos[0] = lanes.base_t.map(|v| F8([v; LANES]));
         if qs.len() != LANES * dof {
@@ -961,8 +973,8 @@ impl SphereGeom {
     /// World centre of link `l`'s bounding sphere per lane, once per batch.
     #[inline(always)]
     fn lane_link_centre<O: Ops>(&self, o: O, l: usize, s: &mut LaneScratch) -> P<O> {
-        if !s.link_posed[l] {
-            s.link_posed[l] = true;
+        if s.link_posed[l] != s.batch {
+            s.link_posed[l] = s.batch;
             let b = self.links[l].body;
             let (rot, pos) = (load(o, &s.rot[b]), load(o, &s.pos[b]));
             store(&place(o, &rot, &pos, &self.lanes.links[l]), &mut s.link_c[l]);
@@ -973,10 +985,10 @@ impl SphereGeom {
     /// World centres of link `l`'s spheres per lane, once per batch.
     #[inline(always)]
     fn pose_lane_link<O: Ops>(&self, o: O, l: usize, s: &mut LaneScratch) {
-        if s.posed[l] {
+        if s.posed[l] == s.batch {
             return;
         }
-        s.posed[l] = true;
+        s.posed[l] = s.batch;
         let link = &self.links[l];
         let (rot, pos) = (load(o, &s.rot[link.body]), load(o, &s.pos[link.body]));
         for k in link.first..link.end {
@@ -1096,8 +1108,15 @@ mod tests {
         let mut s = LaneScratch::new();
         let mut f = super::super::SphereScratch::new();
         let mut worst: f64 = 0.0;
-        for _ in 0..200 {
+        for k in 0..200 {
             let qs: Vec<f64> = (0..LANES).flat_map(|_| robot.random_configuration(&mut rng)).collect();
+            // The batch numbers wrap here, with marks as new (0): a link's centres kept from
+            // the batch before would be off by far more than the bound.
+            if k == 1 {
+                s.batch = u32::MAX;
+                s.posed.fill(0);
+                s.link_posed.fill(0);
+            }
             assert!(geom.pose_lanes(Base, &qs, dof, &mut s));
             for l in 0..geom.links.len() {
                 geom.pose_lane_link(Base, l, &mut s);
