@@ -238,10 +238,12 @@ impl<'m, V: StateValidity> Validity<'m, V> {
             self.collision_checks += 1;
             points.extend_from_slice(b);
         }
-        let (delta, buf) = (&self.delta, &mut self.buf);
+        // Each point written in place, `a + t delta` as `ConfigSpace::step_into` computes it (a
+        // point built aside and copied in took a `memcpy` call per point).
+        let delta = &self.delta;
         bisection_order(n, |i| {
-            ConfigSpace::step_into(a, delta, i as f64 / n as f64, buf);
-            points.extend_from_slice(buf);
+            let t = i as f64 / n as f64;
+            points.extend(a.iter().zip(delta).map(|(a, d)| a + t * d));
             true
         });
         let checks = ((points.len() / a.len().max(1)) as u64).saturating_sub(u64::from(check_end));
