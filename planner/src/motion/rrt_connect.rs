@@ -226,12 +226,15 @@ impl<const DOF: usize> pulp::WithSimd for ScanV3<'_, DOF> {
     }
 }
 
-/// [`scan`] on the instruction set of its caller.
+/// [`scan`] on the instruction set of its caller. Each lane keeps its own best (distance and
+/// block) with a strict `<`, so its earliest block among equals, without a branch; the four are
+/// then reduced to the least distance, ties to the lowest node index.
 #[inline(always)]
 fn scan_lanes<const DOF: usize>(blocks: &[[f64; BLOCK]], q: &[f64]) -> (f64, usize) {
     let dof = if DOF == 0 { q.len() } else { DOF };
     let q = &q[..dof];
-    let mut best = (f64::INFINITY, 0);
+    let mut best = [f64::INFINITY; BLOCK];
+    let mut at = [0u64; BLOCK];
     for (b, block) in blocks.chunks_exact(dof).enumerate() {
         let mut s = [0.0f64; BLOCK];
         for (&qj, lanes) in q.iter().zip(block) {
@@ -241,15 +244,20 @@ fn scan_lanes<const DOF: usize>(blocks: &[[f64; BLOCK]], q: &[f64]) -> (f64, usi
             }
         }
         // A NaN lane is never below the best.
-        if (s[0] < best.0) | (s[1] < best.0) | (s[2] < best.0) | (s[3] < best.0) {
-            for (l, &d) in s.iter().enumerate() {
-                if d < best.0 {
-                    best = (d, b * BLOCK + l);
-                }
-            }
+        for l in 0..BLOCK {
+            let below = s[l] < best[l];
+            best[l] = if below { s[l] } else { best[l] };
+            at[l] = if below { b as u64 } else { at[l] };
         }
     }
-    best
+    let mut out = (f64::INFINITY, 0);
+    for l in 0..BLOCK {
+        let i = at[l] as usize * BLOCK + l;
+        if best[l] < out.0 || (best[l] == out.0 && i < out.1) {
+            out = (best[l], i);
+        }
+    }
+    out
 }
 
 /// Slack on a wrapped joint's bound (rad): wrapped differences of unwrapped angles of a few
