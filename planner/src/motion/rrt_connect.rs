@@ -182,6 +182,9 @@ fn dist2_below(p: &[f64], q: &[f64], limit: f64) -> f64 {
 /// problems 12 (107 at most), where the k-d tree's descent and bookkeeping cost more than the
 /// distances they save. Planning instructions on 10 cage problems: 234.1 M with the k-d tree
 /// throughout, 216.2 M scanning below 32 nodes, 207.4 M below 128 (and below 256, and always).
+/// Measured again with the block scan ([`scan`]), in time: below 512 and 1,024 nodes, per-problem
+/// ratios 0.992 and 1.009 on the cage problems against 128 (the slow problems' trees are larger,
+/// and there the k-d tree wins).
 const SCAN_BELOW: usize = 128;
 
 /// Nodes per block of [`Tree::blocks`].
@@ -189,15 +192,15 @@ const BLOCK: usize = 4;
 
 /// The living node of `blocks` (see [`Tree::blocks`]; `q.len()` joints) nearest to `q` as
 /// (squared distance, index), ties to the lowest index: exactly [`KdIndex::nearest`]'s answer
-/// where no joint wraps (the same sums, in the same order: each lane's is the distance's, and
-/// lanes are taken in index order with a strict `<`). `DOF`, when not 0, is `q.len()`; `q` is
-/// not empty (a tree over no joints has no k-d tree and never comes here).
+/// where no joint wraps (the same sums, in the same order, and the same tie rule). `DOF`, when
+/// not 0, is `q.len()`; `q` is not empty (a tree over no joints has no k-d tree and never comes
+/// here).
 ///
-/// Block by block with no branch per node: the four distances at once (each lane's sum in
-/// joint order, a multiply and an add, never fused, so the scalar sum to the bit), then only a
-/// block with a lane below the best is looked at lane by lane. The scan over node rows it
-/// replaces stopped each sum as soon as it passed the best, one unpredictable branch per joint
-/// and node: the 98 cage problems that solve spent 23% of their planning time in it. Compiled
+/// Block by block with no branch per node or block: the four distances at once (each lane's
+/// sum in joint order, a multiply and an add, never fused, so the scalar sum to the bit), each
+/// lane keeping its own best (see [`scan_lanes`]). The scan over node rows it replaces stopped
+/// each sum as soon as it passed the best, one unpredictable branch per joint and node: the 98
+/// cage problems that solve spent 23% of their planning time in it. Compiled
 /// for AVX2 where the CPU has it (pulp's run-time dispatch, as the collision batch): one
 /// 256-bit operation per step instead of two SSE2 ones, the 10 cage problems' nearest-neighbour
 /// instructions 15.5 M -> 8.1 M (`wide`'s four lanes in the AVX2 function: 10.9 M; on the
