@@ -227,23 +227,27 @@ impl<'m, V: StateValidity> Validity<'m, V> {
     pub fn segment_probed(&mut self, a: &[f64], b: &[f64], resolution: f64, check_end: bool) -> bool {
         // The end within the limits, then in the same query as the inner points, first: a
         // blocked extension usually ends there, and a batch of lanes checks it with them.
-        if check_end && !self.model.robot().within_limits(b) {
+        if a.len() != b.len() || (check_end && !self.model.robot().within_limits(b)) {
             return false;
         }
         self.space.deltas_into(a, b, &mut self.delta);
         let n = steps(self.delta.iter().map(|d| d.abs()).fold(0.0, f64::max), resolution);
         let mut points = std::mem::take(&mut self.points);
+        // Sized once for the end and the `n - 1` inner points, each point then written in
+        // place by `ConfigSpace::step_into` (a point built aside and copied in took a `memcpy`
+        // call per point; appended through an iterator, a few instructions per value).
+        let dof = a.len();
+        let first = usize::from(check_end);
         points.clear();
+        points.resize((first + n.saturating_sub(1)) * dof, 0.0);
         if check_end {
             self.collision_checks += 1;
-            points.extend_from_slice(b);
+            points[..dof].copy_from_slice(b);
         }
-        // Each point written in place, `a + t delta` as `ConfigSpace::step_into` computes it (a
-        // point built aside and copied in took a `memcpy` call per point).
-        let delta = &self.delta;
+        let (delta, mut at) = (&self.delta, first * dof);
         bisection_order(n, |i| {
-            let t = i as f64 / n as f64;
-            points.extend(a.iter().zip(delta).map(|(a, d)| a + t * d));
+            ConfigSpace::step_into(a, delta, i as f64 / n as f64, &mut points[at..at + dof]);
+            at += dof;
             true
         });
         let checks = ((points.len() / a.len().max(1)) as u64).saturating_sub(u64::from(check_end));
