@@ -1040,20 +1040,26 @@ impl CollisionModel {
             return None;
         }
         let n = qs.len() / dof;
-        let mut buf = std::mem::take(&mut s.spheres.batch_q);
-        buf.clear();
-        buf.extend_from_slice(qs);
-        for _ in n..lanes::LANES {
-            buf.extend_from_slice(&qs[(n - 1) * dof..]);
-        }
         if s.step.len() != dof || s.step.iter().any(|&v| v != 0.0) {
             s.step.clear();
             s.step.resize(dof, 0.0);
         }
         let step = (margin == 0.0).then_some(&s.step[..]);
         let grow = LaneMargins { link: &[], pair: &[], uniform: Some(margin), step };
-        let answer = fast.free_lanes(&buf, dof, solids32, grow, &mut s.spheres.lanes);
-        s.spheres.batch_q = buf;
+        // A full batch as it is; fewer configurations padded with copies of the last.
+        let answer = if n == lanes::LANES {
+            fast.free_lanes(qs, dof, solids32, grow, &mut s.spheres.lanes)
+        } else {
+            let mut buf = std::mem::take(&mut s.spheres.batch_q);
+            buf.clear();
+            buf.extend_from_slice(qs);
+            for _ in n..lanes::LANES {
+                buf.extend_from_slice(&qs[(n - 1) * dof..]);
+            }
+            let answer = fast.free_lanes(&buf, dof, solids32, grow, &mut s.spheres.lanes);
+            s.spheres.batch_q = buf;
+            answer
+        };
         let used = (1u32 << n) - 1;
         Some(BatchSettled { free: answer.free & used, colliding: answer.hit & used })
     }

@@ -728,10 +728,6 @@ impl SphereGeom {
         if !self.pose_lanes(o, qs, dof, s) {
             return none;
         }
-        for (gi, g) in self.groups.iter().enumerate() {
-            let (rot, pos) = (load(o, &s.rot[g.body]), load(o, &s.pos[g.body]));
-            store(&place(o, &rot, &pos, &lanes.groups[gi]), &mut s.group_c[gi]);
-        }
         let mut live: u32 = (1 << LANES) - 1;
         // No step (the edge probes): a lane's own cell, not a box of cells.
         let point_cells = step.is_some_and(|st| st.iter().all(|&d| d == 0.0));
@@ -745,7 +741,10 @@ impl SphereGeom {
                 Some(m) => m,
                 None => links.iter().map(|&l| link_m[l as usize]).fold(0.0, f64::max),
             };
-            let gc = load(o, &s.group_c[gi]);
+            // The group's centre, kept for the self pairs below (which run only after every
+            // group has been here): a batch that ends in a contact skips the groups after it.
+            let gc = place(o, &load(o, &s.rot[g.body]), &load(o, &s.pos[g.body]), &lanes.groups[gi]);
+            store(&gc, &mut s.group_c[gi]);
             let gg = up(g.r + eg + grow);
             let tg = thr(gg, 0.0, 0.0);
             for (ob, (bc, br)) in obstacles.solids.iter().zip(&obstacles.bound) {
