@@ -164,6 +164,10 @@ pub(crate) struct Validity<'m, V: StateValidity> {
     pub edges_checked: usize,
     /// Collision checks of [`Self::segment_probed`] (also counted in `collision_checks`).
     pub probe_checks: u64,
+    /// Per degree of freedom, the bounds [`Robot::within_limits`] tests a value against (its
+    /// `lower - 1e-9` and `upper + 1e-9`, the same numbers); `None` for a robot with actuators,
+    /// whose strokes need the whole test.
+    end_bounds: Option<Vec<(f64, f64)>>,
 }
 
 impl<'m, V: StateValidity> Validity<'m, V> {
@@ -181,6 +185,27 @@ impl<'m, V: StateValidity> Validity<'m, V> {
             collision_checks: 0,
             edges_checked: 0,
             probe_checks: 0,
+            end_bounds: robot.actuators().is_empty().then(|| {
+                let joints = robot.joints();
+                robot
+                    .dof_joints()
+                    .iter()
+                    .map(|&j| (joints[j].limits.lower - 1e-9, joints[j].limits.upper + 1e-9))
+                    .collect()
+            }),
+        }
+    }
+
+    /// [`Robot::within_limits`] of `q`, from the bounds kept at construction where the robot
+    /// has no actuators (the robot's test looks each joint's limits up through its joint: on
+    /// the generated cage problems 165 instructions per edge probe).
+    fn within_limits(&self, q: &[f64]) -> bool {
+        match &self.end_bounds {
+            Some(bounds) => {
+                q.len() == bounds.len()
+                    && q.iter().zip(bounds).all(|(&v, &(lo, hi))| v.is_finite() && v >= lo && v <= hi)
+            }
+            None => self.model.robot().within_limits(q),
         }
     }
 
@@ -227,7 +252,7 @@ impl<'m, V: StateValidity> Validity<'m, V> {
     pub fn segment_probed(&mut self, a: &[f64], b: &[f64], resolution: f64, check_end: bool) -> bool {
         // The end within the limits, then in the same query as the inner points, first: a
         // blocked extension usually ends there, and a batch of lanes checks it with them.
-        if a.len() != b.len() || (check_end && !self.model.robot().within_limits(b)) {
+        if a.len() != b.len() || (check_end && !self.within_limits(b)) {
             return false;
         }
         self.space.deltas_into(a, b, &mut self.delta);
@@ -331,6 +356,53 @@ mod tests {
             ConfigSpace::step_into(a, &delta, i as f64 / n as f64, &mut q);
             !model.collides(&q)
         })
+    }
+
+    /// The probe's limits test answers as the robot's, on an arm without actuators (its own
+    /// bounds) and one with (the robot's test): values at and just past each limit, not
+    /// finite, and configurations of the wrong length.
+    #[test]
+    fn the_probe_limits_test_answers_as_the_robot_does() {
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/tests/fixtures");
+        let ur5 = embodied_models::urdf::load_urdf(&dir.join("ur5_spherized.urdf"), Some(&dir.join("ur5.srdf")))
+            .expect("UR5 fixture loads");
+        let mut kinds = Vec::new();
+        // The UR5's limits are finite, the Polycrank's joints have none (an infinite value is
+        // still refused), the IRp-6 has actuators.
+        let arms = [
+            ("ur5", ur5),
+            ("polycrank", builtin("polycrank").expect("robot")),
+            ("irp6-postument", builtin("irp6-postument").expect("robot")),
+        ];
+        for (name, robot) in arms {
+            let model = CollisionModel::new(&robot, Environment::new());
+            let validity = Validity::new(&model, 0.1);
+            assert_eq!(validity.end_bounds.is_some(), robot.actuators().is_empty(), "{name}: test setup");
+            let mut rng = Rng::new(3);
+            let mut q = vec![0.0; robot.dof()];
+            let (mut inside, mut outside) = (0, 0);
+            for k in 0..4000 {
+                robot.random_configuration_into(&mut rng, &mut q);
+                let j = k % robot.dof();
+                let l = robot.limits()[j];
+                q[j] = match (k / robot.dof()) % 9 {
+                    0 => l.lower - 1e-9,
+                    1 => l.upper + 1e-9,
+                    2 => l.upper + 2e-9,
+                    3 => l.lower - 1e-6,
+                    4 => f64::NAN,
+                    5 => f64::INFINITY,
+                    _ => q[j],
+                };
+                let expected = robot.within_limits(&q);
+                assert_eq!(validity.within_limits(&q), expected, "{name}: {q:?}");
+                if expected { inside += 1 } else { outside += 1 }
+            }
+            assert!(inside > 100 && outside > 100, "{name}: {inside} inside, {outside} outside");
+            assert!(!validity.within_limits(&q[1..]), "{name}: a short configuration");
+            kinds.push(robot.actuators().is_empty());
+        }
+        assert_eq!(kinds, [true, true, false], "two arms without actuators, one with");
     }
 
     /// The end goes into the same batched query as the inner points: the answer is the
