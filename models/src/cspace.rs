@@ -72,8 +72,12 @@ impl ConfigSpace {
     /// very same numbers.
     #[inline]
     pub fn step_into(a: &[f64], d: &[f64], t: f64, out: &mut [f64]) {
-        for ((o, a), d) in out.iter_mut().zip(a).zip(d) {
-            *o = a + t * d;
+        // Over slices cut to one length (a zip of three slices was not vectorised: 38
+        // instructions a six-joint point in RRT-Connect's edge probes).
+        let n = out.len().min(a.len()).min(d.len());
+        let (out, a, d) = (&mut out[..n], &a[..n], &d[..n]);
+        for i in 0..n {
+            out[i] = a[i] + t * d[i];
         }
     }
     /// The point at fraction `t` along the shortest way from `a` to `b`, written into `out`.
