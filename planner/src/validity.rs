@@ -361,7 +361,7 @@ mod tests {
         })
     }
 
-    /// The probe's limits test answers as the robot's, on an arm without actuators (its own
+    /// The probe's limits test answers as the robot's, on two arms without actuators (its own
     /// bounds) and one with (the robot's test): values at and just past each limit, not
     /// finite, and configurations of the wrong length.
     #[test]
