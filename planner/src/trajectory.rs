@@ -27,6 +27,14 @@ pub struct Trajectory {
     pub qd: Vec<Vec<f64>>,
 }
 
+/// Where a time falls on a [`Trajectory`] (see `Trajectory::locate`).
+enum At {
+    /// At sample `k` (clamped into the span).
+    Knot(usize),
+    /// Inside sample interval `k` of length `h`, at fraction `s` of it.
+    Inside(usize, f64, f64),
+}
+
 impl Trajectory {
     /// Total duration in seconds (0 for an empty trajectory).
     pub fn duration(&self) -> f64 {
@@ -40,18 +48,12 @@ impl Trajectory {
     /// every digit on a short interval (positions rounded to 1e-15 over h = 2e-5 s give
     /// errors of 1e-5 rad/s², enough to read as over the limit).
     pub fn sample(&self, t: f64) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
-        let n = self.t.len();
-        if n == 0 {
-            return (Vec::new(), Vec::new(), Vec::new());
-        }
-        let dof = self.q[0].len();
-        if n == 1 || t <= self.t[0] || t.is_nan() {
-            return (self.q[0].clone(), self.qd[0].clone(), vec![0.0; dof]);
-        }
-        if t >= self.t[n - 1] {
-            return (self.q[n - 1].clone(), self.qd[n - 1].clone(), vec![0.0; dof]);
-        }
-        let (k, h, s) = self.interval(t);
+        let (k, h, s) = match self.locate(t) {
+            None => return (Vec::new(), Vec::new(), Vec::new()),
+            Some(At::Knot(k)) => return (self.q[k].clone(), self.qd[k].clone(), vec![0.0; self.q[k].len()]),
+            Some(At::Inside(k, h, s)) => (k, h, s),
+        };
+        let dof = self.q[k].len();
         let (mut q, mut qd, mut qdd) = (vec![0.0; dof], vec![0.0; dof], vec![0.0; dof]);
         self.hermite_into(k, h, s, &mut q);
         for i in 0..dof {
@@ -71,33 +73,30 @@ impl Trajectory {
     /// The position of [`Self::sample`] at time `t` into `out` (as many values as fit), with no
     /// allocation: for a control step that asks for many.
     pub fn sample_position_into(&self, t: f64, out: &mut [f64]) {
-        let n = self.t.len();
-        if n == 0 {
-            return;
-        }
-        let at = if n == 1 || t <= self.t[0] || t.is_nan() {
-            Some(0)
-        } else if t >= self.t[n - 1] {
-            Some(n - 1)
-        } else {
-            None
-        };
-        match at {
-            Some(k) => out.iter_mut().zip(&self.q[k]).for_each(|(o, q)| *o = *q),
-            None => {
-                let (k, h, s) = self.interval(t);
-                self.hermite_into(k, h, s, out);
-            }
+        match self.locate(t) {
+            None => {}
+            Some(At::Knot(k)) => out.iter_mut().zip(&self.q[k]).for_each(|(o, q)| *o = *q),
+            Some(At::Inside(k, h, s)) => self.hermite_into(k, h, s, out),
         }
     }
 
-    /// The sample interval `k` holding `t` (strictly inside the span), its length and `t`'s
+    /// Where time `t` falls (`None` for an empty trajectory): clamped to the first or last
+    /// sample (NaN to the first), else the sample interval holding it, its length and `t`'s
     /// fraction of it.
-    fn interval(&self, t: f64) -> (usize, f64, f64) {
+    fn locate(&self, t: f64) -> Option<At> {
         let n = self.t.len();
+        if n == 0 {
+            return None;
+        }
+        if n == 1 || t <= self.t[0] || t.is_nan() {
+            return Some(At::Knot(0));
+        }
+        if t >= self.t[n - 1] {
+            return Some(At::Knot(n - 1));
+        }
         let k = self.t.partition_point(|&x| x <= t).saturating_sub(1).min(n - 2);
         let h = self.t[k + 1] - self.t[k];
-        (k, h, (t - self.t[k]) / h)
+        Some(At::Inside(k, h, (t - self.t[k]) / h))
     }
 
     /// The cubic Hermite position at fraction `s` of interval `k` (length `h`) into `q`.

@@ -256,10 +256,7 @@ impl<'m, V: StateValidity> Validity<'m, V> {
             return false;
         }
         self.space.deltas_into(a, b, &mut self.delta);
-        // The largest step by comparisons (`f64::max`'s NaN handling cost about 90 instructions a
-        // probe; a NaN step is passed over by both).
-        let most = self.delta.iter().fold(0.0, |m: f64, d| if d.abs() > m { d.abs() } else { m });
-        let n = steps(most, resolution);
+        let n = steps(&self.delta, resolution);
         let mut points = std::mem::take(&mut self.points);
         // Sized once for the end and the `n - 1` inner points, each point then written in
         // place by `ConfigSpace::step_into` (a point built aside and copied in took a `memcpy`
@@ -290,7 +287,7 @@ impl<'m, V: StateValidity> Validity<'m, V> {
     fn sampled(&mut self, a: &[f64], b: &[f64], resolution: f64) -> bool {
         // The joint steps once; each point is `a + t delta` (what `interpolate_into` computes).
         self.space.deltas_into(a, b, &mut self.delta);
-        let n = steps(self.delta.iter().map(|d| d.abs()).fold(0.0, f64::max), resolution);
+        let n = steps(&self.delta, resolution);
         let (delta, buf) = (&self.delta, &mut self.buf);
         let (model, scratch, checks) = (self.model, &mut self.scratch, &mut self.collision_checks);
         bisection_order(n, |i| {
@@ -330,8 +327,10 @@ fn bisection_order(n: usize, mut visit: impl FnMut(usize) -> bool) -> bool {
 }
 
 /// Number of equal steps so that no joint moves more than `resolution` per step (at least 1),
-/// for a segment whose largest joint step is `max`.
-fn steps(max: f64, resolution: f64) -> usize {
+/// for a segment of joint steps `delta`. The largest step is found by comparisons (`f64::max`'s
+/// NaN handling cost about 90 instructions an edge probe); a NaN step is passed over by both.
+fn steps(delta: &[f64], resolution: f64) -> usize {
+    let max = delta.iter().fold(0.0, |m: f64, d| if d.abs() > m { d.abs() } else { m });
     let n = (max / resolution).ceil();
     if n.is_finite() && n >= 1.0 { n.min(1e7) as usize } else { 1 }
 }
@@ -353,7 +352,7 @@ mod tests {
         }
         let mut delta = Vec::new();
         space.deltas_into(a, b, &mut delta);
-        let n = steps(delta.iter().map(|d| d.abs()).fold(0.0, f64::max), resolution);
+        let n = steps(&delta, resolution);
         let mut q = vec![0.0; a.len()];
         (1..n).all(|i| {
             ConfigSpace::step_into(a, &delta, i as f64 / n as f64, &mut q);
