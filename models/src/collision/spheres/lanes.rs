@@ -897,7 +897,7 @@ impl SphereGeom {
         // First every joint's sine and cosine (a prismatic joint's travel in `sin`): they depend
         // neither on one another nor on the frames, so their long chains of dependent operations
         // can overlap; the frames below only read them. (Computed body by body between the
-        // frames: 1.2% slower per MotionBenchMaker cage problem, 30 alternating rounds.)
+        // frames: about 1% slower per MotionBenchMaker cage problem, 30 alternating rounds.)
         s.sin.resize(n, F8::ZERO);
         s.cos.resize(n, F8::ZERO);
         for (k, (b, a)) in lanes.bodies.iter().zip(&self.angles).enumerate() {
