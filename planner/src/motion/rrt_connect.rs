@@ -335,18 +335,20 @@ impl Tree {
     }
     /// Cut node `i` off with its descendants (children are pushed after their parents).
     fn cut(&mut self, i: usize) {
-        self.alive[i] = false;
+        self.hide(i);
         for k in i + 1..self.len() {
             let p = self.parent[k];
             if p != ROOT && !self.alive[p as usize] {
-                self.alive[k] = false;
+                self.hide(k);
             }
         }
-        for (k, _) in self.alive.iter().enumerate().skip(i).filter(|(_, a)| !**a) {
-            let b = k / BLOCK * self.dof;
-            for lanes in &mut self.blocks[b..b + self.dof] {
-                lanes[k % BLOCK] = f64::INFINITY;
-            }
+    }
+    /// Node `k` is no longer alive: its lanes of the scan's blocks hold infinity.
+    fn hide(&mut self, k: usize) {
+        self.alive[k] = false;
+        let b = k / BLOCK * self.dof;
+        for lanes in &mut self.blocks[b..b + self.dof] {
+            lanes[k % BLOCK] = f64::INFINITY;
         }
     }
     /// The living node nearest to `q`.
