@@ -202,8 +202,14 @@ impl<'m, V: StateValidity> Validity<'m, V> {
     fn within_limits(&self, q: &[f64]) -> bool {
         match &self.end_bounds {
             Some(bounds) => {
-                q.len() == bounds.len()
-                    && q.iter().zip(bounds).fold(true, |ok, (&v, &(lo, hi))| ok & v.is_finite() & (v >= lo) & (v <= hi))
+                // Unrolled for the common arm sizes (the same test).
+                if let (Ok(q), Ok(b)) = (<&[f64; 6]>::try_from(q), <&[(f64, f64); 6]>::try_from(&bounds[..])) {
+                    return within_bounds(q, b);
+                }
+                if let (Ok(q), Ok(b)) = (<&[f64; 7]>::try_from(q), <&[(f64, f64); 7]>::try_from(&bounds[..])) {
+                    return within_bounds(q, b);
+                }
+                q.len() == bounds.len() && within_bounds(q, bounds)
             }
             None => self.model.robot().within_limits(q),
         }
@@ -270,11 +276,19 @@ impl<'m, V: StateValidity> Validity<'m, V> {
             points[..dof].copy_from_slice(b);
         }
         let (delta, mut at) = (&self.delta, first * dof);
-        bisection_order(n, |i| {
-            ConfigSpace::step_into(a, delta, i as f64 / n as f64, &mut points[at..at + dof]);
-            at += dof;
-            true
-        });
+        let inner = &mut points[at..];
+        let filled = match dof {
+            6 => fill_inner::<6>(a, delta, n, inner),
+            7 => fill_inner::<7>(a, delta, n, inner),
+            _ => false,
+        };
+        if !filled {
+            bisection_order(n, |i| {
+                ConfigSpace::step_into(a, delta, i as f64 / n as f64, &mut points[at..at + dof]);
+                at += dof;
+                true
+            });
+        }
         let checks = ((points.len() / a.len().max(1)) as u64).saturating_sub(u64::from(check_end));
         self.collision_checks += checks;
         self.probe_checks += checks;
@@ -309,21 +323,50 @@ fn bisection_order(n: usize, mut visit: impl FnMut(usize) -> bool) -> bool {
     while stride * 2 < n {
         stride *= 2;
     }
-    let mut first_level = true;
+    // The first level takes every multiple of the stride, each finer level its odd multiples
+    // (the even ones came before): no division per point.
+    let mut step = stride;
     loop {
         let mut i = stride;
         while i < n {
-            if (first_level || (i / stride) % 2 == 1) && !visit(i) {
+            if !visit(i) {
                 return false;
             }
-            i += stride;
+            i += step;
         }
         if stride == 1 {
             return true;
         }
         stride /= 2;
-        first_level = false;
+        step = 2 * stride;
     }
+}
+
+/// The inner points of the segment from `a` by `delta` cut into `n` steps, `a + (i / n) delta`
+/// (as [`ConfigSpace::step_into`] computes them), in bisection order, written over `out` row by
+/// row, for `D` degrees of freedom: rows of known length, each filled in a few vector
+/// operations (through `step_into` and a slice per point: about 100 instructions a six-joint
+/// point). `false` (nothing written) when `a` or `delta` is not `D` long.
+fn fill_inner<const D: usize>(a: &[f64], delta: &[f64], n: usize, out: &mut [f64]) -> bool {
+    let (Ok(a), Ok(d)) = (<&[f64; D]>::try_from(a), <&[f64; D]>::try_from(delta)) else { return false };
+    let (rows, _) = out.as_chunks_mut::<D>();
+    let mut rows = rows.iter_mut();
+    bisection_order(n, |i| {
+        if let Some(row) = rows.next() {
+            let t = i as f64 / n as f64;
+            for j in 0..D {
+                row[j] = a[j] + t * d[j];
+            }
+        }
+        true
+    });
+    true
+}
+
+/// Every value finite and within its bounds (no branch per value).
+#[inline(always)]
+fn within_bounds<'a>(q: impl IntoIterator<Item = &'a f64>, bounds: impl IntoIterator<Item = &'a (f64, f64)>) -> bool {
+    q.into_iter().zip(bounds).fold(true, |ok, (&v, &(lo, hi))| ok & v.is_finite() & (v >= lo) & (v <= hi))
 }
 
 /// Number of equal steps so that no joint moves more than `resolution` per step (at least 1),
@@ -358,6 +401,80 @@ mod tests {
             ConfigSpace::step_into(a, &delta, i as f64 / n as f64, &mut q);
             !model.collides(&q)
         })
+    }
+
+    /// The order of the inner points is the coarse-to-fine one of the division-based
+    /// definition (every multiple of the largest power-of-two stride below `n`, then at each
+    /// finer stride the multiples not visited yet), every inner point once, and a `false` from
+    /// `visit` stops the walk.
+    #[test]
+    fn bisection_order_is_coarse_to_fine_and_visits_every_inner_point_once() {
+        for n in 0..300usize {
+            let mut expected = Vec::new();
+            if n >= 2 {
+                let mut stride = 1;
+                while stride * 2 < n {
+                    stride *= 2;
+                }
+                let mut first = true;
+                loop {
+                    expected.extend((1..n).filter(|i| i % stride == 0 && (first || (i / stride) % 2 == 1)));
+                    if stride == 1 {
+                        break;
+                    }
+                    stride /= 2;
+                    first = false;
+                }
+            }
+            let mut seen = Vec::new();
+            assert!(bisection_order(n, |i| {
+                seen.push(i);
+                true
+            }));
+            assert_eq!(seen, expected, "n = {n}");
+            let mut sorted = seen.clone();
+            sorted.sort_unstable();
+            assert_eq!(sorted, (1..n.max(1)).collect::<Vec<_>>(), "n = {n}");
+            let mut count = 0usize;
+            let all = bisection_order(n, |_| {
+                count += 1;
+                count < 3
+            });
+            assert_eq!((all, count), (n < 4, n.saturating_sub(1).min(3)), "n = {n}");
+        }
+    }
+
+    /// The rows written for six and seven degrees of freedom are the points `step_into` gives,
+    /// in bisection order, to the bit; other sizes are left to it.
+    #[test]
+    fn inner_points_by_rows_are_the_step_into_points() {
+        let mut rng = Rng::new(5);
+        for dof in [5usize, 6, 7] {
+            for n in 1..40usize {
+                let a: Vec<f64> = (0..dof).map(|_| rng.range(-3.0, 3.0)).collect();
+                let d: Vec<f64> = (0..dof).map(|_| rng.range(-2.0, 2.0)).collect();
+                let mut rows = vec![f64::NAN; n.saturating_sub(1) * dof];
+                let filled = match dof {
+                    6 => fill_inner::<6>(&a, &d, n, &mut rows),
+                    7 => fill_inner::<7>(&a, &d, n, &mut rows),
+                    _ => fill_inner::<6>(&a, &d, n, &mut rows),
+                };
+                assert_eq!(filled, dof == 6 || dof == 7, "{dof}");
+                if !filled {
+                    assert!(rows.iter().all(|v| v.is_nan()), "nothing written");
+                    continue;
+                }
+                let mut expected = Vec::new();
+                let mut q = vec![0.0; dof];
+                bisection_order(n, |i| {
+                    ConfigSpace::step_into(&a, &d, i as f64 / n as f64, &mut q);
+                    expected.extend_from_slice(&q);
+                    true
+                });
+                let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+                assert_eq!(bits(&rows), bits(&expected), "{dof} joints, {n} steps");
+            }
+        }
     }
 
     /// The probe's limits test answers as the robot's, on two arms without actuators (its own
