@@ -287,6 +287,8 @@ pub(crate) struct LaneScratch {
     /// lane (a prismatic joint's travel in `sin`).
     sin: Vec<F8>,
     cos: Vec<F8>,
+    /// Per degree of freedom, its values in the lanes (see `transpose`).
+    cols: Vec<[f64; LANES]>,
     /// The batch now posed, counted from 1: the marks above need no clearing per batch (a
     /// clear and fill went through two `memset` calls a batch, and their `vzeroupper`s in the
     /// AVX2 kernel).
@@ -311,6 +313,7 @@ impl LaneScratch {
             posed: Vec::new(),
             sin: Vec::new(),
             cos: Vec::new(),
+            cols: Vec::new(),
             batch: 0,
             link_g: Vec::new(),
             link_g_for: None,
@@ -439,6 +442,22 @@ fn sin_cos_f32(x: &[f64; LANES]) -> ([f32; LANES], [f32; LANES]) {
         out_c[i] = f32::from_bits(b ^ ((q.wrapping_add(1) & 2) << 30));
     }
     (out_s, out_c)
+}
+
+/// The [`LANES`] configurations `qs` of `D` values each, written joint by joint over `cols`
+/// (sized here): `cols[j][i]` is value `j` of configuration `i`. `false` (nothing written)
+/// unless `qs` holds exactly that many values.
+#[inline(always)]
+fn transpose<const D: usize>(qs: &[f64], cols: &mut Vec<[f64; LANES]>) -> bool {
+    let Ok(rows) = <&[[f64; D]; LANES]>::try_from(qs.as_chunks::<D>().0) else { return false };
+    if qs.len() != D * LANES {
+        return false;
+    }
+    cols.resize(D, [0.0; LANES]);
+    for (j, col) in cols.iter_mut().enumerate().take(D) {
+        *col = std::array::from_fn(|i| rows[i][j]);
+    }
+    true
 }
 
 /// `(1 + 2^-21)`: see [`thr`].
@@ -900,11 +919,23 @@ impl SphereGeom {
         // frames: about 1% slower per MotionBenchMaker cage problem, 30 alternating rounds.)
         s.sin.resize(n, F8::ZERO);
         s.cos.resize(n, F8::ZERO);
+        // Each joint's values in the lanes, one row per joint: for the common arm sizes in one
+        // unrolled pass over rows of known length (read from the configurations body by body,
+        // about 40 instructions a body).
+        let transposed = match dof {
+            6 => transpose::<6>(qs, &mut s.cols),
+            7 => transpose::<7>(qs, &mut s.cols),
+            _ => false,
+        };
         for (k, (b, a)) in lanes.bodies.iter().zip(&self.angles).enumerate() {
             // The joint's value in each lane, read first, then turned into the angle in one
             // vectorisable pass (reading and arithmetic lane by lane in one loop was not).
             let mut x = [0.0f64; LANES];
-            if a.dof < dof {
+            if transposed {
+                if let Some(c) = s.cols.get(a.dof) {
+                    x = *c;
+                }
+            } else if a.dof < dof {
                 for (x, row) in x.iter_mut().zip(qs.chunks_exact(dof)) {
                     *x = row[a.dof];
                 }
@@ -1109,6 +1140,28 @@ mod tests {
         );
         b.mimic(j, "j5".to_string(), -0.5, 0.1);
         b.build().expect("a valid arm")
+    }
+
+    /// The lanes' joint rows are the configurations' values, for six and seven joints; other
+    /// lengths write nothing (the batch then reads the configurations body by body).
+    #[test]
+    fn joint_rows_hold_each_configurations_values() {
+        let mut rng = crate::Rng::new(23);
+        for d in [6usize, 7] {
+            let qs: Vec<f64> = (0..LANES * d).map(|_| rng.range(-4.0, 4.0)).collect();
+            let mut cols = Vec::new();
+            let ok = if d == 6 { transpose::<6>(&qs, &mut cols) } else { transpose::<7>(&qs, &mut cols) };
+            assert!(ok && cols.len() == d, "{d}");
+            for (i, q) in qs.chunks(d).enumerate() {
+                for (j, &v) in q.iter().enumerate() {
+                    assert_eq!(cols[j][i].to_bits(), v.to_bits(), "joint {j} of configuration {i}");
+                }
+            }
+            let mut untouched = vec![[1.0; LANES]; 2];
+            assert!(!transpose::<6>(&qs[..LANES * d - 1], &mut untouched), "{d}: one value short");
+            assert!(!transpose::<7>(&[qs.clone(), vec![0.0; 9]].concat(), &mut untouched), "{d}: too many");
+            assert_eq!(untouched, vec![[1.0; LANES]; 2], "nothing written");
+        }
     }
 
     /// The batch's sphere centres lie within its error bound of the double-precision ones, on
