@@ -155,6 +155,10 @@ struct Body {
     prismatic: bool,
     axis: [f32; 3],
     post: Option<([f32; 9], [f32; 3])>,
+    /// A revolute joint right after the parent's frame: no permutation, no sign, nothing after.
+    plain: bool,
+    /// The one coordinate of `pre_t` that is not zero, if only one is.
+    t_axis: Option<usize>,
 }
 
 /// A sphere robot's program and geometry in single precision, with its error bound.
@@ -355,6 +359,16 @@ fn place<O: Ops>(o: O, rot: &R<O>, pos: &P<O>, c: &[f32; 3]) -> P<O> {
         rot[3] * x + rot[4] * y + rot[5] * z + pos[1],
         rot[6] * x + rot[7] * y + rot[8] * z + pos[2],
     ]
+}
+
+/// [`place`] for a point whose only coordinate not zero is `K`: the products by the zeros are
+/// left out. Each is a zero, and adding a zero to a sum leaves it as it is (up to the sign of a
+/// zero result, which the squares and absolute values of the tests ignore), so the values are
+/// the full product's, with a third of its operations.
+#[inline(always)]
+fn place_on<O: Ops, const K: usize>(o: O, rot: &R<O>, pos: &P<O>, c: &[f32; 3]) -> P<O> {
+    let x = splat(o, c[K]);
+    [rot[K] * x + pos[0], rot[3 + K] * x + pos[1], rot[6 + K] * x + pos[2]]
 }
 
 /// Column `c` of the rotation `r` (row-major).
@@ -570,6 +584,14 @@ impl Lanes {
                 prismatic: b.prismatic,
                 axis: v3(&b.axis),
                 post: b.post.as_ref().map(|(r, t)| (m9(r), v3(t))),
+                t_axis: {
+                    let t = v3(&b.pre_t);
+                    let nz: Vec<usize> = (0..3).filter(|&i| t[i] != 0.0).collect();
+                    (nz.len() == 1).then(|| nz[0])
+                },
+                plain: !b.prismatic
+                    && b.post.is_none()
+                    && b.pre_perm.as_ref().is_some_and(|(perm, sign)| *perm == [0, 1, 2] && *sign == [1.0; 3]),
             })
             .collect();
         // The running error bound (module documentation): per body, the error of a rotation
@@ -959,7 +981,35 @@ impl SphereGeom {
             // The parent's frame in registers, built entry by entry (an array built by
             // `from_fn` went through `memcpy`).
             let pr: R<O> = load(o, parent_r);
-            let mut out_p = place(o, &pr, &load(o, &s.pos[b.parent]), &b.pre_t);
+            let pp = load(o, &s.pos[b.parent]);
+            // A translation along one axis (five of the UR5's six): its one column (the same
+            // values, see `place_on`).
+            let mut out_p = match b.t_axis {
+                Some(0) => place_on::<O, 0>(o, &pr, &pp, &b.pre_t),
+                Some(1) => place_on::<O, 1>(o, &pr, &pp, &b.pre_t),
+                Some(2) => place_on::<O, 2>(o, &pr, &pp, &b.pre_t),
+                _ => place(o, &pr, &pp, &b.pre_t),
+            };
+            // A revolute joint right after the parent's frame, with no permutation, no sign and
+            // nothing after (three of the UR5's six joints): the fused turn below without its
+            // products by 1, which leave their factors as they are (the same bits).
+            if b.plain {
+                let (sn, cs) = (L::load(o, s.sin[k]), L::load(o, s.cos[k]));
+                let out_r = [
+                    pr[0] * cs + pr[1] * sn,
+                    pr[1] * cs - pr[0] * sn,
+                    pr[2],
+                    pr[3] * cs + pr[4] * sn,
+                    pr[4] * cs - pr[3] * sn,
+                    pr[5],
+                    pr[6] * cs + pr[7] * sn,
+                    pr[7] * cs - pr[6] * sn,
+                    pr[8],
+                ];
+                store(&out_r, &mut s.rot[k + 1]);
+                store(&out_p, &mut s.pos[k + 1]);
+                continue;
+            }
             // A revolute joint after a signed permutation, with nothing after it (every joint
             // of the UR5): the turn reads the parent's columns as picked and takes their signs
             // into the sine and cosine. `(s c) x` is `s (c x)` and `s x` exactly for `s = ±1`,
@@ -1179,6 +1229,11 @@ mod tests {
         assert!(bodies.iter().any(fused), "{bodies:?}");
         assert!(bodies.iter().any(|b| matches!(b.pre, Pre::Perm(..)) && !fused(b)), "{bodies:?}");
         assert!(bodies.iter().any(|b| matches!(b.pre, Pre::Mat(..))), "{bodies:?}");
+        // A plain turn (no permutation), a fused one that is not plain, translations along one
+        // axis and not.
+        assert!(bodies.iter().any(|b| b.plain) && bodies.iter().any(|b| fused(b) && !b.plain), "{bodies:?}");
+        assert!(bodies.iter().any(|b| b.t_axis.is_some()), "{bodies:?}");
+        assert!(bodies.iter().any(|b| b.t_axis.is_none()), "{bodies:?}");
         let dof = robot.dof();
         let mut rng = crate::Rng::new(17);
         let mut s = LaneScratch::new();
