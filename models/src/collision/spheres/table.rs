@@ -315,7 +315,7 @@ mod tests {
 
     use super::super::super::{Environment, RobotGeom, disable_always_colliding};
     use super::super::{Check, SphereGeom, SphereScratch};
-    use super::CellTable;
+    use super::{CellTable, MAX_JOINTS, ROUND, finest_level};
     use crate::rng::Rng;
     use crate::urdf::load_urdf;
 
@@ -374,6 +374,49 @@ mod tests {
         assert!(!t.proves_box(&[f64::NAN, 0.0, 0.5 * w], &step));
         assert!(t.proves_box(&[0.5 * w, 0.0, 1.5 * w], &[0.0; 3]));
         assert!(!t.proves_box(&[0.5 * w, 0.0, 2.5 * w], &[0.0; 3]));
+    }
+
+    /// On random tables of one to three joints (nine cells in ten proven) and random boxes,
+    /// some wrapping past a turn, some spanning three cells: a box is proven exactly when the
+    /// cell of each of its corners is (corners on a cell edge count in both cells), the
+    /// reference taking every corner's cell through `cell`.
+    #[test]
+    fn a_box_is_proven_exactly_when_each_corners_cell_is() {
+        let mut rng = Rng::new(9);
+        let (mut yes, mut no) = (0, 0);
+        for n in 1..=MAX_JOINTS {
+            let level = finest_level(n);
+            let cells = 1usize << (level as usize * n);
+            let joints: Vec<usize> = [2, 0, 1][..n].to_vec();
+            let scale = (1u64 << level) as f64 / TAU;
+            let w = 1.0 / scale;
+            for _ in 0..20 {
+                let mut t = CellTable { joints: joints.clone(), level, scale, proven: vec![0; cells.div_ceil(64)] };
+                for i in 0..cells {
+                    if rng.uniform() < 0.9 {
+                        t.proven[i >> 6] |= 1 << (i & 63);
+                    }
+                }
+                for _ in 0..2000 {
+                    let q: Vec<f64> = (0..3).map(|_| rng.range(-8.0, 8.0)).collect();
+                    let step: Vec<f64> = (0..3).map(|_| rng.range(0.0, 1.2 * w)).collect();
+                    // Every corner `q ± step`; a span over three cells is never proven.
+                    let spans = joints.iter().all(|&j| {
+                        let cell = |x: f64| (x * scale - 0.5 + ROUND).to_bits() as i64;
+                        cell(q[j] + step[j]) - cell(q[j] - step[j]) <= 1
+                    });
+                    let corners = (0..1usize << 3).all(|c| {
+                        let corner: Vec<f64> =
+                            (0..3).map(|i| if (c >> i) & 1 == 1 { q[i] + step[i] } else { q[i] - step[i] }).collect();
+                        t.proves(&corner)
+                    });
+                    let expected = spans && corners;
+                    assert_eq!(t.proves_box(&q, &step), expected, "{n} joints: {q:?} ± {step:?}");
+                    if expected { yes += 1 } else { no += 1 }
+                }
+            }
+        }
+        assert!(yes > 1000 && no > 1000, "{yes} proven, {no} not");
     }
 
     /// Asserts that no sphere pair of group pair `gp` touches in the pose of `s`.
