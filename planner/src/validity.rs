@@ -345,11 +345,15 @@ fn bisection_order(n: usize, mut visit: impl FnMut(usize) -> bool) -> bool {
 /// The inner points of the segment from `a` by `delta` cut into `n` steps, `a + (i / n) delta`
 /// (as [`ConfigSpace::step_into`] computes them), in bisection order, written over `out` row by
 /// row, for `D` degrees of freedom: rows of known length, each filled in a few vector
-/// operations (through `step_into` and a slice per point: about 100 instructions a six-joint
-/// point). `false` (nothing written) when `a` or `delta` is not `D` long.
+/// operations (through `step_into` and a slice per point: about 85 instructions a six-joint
+/// point, with the bisection order). `false` (nothing written) when `a` or `delta` is not `D`
+/// long or `out` does not hold exactly the `n - 1` points.
 fn fill_inner<const D: usize>(a: &[f64], delta: &[f64], n: usize, out: &mut [f64]) -> bool {
     let (Ok(a), Ok(d)) = (<&[f64; D]>::try_from(a), <&[f64; D]>::try_from(delta)) else { return false };
-    let (rows, _) = out.as_chunks_mut::<D>();
+    let (rows, rest) = out.as_chunks_mut::<D>();
+    if rows.len() != n.saturating_sub(1) || !rest.is_empty() {
+        return false;
+    }
     let mut rows = rows.iter_mut();
     bisection_order(n, |i| {
         if let Some(row) = rows.next() {
@@ -460,6 +464,11 @@ mod tests {
                     _ => fill_inner::<6>(&a, &d, n, &mut rows),
                 };
                 assert_eq!(filled, dof == 6 || dof == 7, "{dof}");
+                let mut short = vec![f64::NAN; n.saturating_sub(2) * dof];
+                if n >= 2 {
+                    assert!(!fill_inner::<6>(&a, &d, n, &mut short) && !fill_inner::<7>(&a, &d, n, &mut short));
+                    assert!(short.iter().all(|v| v.is_nan()), "nothing written to a short buffer");
+                }
                 if !filled {
                     assert!(rows.iter().all(|v| v.is_nan()), "nothing written");
                     continue;
