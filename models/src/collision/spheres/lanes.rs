@@ -463,12 +463,10 @@ fn sin_cos_f32(x: &[f64; LANES]) -> ([f32; LANES], [f32; LANES]) {
 /// unless `qs` holds exactly that many values.
 #[inline(always)]
 fn transpose<const D: usize>(qs: &[f64], cols: &mut Vec<[f64; LANES]>) -> bool {
-    let Ok(rows) = <&[[f64; D]; LANES]>::try_from(qs.as_chunks::<D>().0) else { return false };
-    if qs.len() != D * LANES {
-        return false;
-    }
+    let (rows, rest) = qs.as_chunks::<D>();
+    let (Ok(rows), true) = (<&[[f64; D]; LANES]>::try_from(rows), rest.is_empty()) else { return false };
     cols.resize(D, [0.0; LANES]);
-    for (j, col) in cols.iter_mut().enumerate().take(D) {
+    for (j, col) in cols.iter_mut().enumerate() {
         *col = std::array::from_fn(|i| rows[i][j]);
     }
     true
@@ -586,8 +584,11 @@ impl Lanes {
                 post: b.post.as_ref().map(|(r, t)| (m9(r), v3(t))),
                 t_axis: {
                     let t = v3(&b.pre_t);
-                    let nz: Vec<usize> = (0..3).filter(|&i| t[i] != 0.0).collect();
-                    (nz.len() == 1).then(|| nz[0])
+                    let mut nz = (0..3).filter(|&i| t[i] != 0.0);
+                    match (nz.next(), nz.next()) {
+                        (Some(i), None) => Some(i),
+                        _ => None,
+                    }
                 },
                 plain: !b.prismatic
                     && b.post.is_none()
