@@ -816,3 +816,33 @@ fn settle_batch_refuses_bad_input_and_models_without_batches() {
         Some(embodied_models::collision::BatchSettled { free: 0, colliding: 0 })
     );
 }
+
+/// A scratch space handed on from another robot's queries (a dropped one comes back from the
+/// thread's spares) answers exactly as a new one: batches, single checks and certificates.
+#[test]
+fn a_scratch_handed_on_between_robots_answers_as_a_new_one() {
+    let robots = batch_robots();
+    let mut rng = Rng::new(17);
+    for round in 0..6 {
+        let (a, b) = (&robots[round % 3], &robots[(round + 1 + round / 3) % 3]);
+        let (ma, mb) =
+            (CollisionModel::new(a, closed_clutter(round as u64, 14)), CollisionModel::new(b, closed_clutter(7, 14)));
+        let mut used = ma.scratch();
+        for _ in 0..20 {
+            let qs: Vec<f64> = (0..8).flat_map(|_| a.random_configuration(&mut rng)).collect();
+            ma.batch_collisions_with(&qs, &mut used);
+            ma.certify(&qs[..a.dof()], &qs[a.dof()..2 * a.dof()], 1e-3, true, &mut used);
+        }
+        drop(used);
+        let mut handed = mb.scratch();
+        let mut fresh = embodied_models::collision::CollisionScratch::new();
+        let dof = b.dof();
+        for _ in 0..40 {
+            let qs: Vec<f64> = (0..8).flat_map(|_| b.random_configuration(&mut rng)).collect();
+            assert_eq!(mb.batch_collisions_with(&qs, &mut handed), mb.batch_collisions_with(&qs, &mut fresh));
+            assert_eq!(mb.collides_with(&qs[..dof], &mut handed), mb.collides_with(&qs[..dof], &mut fresh));
+            let (qa, qb) = (&qs[..dof], &qs[dof..2 * dof]);
+            assert_eq!(mb.certify(qa, qb, 1e-3, true, &mut handed), mb.certify(qa, qb, 1e-3, true, &mut fresh));
+        }
+    }
+}

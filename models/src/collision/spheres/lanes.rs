@@ -303,6 +303,8 @@ pub(crate) struct LaneScratch {
     link_g_for: Option<(u64, u64)>,
     /// The instruction set of the batches (see `simd8`).
     pub(crate) isa: Isa,
+    /// The bodies, groups, links and spheres the buffers above are sized for.
+    shape: [usize; 4],
 }
 
 impl LaneScratch {
@@ -322,7 +324,28 @@ impl LaneScratch {
             link_g: Vec::new(),
             link_g_for: None,
             isa: Isa::Best,
+            shape: [0; 4],
         }
+    }
+
+    /// Size the buffers for `shape` (see [`Self::shape`]) and clear the marks, numbering
+    /// batches from 1 again.
+    #[cold]
+    fn fit(&mut self, shape: [usize; 4]) {
+        let [bodies, groups, links, centres] = shape;
+        self.rot.resize(bodies, [F8::ZERO; 9]);
+        self.pos.resize(bodies, [F8::ZERO; 3]);
+        self.sin.resize(bodies, F8::ZERO);
+        self.cos.resize(bodies, F8::ZERO);
+        self.group_c.resize(groups, [F8::ZERO; 3]);
+        self.link_c.resize(links, [F8::ZERO; 3]);
+        self.centre.resize(centres, [F8::ZERO; 3]);
+        self.posed.clear();
+        self.posed.resize(links, 0);
+        self.link_posed.clear();
+        self.link_posed.resize(links, 0);
+        self.batch = 1;
+        self.shape = shape;
     }
 }
 
@@ -917,19 +940,11 @@ impl SphereGeom {
     fn pose_lanes<O: Ops>(&self, o: O, qs: &[f64], dof: usize, s: &mut LaneScratch) -> bool {
         let lanes = &self.lanes;
         let n = self.bodies.len();
-        s.rot.resize(n, [F8::ZERO; 9]);
-        s.pos.resize(n, [F8::ZERO; 3]);
-        s.group_c.resize(self.groups.len(), [F8::ZERO; 3]);
-        s.link_c.resize(self.links.len(), [F8::ZERO; 3]);
-        s.centre.resize(self.centre.len(), [F8::ZERO; 3]);
-        // A new batch number; the marks start again from 1 when it wraps or the links change.
+        // Sized once per model shape: seven `resize` calls a batch cost about 300 instructions.
+        let shape = [n, self.groups.len(), self.links.len(), self.centre.len()];
         s.batch = s.batch.wrapping_add(1);
-        if s.batch == 0 || s.posed.len() != self.links.len() || s.link_posed.len() != self.links.len() {
-            s.posed.clear();
-            s.posed.resize(self.links.len(), 0);
-            s.link_posed.clear();
-            s.link_posed.resize(self.links.len(), 0);
-            s.batch = 1;
+        if s.shape != shape || s.batch == 0 {
+            s.fit(shape);
         }
         s.rot[0] = lanes.base_r.map(|v| F8([v; LANES]));
         s.pos[0] = lanes.base_t.map(|v| F8([v; LANES]));
@@ -940,8 +955,6 @@ impl SphereGeom {
         // neither on one another nor on the frames, so their long chains of dependent operations
         // can overlap; the frames below only read them. (Computed body by body between the
         // frames: about 1% slower per MotionBenchMaker cage problem, 30 alternating rounds.)
-        s.sin.resize(n, F8::ZERO);
-        s.cos.resize(n, F8::ZERO);
         // Each joint's values in the lanes, one row per joint: for the common arm sizes in one
         // unrolled pass over rows of known length (read from the configurations body by body,
         // about 40 instructions a body).
