@@ -1710,7 +1710,7 @@ impl CollisionModel {
         let mut free = true;
         if listed && let (Some(fast), Some(solids32)) = (&self.fast, &self.solids32) {
             // The batches cut their own pieces (finer), or leave these to the loop below.
-            let bufs = (&mut margins, &mut step, &mut q);
+            let bufs = (&mut margins, &mut step);
             let first = (&travel[..], &steps[..], most, pieces);
             let (batches, hit) = self.first_level_in_lanes(fast, solids32, qa, &delta, first, &mut spans, bufs, s);
             checks += batches;
@@ -1800,7 +1800,7 @@ impl CollisionModel {
         delta: &[f64],
         (travel, steps, most, first): (&[f64], &[f64], f64, usize),
         spans: &mut Vec<Span>,
-        (margins, step, q): (&mut Vec<f64>, &mut Vec<f64>, &mut Vec<f64>),
+        (margins, step): (&mut Vec<f64>, &mut Vec<f64>),
         s: &mut CollisionScratch,
     ) -> (u32, bool) {
         let g = &*self.geom;
@@ -1811,7 +1811,7 @@ impl CollisionModel {
         while pieces < LANES_MAX_PIECES && most * 0.5 / pieces as f64 > LANES_START_MARGIN {
             pieces *= 2;
         }
-        if pieces < LANES_MIN_PIECES {
+        if pieces < LANES_MIN_PIECES || dof == 0 {
             bit_reversed_pieces(spans, first);
             return (0, false);
         }
@@ -1833,12 +1833,13 @@ impl CollisionModel {
         let mut from = 1;
         while from <= pieces {
             let n = lanes::LANES.min(pieces + 1 - from);
-            buf.clear();
-            for (k, i) in lane_piece.iter_mut().enumerate() {
+            // Written in place, lane by lane (through `q` and a copy: about 400 instructions a
+            // batch more).
+            buf.resize(lanes::LANES * dof, 0.0);
+            for ((k, i), row) in lane_piece.iter_mut().enumerate().zip(buf.chunks_exact_mut(dof)) {
                 *i = piece_in_order(from + k.min(n - 1), pieces);
                 // Exact: the midpoint `(t0 + t1) / 2` of the piece's ends (a power-of-two width).
-                ConfigSpace::step_into(qa, delta, (*i as f64 + 0.5) * width, q);
-                buf.extend_from_slice(q);
+                ConfigSpace::step_into(qa, delta, (*i as f64 + 0.5) * width, row);
             }
             from += lanes::LANES;
             let grow =
