@@ -224,6 +224,12 @@ impl<'m, V: StateValidity> Validity<'m, V> {
         self
     }
 
+    /// Whether [`Self::segment_free`] certifies segments (every point of a segment it passes is
+    /// free) rather than sampling them.
+    pub fn certifies(&self) -> bool {
+        self.certify.is_some()
+    }
+
     /// Within the position limits and collision-free.
     pub fn config_free(&mut self, q: &[f64]) -> bool {
         if !self.model.robot().within_limits(q) {
