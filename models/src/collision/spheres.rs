@@ -59,7 +59,13 @@ struct Body {
     /// `pre_perm` again when the body is revolute with no `post`, the UR5's every joint: `pose`
     /// then takes its shortest form.
     turn_perm: Option<([usize; 3], [f64; 3])>,
+    /// `turn_perm` is the identity with no sign (three of the UR5's six joints): the turn takes
+    /// no products by 1.
+    plain: bool,
     pre_t: Vector3<f64>,
+    /// The one coordinate of `pre_t` that is not zero, when there is one (five of the UR5's
+    /// six): the translation takes one column of the parent's rotation.
+    t_axis: Option<usize>,
     /// The joint axis in this body's (turned) frame: `e_z` for a revolute joint; for a prismatic
     /// joint, in the frame after `pre`.
     axis: Vector3<f64>,
@@ -742,6 +748,8 @@ impl SphereGeom {
                 pre_r: mat(&b.pre.rotation),
                 pre_perm: None,
                 turn_perm: None,
+                plain: false,
+                t_axis: None,
                 pre_t: b.pre.translation.vector,
                 axis: b.axis.into_inner(),
                 prismatic: b.prismatic,
@@ -768,6 +776,9 @@ impl SphereGeom {
             }
             b.pre_perm = signed_permutation(&b.pre_r);
             b.turn_perm = b.pre_perm.filter(|_| !b.prismatic && b.post.is_none());
+            b.plain = b.turn_perm == Some(([0, 1, 2], [1.0; 3]));
+            let nonzero: Vec<usize> = (0..3).filter(|&k| b.pre_t[k] != 0.0).collect();
+            b.t_axis = (nonzero.len() == 1).then(|| nonzero[0]);
         }
         arms.use_turned_axes(&bodies);
         let angles = bodies
@@ -906,6 +917,23 @@ impl SphereGeom {
         for (i, b) in self.bodies.iter().enumerate().skip(1) {
             let (v, sn, cs) = (angle[i - 1], sin[i - 1], cos[i - 1]);
             let (pr, pp) = (&rot[b.parent], pos[b.parent]);
+            // The parent's rotation times `pre_t`: along one axis, that axis's column (the
+            // other products are by zero, and adding their zeros changes no value).
+            let along = |pr: &Matrix3<f64>| match b.t_axis {
+                Some(k) => pr.column(k) * b.pre_t[k],
+                None => mul3v(pr, &b.pre_t),
+            };
+            if b.plain {
+                // The turn below with the identity and no signs: no products by 1 (the same
+                // values).
+                let col = |k: usize| Vector3::new(pr[(0, k)], pr[(1, k)], pr[(2, k)]);
+                let (a, bb, c) = (col(0), col(1), col(2));
+                let x = a * cs + bb * sn;
+                let y = bb * cs - a * sn;
+                pos[i] = along(pr) + pp;
+                rot[i] = Matrix3::from_columns(&[x, y, c]);
+                continue;
+            }
             if let Some((cols, sign)) = &b.turn_perm {
                 // pr * P * Rz(v), P a signed permutation: the columns are the parent's columns
                 // `cols` with signs, the first two mixed by the joint's cosine and sine.
@@ -915,7 +943,7 @@ impl SphereGeom {
                 let x = a * k0 + bb * k1;
                 let y = bb * k2 - a * k3;
                 let z = c * sign[2];
-                pos[i] = mul3v(pr, &b.pre_t) + pp;
+                pos[i] = along(pr) + pp;
                 rot[i] = Matrix3::from_columns(&[x, y, z]);
                 continue;
             }
