@@ -935,6 +935,8 @@ impl CollisionModel {
     pub fn scratch(&self) -> CollisionScratch {
         let spare = SPARE.try_with(|spare| spare.try_borrow_mut().ok().and_then(|mut v| v.pop())).ok().flatten();
         let mut s = spare.unwrap_or_default();
+        // A spare may have been set to the baseline vectors: a new scratch uses the best.
+        s.spheres.lanes.isa = Isa::Best;
         s.begin(&self.geom);
         // Room for a typical certificate, so that planning does not grow them piece by piece.
         let (dof, rows) = (self.geom.dof, self.geom.links.len() + self.geom.self_pairs.len());
@@ -2000,6 +2002,21 @@ pub fn disable_never_colliding(robot: &mut Robot, max_relative_dofs: usize, max_
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A dropped scratch comes back from the thread's spares with its buffers, and with the best
+    /// vector instructions even if it was set to the baseline ones.
+    #[test]
+    fn spare_scratches_come_back_grown_and_on_the_best_vectors() {
+        let robot = crate::builtin("polycrank").expect("robot");
+        let model = CollisionModel::new(&robot, Environment::new());
+        let s = model.scratch().with_baseline_vectors();
+        let grown = s.body_iso.capacity();
+        assert!(grown > 0);
+        drop(s);
+        let again = model.scratch();
+        assert_eq!(again.body_iso.capacity(), grown, "the spare is handed out");
+        assert_eq!(again.spheres.lanes.isa, Isa::Best);
+    }
 
     /// The table's order is the bit reversal of each piece's index, for every power-of-two
     /// count a first level can have: the middle first, then the quarters, and every piece once.
