@@ -60,11 +60,11 @@ struct Body {
     /// then takes its shortest form.
     turn_perm: Option<([usize; 3], [f64; 3])>,
     /// `turn_perm` is the identity with no sign (three of the UR5's six joints): the turn takes
-    /// no products by 1.
+    /// no products by 1 (here and in the single-precision batch).
     plain: bool,
     pre_t: Vector3<f64>,
     /// The one coordinate of `pre_t` that is not zero, when there is one (five of the UR5's
-    /// six): the translation takes one column of the parent's rotation.
+    /// six): the translation takes one column of the parent's rotation (here and in the batch).
     t_axis: Option<usize>,
     /// The joint axis in this body's (turned) frame: `e_z` for a revolute joint; for a prismatic
     /// joint, in the frame after `pre`.
@@ -777,8 +777,11 @@ impl SphereGeom {
             b.pre_perm = signed_permutation(&b.pre_r);
             b.turn_perm = b.pre_perm.filter(|_| !b.prismatic && b.post.is_none());
             b.plain = b.turn_perm == Some(([0, 1, 2], [1.0; 3]));
-            let nonzero: Vec<usize> = (0..3).filter(|&k| b.pre_t[k] != 0.0).collect();
-            b.t_axis = (nonzero.len() == 1).then(|| nonzero[0]);
+            let mut nonzero = (0..3).filter(|&k| b.pre_t[k] != 0.0);
+            b.t_axis = match (nonzero.next(), nonzero.next()) {
+                (Some(k), None) => Some(k),
+                _ => None,
+            };
         }
         arms.use_turned_axes(&bodies);
         let angles = bodies

@@ -605,17 +605,9 @@ impl Lanes {
                 prismatic: b.prismatic,
                 axis: v3(&b.axis),
                 post: b.post.as_ref().map(|(r, t)| (m9(r), v3(t))),
-                t_axis: {
-                    let t = v3(&b.pre_t);
-                    let mut nz = (0..3).filter(|&i| t[i] != 0.0);
-                    match (nz.next(), nz.next()) {
-                        (Some(i), None) => Some(i),
-                        _ => None,
-                    }
-                },
-                plain: !b.prismatic
-                    && b.post.is_none()
-                    && b.pre_perm.as_ref().is_some_and(|(perm, sign)| *perm == [0, 1, 2] && *sign == [1.0; 3]),
+                // The double-precision body's forms (a zero coordinate stays zero in `f32`).
+                t_axis: b.t_axis,
+                plain: b.plain,
             })
             .collect();
         // The running error bound (module documentation): per body, the error of a rotation
