@@ -481,6 +481,12 @@ pub(crate) struct SphereScratch {
     /// The near items of the motion certificate's sub-intervals (see [`Item`]), in the order
     /// the checks found them: each sub-interval's own is a range of this.
     pub(crate) items: Vec<Item>,
+    /// After a listing query ([`SphereGeom::check_listed`]) that answered `Near`: the smallest
+    /// ratio, over what it found near, of the exact gap to the margin that gap was tested
+    /// against (in `[0, 1)`; 1 when nothing was near). Every margin grows at least in
+    /// proportion to the sub-interval (see `reach` in the certificate), so the query certifies
+    /// free the part of its sub-interval within this share of its half-length of the midpoint.
+    pub(crate) reach: f64,
     /// The batched path's working memory (see [`batch`]).
     pub(crate) batch: batch::BatchScratch,
     /// Configurations of a batch, one after another.
@@ -518,10 +524,21 @@ impl SphereScratch {
             group_e: Vec::new(),
             stamp: 0,
             items: Vec::new(),
+            reach: 1.0,
             batch: batch::BatchScratch::new(),
             batch_q: Vec::new(),
             lanes: lanes::LaneScratch::new(),
         }
+    }
+}
+
+/// `reach` lowered to `gap / margin`: a near item's exact gap (distance less the radii, not
+/// negative) over the margin it was tested against.
+#[inline]
+fn note_gap(reach: &mut f64, gap: f64, margin: f64) {
+    let r = (gap - 2e-12).max(0.0) / margin;
+    if r < *reach {
+        *reach = r;
     }
 }
 
@@ -1095,11 +1112,15 @@ impl SphereGeom {
         s: &mut SphereScratch,
     ) -> Check {
         self.pose_with::<false>(q, s);
+        s.reach = 1.0;
         let mut near = false;
         for n in range {
             let item = s.items[n];
             match item {
-                Item::Fixed => near = true,
+                Item::Fixed => {
+                    near = true;
+                    s.reach = 0.0;
+                }
                 Item::Obstacle { k, l, o } => {
                     let (k, l, o) = (k as usize, l as usize, o as usize);
                     let p = self.pose_sphere(k, l, s);
@@ -1113,10 +1134,12 @@ impl SphereGeom {
                             if d2 > rel * rel {
                                 continue;
                             }
-                            let re = if near { f64::INFINITY } else { r + self.margin(k, 0, inf.step, Some(s)) };
+                            let m = self.margin(k, 0, inf.step, Some(s));
+                            let re = r + m;
                             if d2 > re * re {
                                 continue;
                             }
+                            note_gap(&mut s.reach, d2.sqrt() - r, m);
                         }
                         None => {
                             let sep =
@@ -1124,9 +1147,11 @@ impl SphereGeom {
                             if sep.distance <= 0.0 {
                                 return Check::Hit;
                             }
-                            if !near && sep.distance > self.margin(k, 0, inf.step, Some(s)) {
+                            let m = self.margin(k, 0, inf.step, Some(s));
+                            if sep.distance > m {
                                 continue;
                             }
+                            note_gap(&mut s.reach, sep.distance, m);
                         }
                     }
                     near = true;
@@ -1142,14 +1167,12 @@ impl SphereGeom {
                     if d2 > grown * grown {
                         continue;
                     }
-                    let re = if near {
-                        f64::INFINITY
-                    } else {
-                        r + self.pair_margin(i, j, self.pair_common[p] as usize, inf.step, s)
-                    };
+                    let m = self.pair_margin(i, j, self.pair_common[p] as usize, inf.step, s);
+                    let re = r + m;
                     if d2 > re * re {
                         continue;
                     }
+                    note_gap(&mut s.reach, d2.sqrt() - r, m);
                     near = true;
                 }
             }
@@ -1175,11 +1198,13 @@ impl SphereGeom {
         // exact contact matters, so the rest of the query runs without margins.
         let mut inf = if GROW { inflation } else { None };
         let mut near = false;
+        s.reach = 1.0;
         match self.fixed {
             Check::Hit => return Check::Hit,
             Check::Near if inf.is_some() => {
                 near = true;
                 if COLLECT {
+                    s.reach = 0.0;
                     s.items.push(Item::Fixed);
                 } else {
                     inf = None;
@@ -1264,11 +1289,6 @@ impl SphereGeom {
                                     // only when the loose one touches.
                                     let rel = r + el;
                                     if d2 <= rel * rel {
-                                        if COLLECT && near {
-                                            // Already near: listed on the link's bound.
-                                            s.items.push(item);
-                                            continue;
-                                        }
                                         if ml == f64::INFINITY {
                                             ml = self.link_margin(l, i.step, s);
                                         }
@@ -1276,10 +1296,12 @@ impl SphereGeom {
                                         if d2 > rl * rl {
                                             continue;
                                         }
-                                        let re = r + self.margin(k, 0, i.step, Some(s));
+                                        let m = self.margin(k, 0, i.step, Some(s));
+                                        let re = r + m;
                                         if d2 <= re * re {
                                             near = true;
                                             if COLLECT {
+                                                note_gap(&mut s.reach, d2.sqrt() - r, m);
                                                 s.items.push(item);
                                             } else {
                                                 inf = None;
@@ -1293,14 +1315,16 @@ impl SphereGeom {
                                 if sep.distance <= 0.0 {
                                     return Check::Hit;
                                 }
-                                if let Some(i) = inf
-                                    && ((COLLECT && near) || sep.distance <= self.margin(k, 0, i.step, Some(s)))
-                                {
-                                    near = true;
-                                    if COLLECT {
-                                        s.items.push(item);
-                                    } else {
-                                        inf = None;
+                                if let Some(i) = inf {
+                                    let m = self.margin(k, 0, i.step, Some(s));
+                                    if sep.distance <= m {
+                                        near = true;
+                                        if COLLECT {
+                                            note_gap(&mut s.reach, sep.distance, m);
+                                            s.items.push(item);
+                                        } else {
+                                            inf = None;
+                                        }
                                     }
                                 }
                             }
@@ -1406,18 +1430,15 @@ impl SphereGeom {
                                         li: run.outer as u32,
                                         lj: rp.link,
                                     };
-                                    if COLLECT && *near {
-                                        // Already near: listed on the pair's bound.
-                                        s.items.push(item);
-                                        continue;
-                                    }
                                     self.pose_link(run.outer, s);
                                     self.pose_link(rp.link as usize, s);
                                     let stop = self.pair_common[p] as usize;
-                                    let re = r + self.pair_margin(i, first + m, stop, inf_now.step, s);
+                                    let pm = self.pair_margin(i, first + m, stop, inf_now.step, s);
+                                    let re = r + pm;
                                     if d2 <= re * re {
                                         *near = true;
                                         if COLLECT {
+                                            note_gap(&mut s.reach, d2.sqrt() - r, pm);
                                             s.items.push(item);
                                         } else {
                                             *inf = None;

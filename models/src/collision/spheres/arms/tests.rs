@@ -367,6 +367,62 @@ proptest! {
     }
 }
 
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(48))]
+
+    /// Every margin grows at least in proportion to the joint steps (what lets a listing query
+    /// certify free the share of its sub-interval around the midpoint that its nearest item's
+    /// gap allows: see `reach_of` in the certificate): at a random pose, with the steps of a
+    /// random segment's sub-interval, each sphere's margin against the world and against
+    /// each body up its chain, and each self pair's margin, for `a` times the steps is at
+    /// most `a` times the margin for the steps (the absolute slack aside).
+    #[test]
+    fn margins_grow_at_least_in_proportion_to_the_steps(
+        which in 0usize..7, seed in any::<u64>(), scale in 0.005f64..1.0, a in 0.0f64..=1.0,
+    ) {
+        let robots = robots();
+        let robot = &robots[which];
+        let g = sphere_geom(robot);
+        let fast = SphereGeom::new(&g, false).unwrap();
+        let (qa, qb) = segment(robot, seed, scale);
+        let space = robot.config_space();
+        let half = 0.5f64.powi((seed % 5) as i32 + 1);
+        let step: Vec<f64> = (0..qa.len()).map(|i| space.delta(i, qa[i], qb[i]).abs() * half).collect();
+        let part: Vec<f64> = step.iter().map(|d| d * a).collect();
+        let mut at = SphereScratch::new();
+        fast.pose(&space.interpolate(&qa, &qb, Rng::new(seed).uniform()), &mut at);
+        for l in 0..fast.links.len() {
+            fast.pose_link(l, &mut at);
+        }
+        let within = |small: f64, whole: f64, slack: f64| (small - slack) <= a * (whole - slack) * (1.0 + 1e-12) + 1e-15;
+        for lk in &fast.links {
+            for k in lk.first..lk.end {
+                let mut b = lk.body;
+                loop {
+                    let (small, whole) = (fast.margin(k, b, &part, Some(&at)), fast.margin(k, b, &step, Some(&at)));
+                    prop_assert!(within(small, whole, 1e-12), "{}: sphere {k} against body {b}: {small} for {a} of {whole}", robot.name());
+                    if b == 0 {
+                        break;
+                    }
+                    b = fast.bodies[b].parent;
+                }
+            }
+        }
+        for p in 0..fast.self_pairs.len() {
+            let (la, lb) = fast.self_pairs[p];
+            let stop = fast.pair_common[p] as usize;
+            let (la, lb) = (&fast.links[la as usize], &fast.links[lb as usize]);
+            for i in la.first..la.end {
+                for j in lb.first..lb.end {
+                    let small = fast.pair_margin(i, j, stop, &part, &at);
+                    let whole = fast.pair_margin(i, j, stop, &step, &at);
+                    prop_assert!(within(small, whole, 2e-12), "{}: pair {p} ({i}, {j}): {small} for {a} of {whole}", robot.name());
+                }
+            }
+        }
+    }
+}
+
 /// A segment with both ends free: from a random configuration a random share in `lo..hi` of
 /// the way to another.
 fn free_ends(robot: &Robot, model: &CollisionModel, rng: &mut Rng, lo: f64, hi: f64) -> (Vec<f64>, Vec<f64>) {
@@ -524,5 +580,53 @@ fn listed_certificate_passes_what_the_full_one_does_and_stays_sound() {
             "{}: {both} passed by both, {only_listed} by the listed alone, {refused} by neither",
             robot.name()
         );
+    }
+}
+
+/// What a listing query certifies free around its sub-interval's midpoint (the share its
+/// nearest item's gap allows, see `reach_of` in the certificate) is free when sampled every
+/// 1e-4 rad (or m): on sub-intervals of random segments among obstacles, for the UR5 in the
+/// table-pick scene plus clutter, the mimic arm and the snake (whose self pairs are near all
+/// the time). Many queries are near and certify some share, which the certificate then skips.
+#[test]
+fn what_a_listing_query_certifies_around_the_midpoint_is_free() {
+    for (which, robot) in [ur5(), mimic_arm(), snake()].iter().enumerate() {
+        let mut env = clutter(60 + which as u64);
+        if which == 0 {
+            for o in table_pick().obstacles() {
+                env.add(o.clone());
+            }
+        }
+        let model = sphere_model(robot, env);
+        let space = robot.config_space();
+        let mut s = model.scratch();
+        let mut rng = Rng::new(7 + which as u64);
+        let (mut reached, mut most) = (0, 0);
+        let mut q = vec![0.0; robot.dof()];
+        for _ in 0..150 {
+            let (qa, qb) = free_ends(robot, &model, &mut rng, 0.05, 0.8);
+            let (a, b) = (rng.uniform(), rng.uniform());
+            let (t0, t1) = (a.min(b), a.max(b));
+            let (answer, rho) = model.span_query(&qa, &qb, (t0, t1), &mut s).unwrap();
+            if answer != super::super::Check::Near || rho == 0.0 {
+                continue;
+            }
+            reached += 1;
+            let half = 0.5 * (t1 - t0);
+            most += usize::from(rho > 0.5 * half);
+            let tm = t0 + half;
+            let (lo, hi) = (space.interpolate(&qa, &qb, tm - rho), space.interpolate(&qa, &qb, tm + rho));
+            let n = (space.max_joint_step(&lo, &hi) / 1e-4).ceil().max(1.0) as usize;
+            for k in 0..=n {
+                space.interpolate_into(&qa, &qb, tm - rho + 2.0 * rho * k as f64 / n as f64, &mut q);
+                assert!(
+                    !model.collides(&q),
+                    "{}: certified around {tm} ({rho} either side) but collides at {q:?}",
+                    robot.name()
+                );
+            }
+        }
+        eprintln!("{}: {reached} queries near with a share certified, {most} of them more than half", robot.name());
+        assert!(reached > 10 && most > 0, "{}: {reached} near with a share, {most} more than half", robot.name());
     }
 }
