@@ -318,6 +318,10 @@ enum BenchCommand {
         /// Random shortcut attempts per path after the greedy pass (more: shorter paths, slower).
         #[arg(long)]
         shortcut_attempts: Option<usize>,
+        /// The least share of the path's length a random shortcut must gain to be checked (0:
+        /// any; the planner's default 0.01)
+        #[arg(long)]
+        shortcut_min_gain: Option<f64>,
         /// Planners racing per problem (1: one planner; 2: two differently seeded planners, the
         /// second joining on the rayon pool after 1 ms; the first path wins and stops the other).
         #[arg(long, default_value_t = 1)]
@@ -773,6 +777,7 @@ fn run(cli: Cli) -> Result<(), AppError> {
             algorithm,
             resolution,
             shortcut_attempts,
+            shortcut_min_gain,
             threads,
             rrt_range,
             no_dynamic_domain,
@@ -804,6 +809,14 @@ fn run(cli: Cli) -> Result<(), AppError> {
             }
             if let Some(n) = shortcut_attempts {
                 args.shortcut_attempts = n;
+            }
+            if let Some(g) = shortcut_min_gain {
+                if !(g.is_finite() && g >= 0.0) {
+                    return Err(AppError::Usage(format!(
+                        "--shortcut-min-gain must be zero or a positive number, got {g}"
+                    )));
+                }
+                args.shortcut_min_gain = g;
             }
             args.deadline_ms = deadline_ms;
             args.limit = limit;

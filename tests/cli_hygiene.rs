@@ -47,6 +47,12 @@ fn exit_status_0_success_1_not_succeeded_2_bad_input() {
     assert_eq!(code, 2, "{err}");
     let (code, _, _) = embodied(&["run", "--duration", "-1"]);
     assert_eq!(code, 2);
+    for gain in ["--shortcut-min-gain=-0.1", "--shortcut-min-gain=nan"] {
+        let args = ["bench", "mbm", "--urdf", "u.urdf", "--srdf", "u.srdf", "--problems", "none", gain];
+        let (code, _, err) = embodied(&args);
+        assert_eq!(code, 2, "{err}");
+        assert!(err.contains("--shortcut-min-gain must be zero or a positive number"), "{err}");
+    }
     // The statuses are documented in --help.
     let (code, out, _) = embodied(&["--help"]);
     assert_eq!(code, 0);

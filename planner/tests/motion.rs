@@ -257,6 +257,14 @@ fn goal_errors_are_specific() {
     assert!(matches!(err, Err(PlanError::InvalidInput { .. })), "{err:?}");
     let err = plan_motion(&model, &start, &Goal::AnyOf(vec![]), &MotionSettings::default());
     assert!(matches!(err, Err(PlanError::InvalidInput { .. })), "{err:?}");
+    for gain in [-0.1, f64::NAN, f64::INFINITY] {
+        let settings = MotionSettings { shortcut_min_gain: gain, ..MotionSettings::default() };
+        let err = plan_motion(&model, &start, &Goal::Configuration(start.clone()), &settings);
+        assert!(
+            matches!(&err, Err(PlanError::InvalidInput { message }) if message.contains("shortcut_min_gain")),
+            "{err:?}"
+        );
+    }
 }
 
 #[test]

@@ -57,6 +57,9 @@ pub struct MbmArgs {
     pub resolution: f64,
     /// Random shortcut attempts after the greedy shortcut pass (the planner's default: 5).
     pub shortcut_attempts: usize,
+    /// The least share of the path's length a random shortcut must gain to be checked (the
+    /// planner's default: 0.01).
+    pub shortcut_min_gain: f64,
     /// The planner after the straight segment (default: RRT-Connect).
     pub algorithm: PlannerKind,
     /// RRT-Connect's largest step (rad).
@@ -99,6 +102,7 @@ impl MbmArgs {
             edge_check: EdgeCheck::Certified { tolerance: CERTIFY_TOLERANCE },
             resolution: VERIFY_RESOLUTION,
             shortcut_attempts: MotionSettings::default().shortcut_attempts,
+            shortcut_min_gain: MotionSettings::default().shortcut_min_gain,
             algorithm: PlannerKind::RrtConnect,
             rrt_range: MotionSettings::default().rrt_range,
             dynamic_domain: MotionSettings::default().rrt_dynamic_domain,
@@ -226,6 +230,10 @@ pub struct MbmSettings {
     pub resolution: f64,
     /// Random shortcut attempts after the greedy shortcut pass.
     pub shortcut_attempts: usize,
+    /// The least share of the path's length a random shortcut had to gain to be checked
+    /// (absent in reports written before it existed: read as 0).
+    #[serde(default)]
+    pub shortcut_min_gain: f64,
     /// The planner after the straight segment.
     pub algorithm: PlannerKind,
     /// RRT-Connect's largest step, rad.
@@ -581,6 +589,7 @@ fn run_problem(args: &MbmArgs, loaded: &Loaded, p: &ProblemFiles, run: u32) -> R
         edge_check: args.edge_check,
         deadline: Deadline::after(budget),
         shortcut_attempts: args.shortcut_attempts,
+        shortcut_min_gain: args.shortcut_min_gain,
         planner: args.algorithm,
         rrt_range: args.rrt_range,
         rrt_dynamic_domain: args.dynamic_domain,
@@ -733,6 +742,7 @@ fn settings_of(args: &MbmArgs, loaded: &Loaded) -> MbmSettings {
         edge_check: args.edge_check,
         resolution: args.resolution,
         shortcut_attempts: args.shortcut_attempts,
+        shortcut_min_gain: args.shortcut_min_gain,
         algorithm: args.algorithm,
         rrt_range: args.rrt_range,
         dynamic_domain: args.dynamic_domain,

@@ -172,6 +172,7 @@ pub fn ompl_log(report: &MbmReport, family: &str, index: u32, machine: &Machine,
             serde_json::to_value(s.sampler).ok().and_then(|v| v.as_str().map(str::to_string)).unwrap_or_default()
         ),
         format!("shortcut_attempts = {}", s.shortcut_attempts),
+        format!("shortcut_min_gain = {}", s.shortcut_min_gain),
         format!("threads = {}", s.threads),
     ];
     line(format!("{} common properties", common.len()));

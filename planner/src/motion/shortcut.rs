@@ -9,19 +9,21 @@ use crate::validity::{StateValidity, Validity};
 
 /// Shorten `path` with the greedy pass (when `greedy`: lazy RRT-Connect has run it already)
 /// and up to `attempts` shortcut tries between random points of the path (vertices or points
-/// inside segments).
+/// inside segments), each checked only if it would shorten the path by at least `min_gain`
+/// times its length (see [`super::MotionSettings::shortcut_min_gain`]).
 pub(crate) fn shortcut<V: StateValidity>(
     mut path: Vec<Vec<f64>>,
     validity: &mut Validity<'_, V>,
     budget: &mut Budget<'_>,
     rng: &mut Rng,
     greedy: bool,
-    attempts: usize,
+    (attempts, min_gain): (usize, f64),
 ) -> Vec<Vec<f64>> {
     if greedy {
         path = greedy_pass(path, validity, budget);
     }
     let space = validity.space.clone();
+    let mut length: f64 = path.windows(2).map(|w| space.distance(&w[0], &w[1])).sum();
     for _ in 0..attempts {
         if path.len() < 3 || budget.spend(1, validity.collision_checks) {
             break;
@@ -42,7 +44,8 @@ pub(crate) fn shortcut<V: StateValidity>(
         let old = space.distance(&p1, &path[s1 + 1])
             + path[s1 + 1..=s2].windows(2).map(|w| space.distance(&w[0], &w[1])).sum::<f64>()
             + space.distance(&path[s2], &p2);
-        if space.distance(&p1, &p2) >= old - 1e-9 {
+        let gain = old - space.distance(&p1, &p2);
+        if gain <= 1e-9 || gain < min_gain * length {
             continue;
         }
         // Certified segments are free at every point, so `p1` and `p2` are: then the new
@@ -62,6 +65,7 @@ pub(crate) fn shortcut<V: StateValidity>(
             next.extend(path[s2 + 1..].iter().cloned());
             next.dedup_by(|a, b| space.distance(a, b) < 1e-12);
             path = next;
+            length -= gain;
         }
     }
     path
@@ -155,7 +159,7 @@ mod tests {
             let length = |p: &[Vec<f64>]| p.windows(2).map(|w| space.distance(&w[0], &w[1])).sum::<f64>();
             let deadline = Deadline::none();
             let mut budget = Budget::new(&deadline);
-            let short = shortcut(path.clone(), &mut validity, &mut budget, &mut rng, false, 20);
+            let short = shortcut(path.clone(), &mut validity, &mut budget, &mut rng, false, (20, 0.0));
             assert_eq!((short.first(), short.last()), (path.first(), path.last()));
             assert!(length(&short) <= length(&path) + 1e-9);
             for w in short.windows(2) {
@@ -163,6 +167,11 @@ mod tests {
             }
             taken += usize::from(short.len() != path.len() || length(&short) < length(&path) - 1e-9);
             paths += 1;
+            // No shortcut can gain the whole length: none is checked, the path stays.
+            let edges = validity.edges_checked;
+            let kept = shortcut(short.clone(), &mut validity, &mut budget, &mut rng, false, (20, 1.0));
+            assert_eq!(kept, short);
+            assert_eq!(validity.edges_checked, edges, "a shortcut below the least gain was checked");
         }
         assert!(taken > paths / 4, "shortcuts taken on {taken} of {paths} paths");
     }
