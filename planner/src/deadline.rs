@@ -183,6 +183,9 @@ pub(crate) struct Budget<'d> {
     pub started: Instant,
     /// The limit that stopped planning, once one has.
     stopped: Option<Interrupt>,
+    /// Called once, at the first clock read at least this long after the start (a race of
+    /// planners hands its other racers to the thread pool then: see [`Self::with_hand_over`]).
+    hand_over: Option<(&'d dyn Fn(), Duration)>,
 }
 
 /// At most this many collision checks between two reads of the clock (a few hundred µs).
@@ -198,7 +201,15 @@ impl<'d> Budget<'d> {
             since_clock: 0,
             started: Instant::now(),
             stopped: None,
+            hand_over: None,
         }
+    }
+
+    /// Calls `f` once, at the first clock read (every few units of work, see [`Self::spend`])
+    /// at least `after` past the start, unless planning ends before.
+    pub fn with_hand_over(mut self, f: &'d dyn Fn(), after: Duration) -> Self {
+        self.hand_over = Some((f, after));
+        self
     }
 
     /// Count `units` of work, `checks` being the collision checks made so far; true when
@@ -214,6 +225,12 @@ impl<'d> Budget<'d> {
         if read_clock {
             self.since_clock = 0;
             self.checks_at_clock = self.checks;
+            if let Some((f, after)) = self.hand_over
+                && self.started.elapsed() >= after
+            {
+                self.hand_over = None;
+                f();
+            }
         }
         match self.deadline.check(self.work, self.checks, read_clock) {
             Some(cause) => {
@@ -266,5 +283,28 @@ mod tests {
         let cancel = Arc::new(AtomicBool::new(true));
         let deadline = Deadline::none().with_cancel_flag(cancel);
         assert!(Budget::new(&deadline).spend(1, 0), "the caller's flag too");
+    }
+
+    /// The hand-over of a race is called once, at a clock read past its time, and never by
+    /// planning that ends before it.
+    #[test]
+    fn the_hand_over_is_called_once_at_a_clock_read_past_its_time() {
+        let calls = std::cell::Cell::new(0);
+        let count = || calls.set(calls.get() + 1);
+        let deadline = Deadline::none().with_race_flag(Arc::new(AtomicBool::new(false)));
+        let mut budget = Budget::new(&deadline).with_hand_over(&count, Duration::ZERO);
+        for _ in 0..7 {
+            assert!(!budget.spend(1, 0));
+        }
+        assert_eq!(calls.get(), 0, "no clock read yet");
+        for _ in 0..100 {
+            assert!(!budget.spend(1, 0));
+        }
+        assert_eq!(calls.get(), 1, "once, at the first clock read");
+        let mut budget = Budget::new(&deadline).with_hand_over(&count, Duration::from_secs(3600));
+        for _ in 0..100 {
+            assert!(!budget.spend(1, 0));
+        }
+        assert_eq!(calls.get(), 1, "not before its time");
     }
 }

@@ -299,12 +299,12 @@ pub fn plan_motion_with<V: StateValidity>(
     if settings.racers > 1 {
         return race(model, start, goal, settings);
     }
-    plan_alone(model, start, goal, settings, Stages::All)
+    plan_alone(model, start, goal, settings, Stages::All, None)
 }
 
-/// How long racer 0 of [`MotionSettings::racers`] plans alone before the others start. Most
-/// MotionBenchMaker UR5 searches end within it, so they pay nothing for the race; the tail is
-/// where a second seed pays. On the 400 generated narrow-passage problems (four interleaved
+/// How long racer 0 of [`MotionSettings::racers`] plans alone before the others are handed to
+/// the thread pool. Most MotionBenchMaker UR5 searches end within it, so they pay nothing for
+/// the race; the tail is where a second seed pays. On the 400 generated narrow-passage problems (four interleaved
 /// runs on the 2-core machine), a head start of 1 ms gave p50 426-464 µs (one core: 426-624),
 /// 300 µs gave 496-719 µs; p95 3.8-4.8 ms either way (one core: 7.8-11.4 ms).
 const RACE_HEAD_START: std::time::Duration = std::time::Duration::from_micros(1000);
@@ -333,19 +333,19 @@ fn race<V: StateValidity>(
     use std::sync::atomic::{AtomicBool, Ordering};
 
     // The straight segment first, on this thread: most problems end there and need no race.
-    match plan_alone(model, start, goal, settings, Stages::Direct) {
+    match plan_alone(model, start, goal, settings, Stages::Direct, None) {
         Err(PlanError::NoPath { .. }) => {}
         done => return done,
     }
     let flag = Arc::new(AtomicBool::new(false));
-    let run = |k: usize| {
+    let run = |k: usize, hand_over: Option<&dyn Fn()>| {
         let racer = MotionSettings {
             seed: settings.seed.wrapping_add(k as u64),
             deadline: settings.deadline.clone().with_race_flag(Arc::clone(&flag)),
             racers: 1,
             ..settings.clone()
         };
-        let result = plan_alone(model, start, goal, &racer, Stages::Search);
+        let result = plan_alone(model, start, goal, &racer, Stages::Search, hand_over);
         if result.is_ok() {
             flag.store(true, Ordering::Relaxed);
         }
@@ -353,33 +353,43 @@ fn race<V: StateValidity>(
     };
     // Racer 0 plans on this thread at once; the others are handed to the rayon pool (a
     // parallel iterator called from outside the pool would park this thread until two pool
-    // threads woke up) and join the race only after `RACE_HEAD_START`, waiting for it on their
-    // own core: most searches end before, and a racer that has not started planning leaves
-    // at once when the race is won, where one that is certifying a path of its own finishes its
-    // certificate first (the race flag is read between units of work).
-    let begun = std::time::Instant::now();
+    // threads woke up) only once racer 0 has planned for `RACE_HEAD_START` (at its next clock
+    // read): most searches end before, and then nothing was handed over and nothing is waited
+    // for. (Handed over at once, each waiting out the head start on its own core, they cost
+    // the public MotionBenchMaker UR5 problems the waking of a pool thread and the join: with
+    // two racers, each problem's fastest of six interleaved runs, p50 131 µs against 110 µs
+    // now, per problem 0.855; cage unchanged, 0.97-0.99.) A racer that is certifying a path
+    // when the race is won finishes its certificate first (the race flag is read between units
+    // of work).
     let others: Vec<std::sync::Mutex<Option<Result<MotionPlan, PlanError>>>> =
         (1..settings.racers).map(|_| std::sync::Mutex::new(None)).collect();
     let first = rayon::in_place_scope(|scope| {
-        for (k, slot) in others.iter().enumerate() {
-            let (run, flag) = (&run, &flag);
-            scope.spawn(move |_| {
-                while begun.elapsed() < RACE_HEAD_START {
+        let handed = std::cell::Cell::new(false);
+        let hand_over = || {
+            if handed.replace(true) {
+                return;
+            }
+            for (k, slot) in others.iter().enumerate() {
+                let (run, flag) = (&run, &flag);
+                scope.spawn(move |_| {
                     if flag.load(Ordering::Relaxed) {
                         return;
                     }
-                    std::hint::spin_loop();
-                }
-                let result = run(k + 1);
-                if let Ok(mut slot) = slot.lock() {
-                    *slot = Some(result);
-                }
-            });
+                    let result = run(k + 1, None);
+                    if let Ok(mut slot) = slot.lock() {
+                        *slot = Some(result);
+                    }
+                });
+            }
+        };
+        // A path of racer 0 raises the flag (in `run`), so racers not yet started never plan;
+        // an error of racer 0 is not the race's answer while another may still find a path,
+        // so they are handed over then if they were not yet.
+        let first = run(0, Some(&hand_over));
+        if first.is_err() {
+            hand_over();
         }
-        // A path of racer 0 raises the flag (in `run`), so racers still waiting never start; an
-        // error of racer 0 is not the race's answer while another may still find a path, so
-        // they run then.
-        run(0)
+        first
     });
     let mut results = vec![first];
     results.extend(others.into_iter().filter_map(|slot| slot.into_inner().ok().flatten()));
@@ -410,6 +420,7 @@ fn plan_alone<V: StateValidity>(
     goal: &Goal,
     settings: &MotionSettings,
     stages: Stages,
+    hand_over: Option<&dyn Fn()>,
 ) -> Result<MotionPlan, PlanError> {
     let robot = model.robot();
     if !(settings.resolution.is_finite() && settings.resolution > 0.0) {
@@ -419,6 +430,9 @@ fn plan_alone<V: StateValidity>(
     }
     check_start(model, start)?;
     let mut budget = Budget::new(&settings.deadline);
+    if let Some(f) = hand_over {
+        budget = budget.with_hand_over(f, RACE_HEAD_START);
+    }
     if let EdgeCheck::Certified { tolerance } = settings.edge_check
         && !(tolerance.is_finite() && tolerance > 0.0)
     {
