@@ -96,6 +96,9 @@ pub struct MotionStats {
     pub probe_checks: u64,
     /// Lazy RRT-Connect: tree edges cut off because their certificate failed on a found path.
     pub cut_edges: usize,
+    /// RRT-Connect: attempts started again with new trees after one drew its `max_samples`
+    /// samples without a path (see `MotionSettings::rrt_restarts`).
+    pub restarts: usize,
 }
 
 /// Rewrite continuous joints so that each waypoint differs from the previous by the short way.

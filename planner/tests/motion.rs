@@ -323,6 +323,28 @@ fn sample_budget_ends_with_no_path() {
     }
 }
 
+/// RRT-Connect starts again with new trees when an attempt draws `max_samples` samples without a
+/// path: with one sample fewer than a run needs, the same seed fails alone (the same draws) and
+/// succeeds with restarts, having drawn more samples than one attempt may; a problem run out of
+/// attempts reports every attempt's samples.
+#[test]
+fn a_stuck_rrt_connect_starts_again() {
+    let (model, start, goal) = irp6_around_box();
+    let goal = Goal::Configuration(goal);
+    let base = MotionSettings { seed: 3, rrt_restarts: 0, ..settings(PlannerKind::RrtConnect) };
+    let need = plan_motion(&model, &start, &goal, &base).expect("solvable").stats.samples;
+    assert!(need >= 2, "{need} samples");
+    let tight = MotionSettings { max_samples: need - 1, ..base.clone() };
+    let err = plan_motion(&model, &start, &goal, &tight).expect_err("one sample short");
+    assert!(matches!(err, PlanError::NoPath { samples } if samples == need - 1), "{err:?}");
+    let again = MotionSettings { rrt_restarts: 50, ..tight.clone() };
+    let plan = plan_motion(&model, &start, &goal, &again).expect("solved by a later attempt");
+    assert!(plan.stats.restarts > 0 && plan.stats.samples > need - 1, "{:?}", plan.stats);
+    let none = MotionSettings { max_samples: 1, rrt_restarts: 3, ..base };
+    let err = plan_motion(&model, &start, &goal, &none).expect_err("one sample an attempt");
+    assert!(matches!(err, PlanError::NoPath { samples: 4 }), "{err:?}");
+}
+
 #[test]
 fn same_seed_same_path() {
     let (model, start, goal) = irp6_around_box();

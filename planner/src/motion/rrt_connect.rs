@@ -483,8 +483,10 @@ pub(crate) fn plan<V: StateValidity>(
     let mut connect_buf = Vec::with_capacity(dof);
     let mut target = Vec::with_capacity(dof);
     let mut start_is_a = true;
+    // This attempt's samples (a restart begins again at zero; see `MotionSettings::rrt_restarts`).
+    let first_sample = stats.samples;
     loop {
-        if stats.samples >= settings.max_samples {
+        if stats.samples - first_sample >= settings.max_samples {
             return Outcome::Infeasible;
         }
         if budget.spend(1, validity.collision_checks) {
