@@ -437,6 +437,18 @@ fn free_ends(robot: &Robot, model: &CollisionModel, rng: &mut Rng, lo: f64, hi: 
     }
 }
 
+/// `robot`'s sphere model among `clutter(seed)`, with the table-pick scene too for robot 0 (the
+/// UR5 of the tests below).
+fn cluttered(which: usize, robot: &Robot, seed: u64) -> CollisionModel {
+    let mut env = clutter(seed);
+    if which == 0 {
+        for o in table_pick().obstacles() {
+            env.add(o.clone());
+        }
+    }
+    sphere_model(robot, env)
+}
+
 /// No configuration of the segment `qa`-`qb` sampled every 1e-3 rad (or m) collides.
 fn assert_free_when_sampled_finely(robot: &Robot, model: &CollisionModel, qa: &[f64], qb: &[f64]) {
     let space = robot.config_space();
@@ -456,13 +468,7 @@ fn assert_free_when_sampled_finely(robot: &Robot, model: &CollisionModel, qa: &[
 #[test]
 fn certified_segments_are_free_when_sampled_finely() {
     for (which, robot) in [ur5(), mimic_arm()].iter().enumerate() {
-        let mut env = clutter(which as u64);
-        if which == 0 {
-            for o in table_pick().obstacles() {
-                env.add(o.clone());
-            }
-        }
-        let model = sphere_model(robot, env);
+        let model = cluttered(which, robot, which as u64);
         let mut rng = Rng::new(17 + which as u64);
         let (mut certified, mut refused) = (0, 0);
         for _ in 0..30 {
@@ -550,13 +556,7 @@ fn the_snake_has_pairs_deeper_than_deep_and_shallower() {
 #[test]
 fn listed_certificate_passes_what_the_full_one_does_and_stays_sound() {
     for (which, robot) in [ur5(), mimic_arm(), snake()].iter().enumerate() {
-        let mut env = clutter(40 + which as u64);
-        if which == 0 {
-            for o in table_pick().obstacles() {
-                env.add(o.clone());
-            }
-        }
-        let model = sphere_model(robot, env);
+        let model = cluttered(which, robot, 40 + which as u64);
         let mut s = model.scratch();
         let mut rng = Rng::new(91 + which as u64);
         let (mut both, mut only_listed, mut refused) = (0, 0, 0);
@@ -591,13 +591,7 @@ fn listed_certificate_passes_what_the_full_one_does_and_stays_sound() {
 #[test]
 fn what_a_listing_query_certifies_around_the_midpoint_is_free() {
     for (which, robot) in [ur5(), mimic_arm(), snake()].iter().enumerate() {
-        let mut env = clutter(60 + which as u64);
-        if which == 0 {
-            for o in table_pick().obstacles() {
-                env.add(o.clone());
-            }
-        }
-        let model = sphere_model(robot, env);
+        let model = cluttered(which, robot, 60 + which as u64);
         let space = robot.config_space();
         let mut s = model.scratch();
         let mut rng = Rng::new(7 + which as u64);
