@@ -312,9 +312,10 @@ pub fn plan_motion_with<V: StateValidity>(
 
 /// How long racer 0 of [`MotionSettings::racers`] plans alone before the others are handed to
 /// the thread pool. Most MotionBenchMaker UR5 searches end within it, so they pay nothing for
-/// the race; the tail is where a second seed pays. On the 400 generated narrow-passage problems (four interleaved
-/// runs on the 2-core machine), a head start of 1 ms gave p50 426-464 µs (one core: 426-624),
-/// 300 µs gave 496-719 µs; p95 3.8-4.8 ms either way (one core: 7.8-11.4 ms).
+/// the race; the tail is where a second seed pays. On the 400 generated narrow-passage
+/// problems (four interleaved runs on the 2-core machine), a head start of 1 ms gave p50
+/// 426-464 µs (one core: 426-624), 300 µs gave 496-719 µs; p95 3.8-4.8 ms either way (one
+/// core: 7.8-11.4 ms).
 const RACE_HEAD_START: std::time::Duration = std::time::Duration::from_micros(1000);
 
 /// Which stages of [`plan_alone`] run.
