@@ -620,6 +620,18 @@ struct Span {
     within: Option<(usize, usize)>,
 }
 
+/// The inflation of a sub-interval of half-length `half` (a share of the segment): `margins` :=
+/// each row of `travel` (links, then self pairs) times `half`, `step` := each joint's change
+/// `steps` times `half`; a relative 1e-9 and (margins) an absolute 1e-12 more than the bound,
+/// against rounding.
+fn span_margins(half: f64, travel: &[f64], steps: &[f64], margins: &mut Vec<f64>, step: &mut Vec<f64>) {
+    let scale = half * (1.0 + 1e-9);
+    margins.clear();
+    margins.extend(travel.iter().map(|t| t * scale + 1e-12));
+    step.clear();
+    step.extend(steps.iter().map(|d| d * scale));
+}
+
 /// How far either side of a sub-interval's midpoint (in segment fraction) a listing query
 /// certified free, from the sub-interval's half-length `half` and the query's `reach` (the
 /// smallest ratio of a near item's gap to its margin, see `SphereScratch::reach`): 0 to halve.
@@ -1689,9 +1701,8 @@ impl CollisionModel {
         let mut travel = Vec::new();
         g.travel_into(&steps, &mut travel);
         let half = 0.5 * (t1 - t0);
-        let scale = half * (1.0 + 1e-9);
-        let margins: Vec<f64> = travel.iter().map(|t| t * scale + 1e-12).collect();
-        let step: Vec<f64> = steps.iter().map(|d| d * scale).collect();
+        let (mut margins, mut step) = (Vec::new(), Vec::new());
+        span_margins(half, &travel, &steps, &mut margins, &mut step);
         let slots = g.links.len();
         let inflation = Inflation { link: &margins[..slots], pair: &margins[slots..], step: &step };
         let mut q = vec![0.0; g.dof];
@@ -1758,10 +1769,6 @@ impl CollisionModel {
         g.travel_into(&steps, &mut travel);
         let slots = g.links.len();
         let most = travel.iter().copied().fold(0.0, f64::max);
-        margins.clear();
-        margins.resize(travel.len(), 0.0);
-        step.clear();
-        step.resize(dof, 0.0);
         q.clear();
         q.resize(dof, 0.0);
         spans.clear();
@@ -1788,7 +1795,7 @@ impl CollisionModel {
             bit_reversed_pieces(&mut spans, pieces);
         }
         let mut head = 0;
-        // The span length (`scale`'s bits) `margins` and `step` hold; none yet (the batches
+        // The half-length (its bits) `margins` and `step` hold; none yet (the batches
         // used them for their own pieces).
         let mut margins_for = f64::NAN.to_bits();
         while head < spans.len() {
@@ -1800,17 +1807,10 @@ impl CollisionModel {
             head += 1;
             let half = 0.5 * (t1 - t0);
             let tm = t0 + half;
-            // A relative and an absolute hair more than the bound, against rounding. Spans are
-            // taken level by level, so most share the one before's length and its margins.
-            let scale = half * (1.0 + 1e-9);
-            if scale.to_bits() != margins_for {
-                margins_for = scale.to_bits();
-                for (m, t) in margins.iter_mut().zip(&travel) {
-                    *m = t * scale + 1e-12;
-                }
-                for (m, d) in step.iter_mut().zip(&steps) {
-                    *m = d * scale;
-                }
+            // Spans of the first level share one length, and so their margins.
+            if half.to_bits() != margins_for {
+                margins_for = half.to_bits();
+                span_margins(half, &travel, &steps, &mut margins, &mut step);
             }
             ConfigSpace::step_into(qa, &delta, tm, &mut q);
             checks += 1;
@@ -1885,11 +1885,7 @@ impl CollisionModel {
             return (0, false);
         }
         // Their margins (as the double-precision loop computes them).
-        let scale = 0.5 / pieces as f64 * (1.0 + 1e-9);
-        margins.clear();
-        margins.extend(travel.iter().map(|t| t * scale + 1e-12));
-        step.clear();
-        step.extend(steps.iter().map(|d| d * scale));
+        span_margins(0.5 / pieces as f64, travel, steps, margins, step);
         let mut buf = std::mem::take(&mut s.spheres.batch_q);
         let mut left = std::mem::take(&mut s.spans_left);
         left.clear();

@@ -484,7 +484,7 @@ pub(crate) struct SphereScratch {
     /// After a listing query ([`SphereGeom::check_listed`]) that answered `Near`: the smallest
     /// ratio, over what it found near, of the exact gap to the margin that gap was tested
     /// against (in `[0, 1)`; 1 when nothing was near). Every margin grows at least in
-    /// proportion to the sub-interval (see `reach` in the certificate), so the query certifies
+    /// proportion to the sub-interval (see `reach_of` in the certificate), so the query certifies
     /// free the part of its sub-interval within this share of its half-length of the midpoint.
     pub(crate) reach: f64,
     /// The batched path's working memory (see [`batch`]).
@@ -1198,7 +1198,9 @@ impl SphereGeom {
         // exact contact matters, so the rest of the query runs without margins.
         let mut inf = if GROW { inflation } else { None };
         let mut near = false;
-        s.reach = 1.0;
+        if COLLECT {
+            s.reach = 1.0;
+        }
         match self.fixed {
             Check::Hit => return Check::Hit,
             Check::Near if inf.is_some() => {
