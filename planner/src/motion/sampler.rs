@@ -53,7 +53,9 @@ impl std::str::FromStr for Sampler {
 /// back to uniform draws.
 const PRIMES: [u32; 16] = [2, 3, 5, 7, 11, 13, 17, 19, 23, 29, 31, 37, 41, 43, 47, 53];
 
-/// The radical inverse of `i` in `base`: its digits mirrored behind the point, in [0, 1).
+/// The radical inverse of `i` in `base`: its digits mirrored behind the point, in [0, 1) (what
+/// [`Digits`] counts, for the tests).
+#[cfg(test)]
 fn radical_inverse(mut i: u64, base: u32) -> f64 {
     let b = u64::from(base);
     let inv = 1.0 / f64::from(base);
@@ -67,10 +69,62 @@ fn radical_inverse(mut i: u64, base: u32) -> f64 {
     r
 }
 
+/// The Halton sequence's index in one base, digit by digit, counted up in place, and its
+/// radical inverse as an integer over a fixed power of the base: the next value without a
+/// division of integers (on the generated MotionBenchMaker cage problems, [`radical_inverse`]'s
+/// divisions were a fifth of the planner's instructions, a recomputed sum of the digits still
+/// a sixth).
+#[derive(Debug, Clone)]
+struct Digits {
+    base: u64,
+    /// Least significant first.
+    digits: Vec<u64>,
+    /// `base^(len - 1 - k)` for digit `k`: the digits mirrored behind the point are
+    /// `mirrored / base^len`.
+    weights: Vec<u64>,
+    /// `Σ digits[k] * weights[k]`, below `base^len` (so below 2^53: exact as `f64`).
+    mirrored: u64,
+    /// `base^len` (exact as `f64`).
+    scale: f64,
+}
+
+impl Digits {
+    fn new(base: u32) -> Self {
+        let base = u64::from(base);
+        // As many digits as keep `base^len` within 2^53.
+        let mut weights = vec![1u64];
+        while let Some(next) = weights[weights.len() - 1].checked_mul(base).filter(|&w| w <= 1 << 53) {
+            weights.push(next);
+        }
+        let len = weights.len() - 1;
+        let scale = weights[len] as f64;
+        weights.truncate(len);
+        weights.reverse();
+        Self { base, digits: vec![0; len], weights, mirrored: 0, scale }
+    }
+
+    /// Count up by one, and return the radical inverse of the new index: its digits mirrored
+    /// behind the point, rounded once (after `base^len - 1` indices the count starts again).
+    fn next(&mut self) -> f64 {
+        for (d, &w) in self.digits.iter_mut().zip(&self.weights) {
+            *d += 1;
+            self.mirrored += w;
+            if *d < self.base {
+                break;
+            }
+            // Carry: this digit back to zero.
+            *d = 0;
+            self.mirrored -= self.base * w;
+        }
+        self.mirrored as f64 / self.scale
+    }
+}
+
 /// A stream of configurations drawn with a [`Sampler`].
 pub(crate) struct Draw {
     sampler: Sampler,
-    index: u64,
+    /// The Halton index per base (one per degree of freedom with a prime).
+    halton: Vec<Digits>,
     offset: Vec<f64>,
     /// (lower, width) of every degree of freedom.
     boxes: Vec<(f64, f64)>,
@@ -93,7 +147,11 @@ impl Draw {
             Sampler::Uniform => Vec::new(),
             Sampler::Halton => (0..robot.dof()).map(|_| rng.uniform()).collect(),
         };
-        Self { sampler, index: 0, offset, boxes }
+        let halton = match sampler {
+            Sampler::Uniform => Vec::new(),
+            Sampler::Halton => PRIMES.iter().take(robot.dof()).map(|&b| Digits::new(b)).collect(),
+        };
+        Self { sampler, halton, offset, boxes }
     }
 
     /// The next configuration into `q`.
@@ -109,11 +167,10 @@ impl Draw {
             }
             Sampler::Uniform => robot.random_configuration_into(rng, q),
             Sampler::Halton => {
-                self.index += 1;
                 for (i, v) in q.iter_mut().enumerate() {
-                    let u = match PRIMES.get(i) {
-                        Some(&base) => {
-                            let x = radical_inverse(self.index, base) + self.offset[i];
+                    let u = match self.halton.get_mut(i) {
+                        Some(digits) => {
+                            let x = digits.next() + self.offset[i];
                             if x >= 1.0 { x - 1.0 } else { x }
                         }
                         None => rng.uniform(),
@@ -136,6 +193,34 @@ mod tests {
         assert_eq!(radical_inverse(2, 2), 0.25);
         assert_eq!(radical_inverse(3, 2), 0.75);
         assert!((radical_inverse(5, 3) - (2.0 / 3.0 + 1.0 / 9.0)).abs() < 1e-15);
+    }
+
+    /// The digit counter gives the radical inverse of 1, 2, 3, ...: exactly in base 2 (every
+    /// sum is exact there), within rounding in the others; and it wraps to 0 after the last
+    /// index it holds.
+    #[test]
+    fn counted_digits_give_the_radical_inverse() {
+        for &base in &PRIMES {
+            let mut digits = Digits::new(base);
+            for i in 1..50_000u64 {
+                let (got, want) = (digits.next(), radical_inverse(i, base));
+                if base == 2 {
+                    assert_eq!(got.to_bits(), want.to_bits(), "index {i}");
+                } else {
+                    assert!((got - want).abs() <= 4.0 * f64::EPSILON * want, "base {base}, index {i}: {got} {want}");
+                }
+                assert!((0.0..1.0).contains(&got));
+            }
+        }
+        // A counter near its end: the largest index, then 0 again.
+        let mut digits = Digits::new(53);
+        for d in &mut digits.digits {
+            *d = 52;
+        }
+        digits.mirrored = digits.weights.iter().map(|w| 52 * w).sum::<u64>() - digits.weights[0];
+        digits.digits[0] = 51;
+        assert_eq!(digits.next(), (digits.scale - 1.0) / digits.scale);
+        assert_eq!(digits.next(), 0.0);
     }
 
     #[test]
