@@ -982,12 +982,15 @@ impl SphereGeom {
                 (s.sin[k], s.cos[k]) = (F8(sn), F8(cs));
             }
         }
+        // The frame just computed (its index in `s.rot`), still in registers.
+        let mut last: Option<(usize, R<O>, P<O>)> = None;
         for (k, b) in lanes.bodies.iter().enumerate() {
-            let parent_r = &s.rot[b.parent];
             // The parent's frame in registers, built entry by entry (an array built by
-            // `from_fn` went through `memcpy`).
-            let pr: R<O> = load(o, parent_r);
-            let pp = load(o, &s.pos[b.parent]);
+            // `from_fn` went through `memcpy`); the previous body's as it was computed.
+            let (pr, pp): (R<O>, P<O>) = match last {
+                Some((i, r, p)) if i == b.parent => (r, p),
+                _ => (load(o, &s.rot[b.parent]), load(o, &s.pos[b.parent])),
+            };
             // A translation along one axis (five of the UR5's six): its one column (the same
             // values, see `place_on`).
             let mut out_p = match b.t_axis {
@@ -1014,6 +1017,7 @@ impl SphereGeom {
                 ];
                 store(&out_r, &mut s.rot[k + 1]);
                 store(&out_p, &mut s.pos[k + 1]);
+                last = Some((k + 1, out_r, out_p));
                 continue;
             }
             // A revolute joint after a signed permutation, with nothing after it (every joint
@@ -1044,12 +1048,14 @@ impl SphereGeom {
                 ];
                 store(&out_r, &mut s.rot[k + 1]);
                 store(&out_p, &mut s.pos[k + 1]);
+                last = Some((k + 1, out_r, out_p));
                 continue;
             }
             // `parent * pre` (for a signed permutation: the parent's columns, picked and
             // signed, read from memory as picked).
             let mut out_r = match &b.pre {
                 Pre::Perm(perm, sign) => {
+                    let parent_r = &s.rot[b.parent];
                     let e = |r: usize, c: usize| L::load(o, parent_r[3 * r + perm[c] as usize]) * splat(o, sign[c]);
                     [e(0, 0), e(0, 1), e(0, 2), e(1, 0), e(1, 1), e(1, 2), e(2, 0), e(2, 1), e(2, 2)]
                 }
@@ -1076,6 +1082,7 @@ impl SphereGeom {
             }
             store(&out_r, &mut s.rot[k + 1]);
             store(&out_p, &mut s.pos[k + 1]);
+            last = Some((k + 1, out_r, out_p));
         }
         true
     }
