@@ -272,10 +272,11 @@ impl<'m, V: StateValidity> Validity<'m, V> {
         let mut points = std::mem::take(&mut self.points);
         // Sized once for the end and the `n - 1` inner points, each point then written in
         // place by `ConfigSpace::step_into` (a point built aside and copied in took a `memcpy`
-        // call per point; appended through an iterator, a few instructions per value).
+        // call per point; appended through an iterator, a few instructions per value). Not
+        // cleared first: every value is written below, so the last probe's values need no
+        // zeroing (a `memset` a probe).
         let dof = a.len();
         let first = usize::from(check_end);
-        points.clear();
         points.resize((first + n.saturating_sub(1)) * dof, 0.0);
         if check_end {
             self.collision_checks += 1;
