@@ -143,13 +143,12 @@ impl Draw {
                 }
             })
             .collect();
-        let offset = match sampler {
-            Sampler::Uniform => Vec::new(),
-            Sampler::Halton => (0..robot.dof()).map(|_| rng.uniform()).collect(),
-        };
-        let halton = match sampler {
-            Sampler::Uniform => Vec::new(),
-            Sampler::Halton => PRIMES.iter().take(robot.dof()).map(|&b| Digits::new(b)).collect(),
+        let (halton, offset) = match sampler {
+            Sampler::Uniform => (Vec::new(), Vec::new()),
+            Sampler::Halton => (
+                PRIMES.iter().take(robot.dof()).map(|&b| Digits::new(b)).collect(),
+                (0..robot.dof()).map(|_| rng.uniform()).collect(),
+            ),
         };
         Self { sampler, halton, offset, boxes }
     }
