@@ -61,7 +61,7 @@ use std::sync::Arc;
 
 use nalgebra::{Isometry3, Matrix3, Point3, Translation3, Unit, UnitQuaternion, Vector3};
 
-use crate::cspace::ConfigSpace;
+use crate::cspace::{ConfigSpace, bisection_order};
 use crate::geometry::{ConvexHull, Shape};
 use crate::joint::JointKind;
 use crate::rng::Rng;
@@ -71,7 +71,7 @@ use narrow::View;
 pub use narrow::{
     Separation, parry_shape_separation, parry_shapes_intersect, shape_separation, shapes_intersect, shapes_within,
 };
-use spheres::lanes::{self, LaneMargins, Solids32};
+use spheres::lanes::{self, LaneInput, LaneMargins, Solids32};
 use spheres::simd8::Isa;
 use spheres::{Check, Solid, SphereGeom, SphereScratch};
 
@@ -697,6 +697,8 @@ pub struct CollisionScratch {
     step: Vec<f64>,
     inflation: Vec<f64>,
     margins: Vec<f64>,
+    /// The points of an edge probe, or one of them (see [`CollisionModel::probe_collides`]).
+    probe: Vec<f64>,
     spheres: SphereScratch,
 }
 
@@ -729,6 +731,7 @@ impl CollisionScratch {
             step: Vec::new(),
             inflation: Vec::new(),
             margins: Vec::new(),
+            probe: Vec::new(),
             spheres: SphereScratch::new(),
         }
     }
@@ -1105,38 +1108,150 @@ impl CollisionModel {
     /// configurations, or a `margin` that is not finite and at least 0. With a `margin` above 0
     /// the self-collision cell tables are not used (they prove contact-freedom, not clearance).
     pub fn settle_batch(&self, qs: &[f64], margin: f64, s: &mut CollisionScratch) -> Option<BatchSettled> {
-        let g = &*self.geom;
-        let dof = g.dof;
-        let (Some(fast), Some(solids32)) = (&self.fast, &self.solids32) else { return None };
+        let dof = self.geom.dof;
         if dof == 0 || qs.is_empty() || !qs.len().is_multiple_of(dof) || qs.len() > lanes::LANES * dof {
             return None;
         }
-        if !(margin.is_finite() && margin >= 0.0) {
+        let n = qs.len() / dof;
+        // A full batch as it is; fewer configurations padded with copies of the last.
+        if n == lanes::LANES {
+            return self.settle_lanes(LaneInput::Rows(qs), n, margin, s);
+        }
+        let mut buf = std::mem::take(&mut s.spheres.batch_q);
+        buf.clear();
+        buf.extend_from_slice(qs);
+        for _ in n..lanes::LANES {
+            buf.extend_from_slice(&qs[(n - 1) * dof..]);
+        }
+        let answer = self.settle_lanes(LaneInput::Rows(&buf), n, margin, s);
+        s.spheres.batch_q = buf;
+        answer
+    }
+
+    /// [`Self::settle_batch`] of a full batch (`input`), of which the first `n` lanes are used.
+    fn settle_lanes(
+        &self,
+        input: LaneInput<'_>,
+        n: usize,
+        margin: f64,
+        s: &mut CollisionScratch,
+    ) -> Option<BatchSettled> {
+        let dof = self.geom.dof;
+        let (Some(fast), Some(solids32)) = (&self.fast, &self.solids32) else { return None };
+        if !(margin.is_finite() && margin >= 0.0) || n == 0 || n > lanes::LANES {
             return None;
         }
-        let n = qs.len() / dof;
         if s.step.len() != dof || s.step.iter().any(|&v| v != 0.0) {
             s.step.clear();
             s.step.resize(dof, 0.0);
         }
         let step = (margin == 0.0).then_some(&s.step[..]);
         let grow = LaneMargins { link: &[], pair: &[], uniform: Some(margin), step };
-        // A full batch as it is; fewer configurations padded with copies of the last.
-        let answer = if n == lanes::LANES {
-            fast.free_lanes(qs, dof, solids32, grow, &mut s.spheres.lanes)
-        } else {
-            let mut buf = std::mem::take(&mut s.spheres.batch_q);
-            buf.clear();
-            buf.extend_from_slice(qs);
-            for _ in n..lanes::LANES {
-                buf.extend_from_slice(&qs[(n - 1) * dof..]);
-            }
-            let answer = fast.free_lanes(&buf, dof, solids32, grow, &mut s.spheres.lanes);
-            s.spheres.batch_q = buf;
-            answer
-        };
+        let answer = fast.free_lanes(input, dof, solids32, grow, &mut s.spheres.lanes);
         let used = (1u32 << n) - 1;
         Some(BatchSettled { free: answer.free & used, colliding: answer.hit & used })
+    }
+
+    /// Whether any point of an edge probe collides, exactly as [`Self::any_collides_settled`]
+    /// of the points one after another says: `end` first when given, then the inner points of
+    /// the segment from `a` by the joint steps `delta` cut into `n` steps, `a + (i / n) delta`
+    /// for `i` from 1 to `n - 1` in [`bisection_order`] (each value as
+    /// [`ConfigSpace::step_into`] computes it). On the sphere path among balls, boxes and
+    /// cylinders the points are written into the batch's lanes joint by joint, straight from
+    /// `a` and `delta`, with no rows to build and turn. `a`, `delta` and `end` of another
+    /// length than the robot's DOFs count as colliding.
+    pub fn probe_collides(
+        &self,
+        a: &[f64],
+        end: Option<&[f64]>,
+        delta: &[f64],
+        n: usize,
+        s: &mut CollisionScratch,
+    ) -> bool {
+        let dof = self.geom.dof;
+        if a.len() != dof || delta.len() != dof || end.is_some_and(|e| e.len() != dof) {
+            return true;
+        }
+        if dof == 0 || !self.certifies_in_batches() {
+            let mut points = std::mem::take(&mut s.probe);
+            points.clear();
+            if let Some(e) = end {
+                points.extend_from_slice(e);
+            }
+            bisection_order(n, |i| {
+                let at = points.len();
+                points.resize(at + dof, 0.0);
+                ConfigSpace::step_into(a, delta, i as f64 / n as f64, &mut points[at..]);
+                true
+            });
+            let hit = self.any_collides_settled(&points, s);
+            s.probe = points;
+            return hit;
+        }
+        // The points of the next batch: 0 for the end, `i` for inner point `i`.
+        let mut ids = [0usize; lanes::LANES];
+        let mut count = usize::from(end.is_some());
+        let mut hit = false;
+        bisection_order(n, |i| {
+            ids[count] = i;
+            count += 1;
+            if count < lanes::LANES {
+                return true;
+            }
+            count = 0;
+            hit = self.probe_batch(a, end, delta, n, &ids, s);
+            !hit
+        });
+        hit || (count > 0 && self.probe_batch(a, end, delta, n, &ids[..count], s))
+    }
+
+    /// Whether any of the probe points `ids` (see [`Self::probe_collides`]) collides: in one
+    /// batch, its unused lanes copies of the last point, or one by one when they are few.
+    fn probe_batch(
+        &self,
+        a: &[f64],
+        end: Option<&[f64]>,
+        delta: &[f64],
+        n: usize,
+        ids: &[usize],
+        s: &mut CollisionScratch,
+    ) -> bool {
+        let Some(&last) = ids.last() else { return false };
+        let end = end.filter(|_| ids[0] == 0);
+        let point = |i: usize, out: &mut Vec<f64>| {
+            out.clear();
+            match end {
+                Some(e) if i == 0 => out.extend_from_slice(e),
+                _ => {
+                    out.resize(a.len(), 0.0);
+                    ConfigSpace::step_into(a, delta, i as f64 / n as f64, out);
+                }
+            }
+        };
+        let one_by_one = |lanes: u32, s: &mut CollisionScratch| {
+            let mut row = std::mem::take(&mut s.probe);
+            let hit = ids.iter().enumerate().any(|(l, &i)| {
+                lanes & (1 << l) != 0 && {
+                    point(i, &mut row);
+                    self.collides_with(&row, s)
+                }
+            });
+            s.probe = row;
+            hit
+        };
+        let all = (1u32 << ids.len()) - 1;
+        if ids.len() < SETTLE_MIN {
+            return one_by_one(all, s);
+        }
+        // Unused lanes repeat the last point (the end only ever comes first).
+        let lane_ids = std::array::from_fn(|l| ids.get(l).copied().unwrap_or(last) as u32);
+        let (Ok(n32), true) = (u32::try_from(n), ids.iter().all(|&i| i < n)) else { return one_by_one(all, s) };
+        let input = LaneInput::Segment { a, delta, n: n32, ids: lane_ids, end };
+        match self.settle_lanes(input, ids.len(), 0.0, s) {
+            Some(settled) if settled.colliding != 0 => true,
+            Some(settled) => one_by_one(all & !settled.free, s),
+            None => one_by_one(all, s),
+        }
     }
 
     /// The colliding configurations of a batch (1 to [`BATCH_LANES`] whole configurations);
@@ -1909,7 +2024,7 @@ impl CollisionModel {
             from += lanes::LANES;
             let grow =
                 LaneMargins { link: &margins[..slots], pair: &margins[slots..], uniform: None, step: Some(step) };
-            let answer = fast.free_lanes(&buf, dof, solids32, grow, &mut s.spheres.lanes);
+            let answer = fast.free_lanes(LaneInput::Rows(&buf), dof, solids32, grow, &mut s.spheres.lanes);
             batches += 1;
             if answer.hit & ((1u32 << n) - 1) != 0 {
                 hit = true;

@@ -135,6 +135,36 @@ impl ConfigSpace {
     }
 }
 
+/// The inner points `1..n` of a segment cut into `n` equal steps, in bisection order (the
+/// largest power-of-two stride below `n` first, then each finer level's new points), while
+/// `visit` returns true; whether every point was visited.
+pub fn bisection_order(n: usize, mut visit: impl FnMut(usize) -> bool) -> bool {
+    if n < 2 {
+        return true;
+    }
+    let mut stride = 1usize;
+    while stride * 2 < n {
+        stride *= 2;
+    }
+    // The first level takes every multiple of the stride, each finer level its odd multiples
+    // (the even ones came before): no division per point.
+    let mut step = stride;
+    loop {
+        let mut i = stride;
+        while i < n {
+            if !visit(i) {
+                return false;
+            }
+            i += step;
+        }
+        if stride == 1 {
+            return true;
+        }
+        stride /= 2;
+        step = 2 * stride;
+    }
+}
+
 /// `Σ (b_i - a_i)²` in index order, as [`ConfigSpace::distance_squared`] sums it.
 #[inline(always)]
 fn sum_sq<const D: usize>(a: &[f64; D], b: &[f64; D]) -> f64 {
@@ -157,6 +187,47 @@ impl Robot {
 mod tests {
     use super::*;
     use crate::rng::Rng;
+
+    /// The order of the inner points is the coarse-to-fine one of the division-based
+    /// definition (every multiple of the largest power-of-two stride below `n`, then at each
+    /// finer stride the multiples not visited yet), every inner point once, and a `false` from
+    /// `visit` stops the walk.
+    #[test]
+    fn bisection_order_is_coarse_to_fine_and_visits_every_inner_point_once() {
+        for n in 0..300usize {
+            let mut expected = Vec::new();
+            if n >= 2 {
+                let mut stride = 1;
+                while stride * 2 < n {
+                    stride *= 2;
+                }
+                let mut first = true;
+                loop {
+                    expected.extend((1..n).filter(|i| i % stride == 0 && (first || (i / stride) % 2 == 1)));
+                    if stride == 1 {
+                        break;
+                    }
+                    stride /= 2;
+                    first = false;
+                }
+            }
+            let mut seen = Vec::new();
+            assert!(bisection_order(n, |i| {
+                seen.push(i);
+                true
+            }));
+            assert_eq!(seen, expected, "n = {n}");
+            let mut sorted = seen.clone();
+            sorted.sort_unstable();
+            assert_eq!(sorted, (1..n.max(1)).collect::<Vec<_>>(), "n = {n}");
+            let mut count = 0usize;
+            let all = bisection_order(n, |_| {
+                count += 1;
+                count < 3
+            });
+            assert_eq!((all, count), (n < 4, n.saturating_sub(1).min(3)), "n = {n}");
+        }
+    }
 
     /// The unrolled paths (no wrapping dimension; six and seven of them) give the very bits of
     /// the per-joint formulas, and a space with a wrapping dimension still wraps: on random

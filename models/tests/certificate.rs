@@ -6,7 +6,9 @@ use std::path::PathBuf;
 use embodied_models::collision::{CollisionModel, Environment, Obstacle, disable_always_colliding};
 use embodied_models::nalgebra::{Isometry3, Point3, UnitQuaternion, Vector3};
 use embodied_models::urdf::load_urdf;
-use embodied_models::{ConvexHull, JointKind, JointLimits, PlacedShape, Rng, Robot, RobotBuilder, Shape, builtin};
+use embodied_models::{
+    ConfigSpace, ConvexHull, JointKind, JointLimits, PlacedShape, Rng, Robot, RobotBuilder, Shape, builtin,
+};
 use proptest::prelude::*;
 
 fn fixture(name: &str) -> PathBuf {
@@ -740,6 +742,61 @@ proptest! {
                 }
             }
         }
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(16))]
+
+    /// An edge probe (its end, then its inner points in bisection order, written into the
+    /// lanes straight from the segment) answers as the same points built one by one and
+    /// passed to `any_collides_settled` do, and as single checks: with and without its end,
+    /// from 1 to 40 steps (one batch, several, and the few checked one by one), on segments
+    /// between random configurations and configurations near contact, on the UR5, an arm with
+    /// every joint form and a long chain, on both instruction sets; and where the model has
+    /// no batches (capsules among the obstacles).
+    #[test]
+    fn edge_probes_answer_as_their_points_do(which in 0usize..3, seed in any::<u64>(), closed in any::<bool>()) {
+        let robot = &batch_robots()[which];
+        let env = if closed { closed_clutter(seed % 50, 12) } else { solid_clutter(seed % 50, 10) };
+        let model = CollisionModel::new(robot, env);
+        prop_assert_eq!(model.certifies_in_batches(), !closed);
+        let space = robot.config_space();
+        let mut rng = Rng::new(seed);
+        let mut s = model.scratch();
+        let mut baseline = model.scratch().with_baseline_vectors();
+        let dof = robot.dof();
+        let (mut blocked, mut clear) = (0, 0);
+        for k in 0..24 {
+            let a = robot.random_configuration(&mut rng);
+            let b = if k % 2 == 0 {
+                near_contact(&model, robot, &mut rng, 1e-6).unwrap_or_else(|| robot.random_configuration(&mut rng))
+            } else {
+                robot.random_configuration(&mut rng)
+            };
+            let mut delta = Vec::new();
+            space.deltas_into(&a, &b, &mut delta);
+            let n = 1 + (k * 7 + seed as usize) % 40;
+            for end in [None, Some(&b[..])] {
+                let mut points: Vec<f64> = end.map(<[f64]>::to_vec).unwrap_or_default();
+                let mut q = vec![0.0; dof];
+                embodied_models::cspace::bisection_order(n, |i| {
+                    ConfigSpace::step_into(&a, &delta, i as f64 / n as f64, &mut q);
+                    points.extend_from_slice(&q);
+                    true
+                });
+                let expected = model.any_collides_settled(&points, &mut s);
+                prop_assert_eq!(expected, points.chunks(dof).any(|q| model.collides_with(q, &mut s)));
+                prop_assert_eq!(model.probe_collides(&a, end, &delta, n, &mut s), expected, "n = {}", n);
+                prop_assert_eq!(model.probe_collides(&a, end, &delta, n, &mut baseline), expected);
+                if expected { blocked += 1 } else { clear += 1 }
+            }
+        }
+        prop_assert!(blocked > 0 && clear > 0, "{} blocked, {} clear", blocked, clear);
+        // Ends and steps of another length than the robot's count as colliding.
+        let a = robot.random_configuration(&mut rng);
+        prop_assert!(model.probe_collides(&a[..dof - 1], None, &a[..dof - 1], 4, &mut s));
+        prop_assert!(model.probe_collides(&a, Some(&a[..dof - 1]), &a, 4, &mut s));
     }
 }
 

@@ -18,6 +18,7 @@
 //! ([`StateValidity::any_collides`]), so that a model may check them in vector lanes.
 
 use embodied_models::collision::{CollisionModel, CollisionScratch};
+use embodied_models::cspace::bisection_order;
 use embodied_models::{ConfigSpace, Robot};
 
 use crate::error::PlanError;
@@ -76,6 +77,33 @@ pub trait StateValidity: Sync {
         qs.chunks(dof).any(|q| self.collides(q, scratch))
     }
 
+    /// Whether any point of an edge probe is invalid: `end` first when given, then the inner
+    /// points `a + (i / n) delta` of the segment cut into `n` steps ([`ConfigSpace::step_into`]
+    /// with `t = i / n`, `i` from 1 to `n - 1` in bisection order). By default the points are
+    /// built (in a new buffer) and passed to [`Self::any_collides`]; an implementation may
+    /// check them without building them, as long as the answer is the same.
+    fn probe_collides(
+        &self,
+        a: &[f64],
+        end: Option<&[f64]>,
+        delta: &[f64],
+        n: usize,
+        scratch: &mut Self::Scratch,
+    ) -> bool {
+        let dof = a.len();
+        let mut points = Vec::with_capacity(n.min(64) * dof);
+        if let Some(e) = end {
+            points.extend_from_slice(e);
+        }
+        bisection_order(n, |i| {
+            let at = points.len();
+            points.resize(at + dof, 0.0);
+            ConfigSpace::step_into(a, delta, i as f64 / n as f64, &mut points[at..]);
+            true
+        });
+        self.any_collides(&points, scratch)
+    }
+
     /// Why `q` is invalid, in words (for errors: "link `a` and obstacle `b`"); `None` when valid.
     fn first_collision(&self, q: &[f64]) -> Option<String>;
 
@@ -118,6 +146,17 @@ impl StateValidity for CollisionModel {
         self.any_collides_settled(qs, scratch)
     }
 
+    fn probe_collides(
+        &self,
+        a: &[f64],
+        end: Option<&[f64]>,
+        delta: &[f64],
+        n: usize,
+        scratch: &mut CollisionScratch,
+    ) -> bool {
+        CollisionModel::probe_collides(self, a, end, delta, n, scratch)
+    }
+
     fn first_collision(&self, q: &[f64]) -> Option<String> {
         CollisionModel::first_collision(self, q).map(|c| c.to_string())
     }
@@ -158,8 +197,6 @@ pub(crate) struct Validity<'m, V: StateValidity> {
     buf: Vec<f64>,
     /// Joint steps of the segment being sampled.
     delta: Vec<f64>,
-    /// Configurations of one probe, one after another.
-    points: Vec<f64>,
     pub collision_checks: u64,
     pub edges_checked: usize,
     /// Collision checks of [`Self::segment_probed`] (also counted in `collision_checks`).
@@ -181,7 +218,6 @@ impl<'m, V: StateValidity> Validity<'m, V> {
             scratch: model.scratch(),
             buf: vec![0.0; robot.dof()],
             delta: Vec::new(),
-            points: Vec::new(),
             collision_checks: 0,
             edges_checked: 0,
             probe_checks: 0,
@@ -255,7 +291,7 @@ impl<'m, V: StateValidity> Validity<'m, V> {
     /// No sampled configuration of the segment `a`-`b` collides, at `resolution` (largest joint
     /// step), ends excluded; with `check_end`, the end `b` too (within the position limits and
     /// free). A probe, not a certificate: an obstacle between samples is missed. The points go
-    /// to the model in one query ([`StateValidity::any_collides`]: in vector lanes for a
+    /// to the model in one query ([`StateValidity::probe_collides`]: in vector lanes for a
     /// [`CollisionModel`] on the sphere path), the end first, then the inner points in
     /// bisection order. (The end checked alone first, then the inner points: on the 296 public
     /// MotionBenchMaker UR5 problems, where 39% of the extensions end blocked, 3.0% more
@@ -269,39 +305,14 @@ impl<'m, V: StateValidity> Validity<'m, V> {
         }
         self.space.deltas_into(a, b, &mut self.delta);
         let n = steps(&self.delta, resolution);
-        let mut points = std::mem::take(&mut self.points);
-        // Sized once for the end and the `n - 1` inner points, each point then written in
-        // place by `ConfigSpace::step_into` (a point built aside and copied in took a `memcpy`
-        // call per point; appended through an iterator, a few instructions per value). Not
-        // cleared first: every value is written below, so the last probe's values need no
-        // zeroing (a `memset` a probe).
-        let dof = a.len();
-        let first = usize::from(check_end);
-        points.resize((first + n.saturating_sub(1)) * dof, 0.0);
-        if check_end {
-            self.collision_checks += 1;
-            points[..dof].copy_from_slice(b);
-        }
-        let (delta, mut at) = (&self.delta, first * dof);
-        let inner = &mut points[at..];
-        let filled = match dof {
-            6 => fill_inner::<6>(a, delta, n, inner),
-            7 => fill_inner::<7>(a, delta, n, inner),
-            _ => false,
-        };
-        if !filled {
-            bisection_order(n, |i| {
-                ConfigSpace::step_into(a, delta, i as f64 / n as f64, &mut points[at..at + dof]);
-                at += dof;
-                true
-            });
-        }
-        let checks = ((points.len() / a.len().max(1)) as u64).saturating_sub(u64::from(check_end));
-        self.collision_checks += checks;
-        self.probe_checks += checks;
-        let free = points.is_empty() || !self.model.any_collides(&points, &mut self.scratch);
-        self.points = points;
-        free
+        let inner = n.saturating_sub(1) as u64;
+        self.collision_checks += inner + u64::from(check_end);
+        self.probe_checks += inner;
+        // The points go to the model as the segment's ends and steps: a `CollisionModel`
+        // writes them into its lanes joint by joint (built as rows here and turned into
+        // columns there, they cost about 400 instructions a probe more).
+        let end = check_end.then_some(b);
+        !self.model.probe_collides(a, end, &self.delta, n, &mut self.scratch)
     }
 
     /// Sampled check of the segment's inner points, in bisection order.
@@ -317,61 +328,6 @@ impl<'m, V: StateValidity> Validity<'m, V> {
             !model.collides(buf, scratch)
         })
     }
-}
-
-/// The inner points `1..n` of a segment cut into `n` equal steps, in bisection order (the
-/// largest power-of-two stride below `n` first, then each finer level's new points), while
-/// `visit` returns true; whether every point was visited.
-fn bisection_order(n: usize, mut visit: impl FnMut(usize) -> bool) -> bool {
-    if n < 2 {
-        return true;
-    }
-    let mut stride = 1usize;
-    while stride * 2 < n {
-        stride *= 2;
-    }
-    // The first level takes every multiple of the stride, each finer level its odd multiples
-    // (the even ones came before): no division per point.
-    let mut step = stride;
-    loop {
-        let mut i = stride;
-        while i < n {
-            if !visit(i) {
-                return false;
-            }
-            i += step;
-        }
-        if stride == 1 {
-            return true;
-        }
-        stride /= 2;
-        step = 2 * stride;
-    }
-}
-
-/// The inner points of the segment from `a` by `delta` cut into `n` steps, `a + (i / n) delta`
-/// (as [`ConfigSpace::step_into`] computes them), in bisection order, written over `out` row by
-/// row, for `D` degrees of freedom: rows of known length, each filled in a few vector
-/// operations (through `step_into` and a slice per point: about 85 instructions a six-joint
-/// point, with the bisection order). `false` (nothing written) when `a` or `delta` is not `D`
-/// long or `out` does not hold exactly the `n - 1` points.
-fn fill_inner<const D: usize>(a: &[f64], delta: &[f64], n: usize, out: &mut [f64]) -> bool {
-    let (Ok(a), Ok(d)) = (<&[f64; D]>::try_from(a), <&[f64; D]>::try_from(delta)) else { return false };
-    let (rows, rest) = out.as_chunks_mut::<D>();
-    if rows.len() != n.saturating_sub(1) || !rest.is_empty() {
-        return false;
-    }
-    let mut rows = rows.iter_mut();
-    bisection_order(n, |i| {
-        if let Some(row) = rows.next() {
-            let t = i as f64 / n as f64;
-            for j in 0..D {
-                row[j] = a[j] + t * d[j];
-            }
-        }
-        true
-    });
-    true
 }
 
 /// Every value finite and within its bounds (no branch per value).
@@ -412,85 +368,6 @@ mod tests {
             ConfigSpace::step_into(a, &delta, i as f64 / n as f64, &mut q);
             !model.collides(&q)
         })
-    }
-
-    /// The order of the inner points is the coarse-to-fine one of the division-based
-    /// definition (every multiple of the largest power-of-two stride below `n`, then at each
-    /// finer stride the multiples not visited yet), every inner point once, and a `false` from
-    /// `visit` stops the walk.
-    #[test]
-    fn bisection_order_is_coarse_to_fine_and_visits_every_inner_point_once() {
-        for n in 0..300usize {
-            let mut expected = Vec::new();
-            if n >= 2 {
-                let mut stride = 1;
-                while stride * 2 < n {
-                    stride *= 2;
-                }
-                let mut first = true;
-                loop {
-                    expected.extend((1..n).filter(|i| i % stride == 0 && (first || (i / stride) % 2 == 1)));
-                    if stride == 1 {
-                        break;
-                    }
-                    stride /= 2;
-                    first = false;
-                }
-            }
-            let mut seen = Vec::new();
-            assert!(bisection_order(n, |i| {
-                seen.push(i);
-                true
-            }));
-            assert_eq!(seen, expected, "n = {n}");
-            let mut sorted = seen.clone();
-            sorted.sort_unstable();
-            assert_eq!(sorted, (1..n.max(1)).collect::<Vec<_>>(), "n = {n}");
-            let mut count = 0usize;
-            let all = bisection_order(n, |_| {
-                count += 1;
-                count < 3
-            });
-            assert_eq!((all, count), (n < 4, n.saturating_sub(1).min(3)), "n = {n}");
-        }
-    }
-
-    /// The rows written for six and seven degrees of freedom are the points `step_into` gives,
-    /// in bisection order, to the bit; other sizes are left to it.
-    #[test]
-    fn inner_points_by_rows_are_the_step_into_points() {
-        let mut rng = Rng::new(5);
-        for dof in [5usize, 6, 7] {
-            for n in 1..40usize {
-                let a: Vec<f64> = (0..dof).map(|_| rng.range(-3.0, 3.0)).collect();
-                let d: Vec<f64> = (0..dof).map(|_| rng.range(-2.0, 2.0)).collect();
-                let mut rows = vec![f64::NAN; n.saturating_sub(1) * dof];
-                let filled = match dof {
-                    6 => fill_inner::<6>(&a, &d, n, &mut rows),
-                    7 => fill_inner::<7>(&a, &d, n, &mut rows),
-                    _ => fill_inner::<6>(&a, &d, n, &mut rows),
-                };
-                assert_eq!(filled, dof == 6 || dof == 7, "{dof}");
-                let mut short = vec![f64::NAN; n.saturating_sub(2) * dof];
-                if n >= 2 {
-                    assert!(!fill_inner::<6>(&a, &d, n, &mut short) && !fill_inner::<7>(&a, &d, n, &mut short));
-                    assert!(short.iter().all(|v| v.is_nan()), "nothing written to a short buffer");
-                }
-                if !filled {
-                    assert!(rows.iter().all(|v| v.is_nan()), "nothing written");
-                    continue;
-                }
-                let mut expected = Vec::new();
-                let mut q = vec![0.0; dof];
-                bisection_order(n, |i| {
-                    ConfigSpace::step_into(&a, &d, i as f64 / n as f64, &mut q);
-                    expected.extend_from_slice(&q);
-                    true
-                });
-                let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
-                assert_eq!(bits(&rows), bits(&expected), "{dof} joints, {n} steps");
-            }
-        }
     }
 
     /// The probe's limits test answers as the robot's, on two arms without actuators (its own

@@ -275,6 +275,90 @@ pub(crate) struct Lanes8 {
     pub hit: u32,
 }
 
+/// Where a batch's [`LANES`] configurations are.
+#[derive(Debug, Clone, Copy)]
+pub(crate) enum LaneInput<'a> {
+    /// One after another, `dof` values each.
+    Rows(&'a [f64]),
+    /// Points of a segment from `a` by the joint steps `delta` cut into `n` steps: lane `i`
+    /// holds `a + (ids[i] / n) delta` (each value as `ConfigSpace::step_into` computes it),
+    /// except lane 0, which holds `end` when it is given. Worked out joint by joint in the
+    /// batch's vector registers: no rows to build and turn.
+    Segment { a: &'a [f64], delta: &'a [f64], n: u32, ids: [u32; LANES], end: Option<&'a [f64]> },
+}
+
+/// A batch's configurations as the kernel reads them (one kernel compiled for each kind, so
+/// that neither pays for the other's branches: one kernel for both cost the certificate's
+/// batches about 500 instructions each, by its worse register use).
+trait Source: Copy {
+    /// Writes value `j` of every lane over `cols[j]` (sized here); `false` (the batch gives up)
+    /// unless the configurations hold `dof` values each.
+    fn columns(&self, dof: usize, cols: &mut Vec<[f64; LANES]>) -> bool;
+    /// Lane `i`'s configuration (`dof` values), gathered from `cols` (as
+    /// [`Self::columns`] wrote them) into `buf` when it is not at hand.
+    fn row<'s>(&'s self, i: usize, dof: usize, cols: &[[f64; LANES]], buf: &'s mut Vec<f64>) -> &'s [f64];
+}
+
+#[derive(Debug, Clone, Copy)]
+struct RowsIn<'a>(&'a [f64]);
+
+impl Source for RowsIn<'_> {
+    #[inline(always)]
+    fn columns(&self, dof: usize, cols: &mut Vec<[f64; LANES]>) -> bool {
+        // For the common arm sizes one unrolled pass over rows of known length (reading each
+        // body's value from the rows cost about 40 instructions a body).
+        match dof {
+            6 => transpose::<6>(self.0, cols),
+            7 => transpose::<7>(self.0, cols),
+            _ => transpose_any(self.0, dof, cols),
+        }
+    }
+
+    #[inline(always)]
+    fn row<'s>(&'s self, i: usize, dof: usize, _: &[[f64; LANES]], _: &'s mut Vec<f64>) -> &'s [f64] {
+        &self.0[i * dof..(i + 1) * dof]
+    }
+}
+
+#[derive(Debug, Clone, Copy)]
+struct SegmentIn<'a> {
+    a: &'a [f64],
+    delta: &'a [f64],
+    n: u32,
+    ids: [u32; LANES],
+    end: Option<&'a [f64]>,
+}
+
+impl Source for SegmentIn<'_> {
+    /// Joint by joint in the registers, the end over lane 0: about 50 instructions for six
+    /// joints (built as rows outside the batch and turned here, about 250).
+    #[inline(always)]
+    fn columns(&self, dof: usize, cols: &mut Vec<[f64; LANES]>) -> bool {
+        let SegmentIn { a, delta, n, ids, end } = *self;
+        if dof == 0 || a.len() != dof || delta.len() != dof || end.is_some_and(|e| e.len() != dof) {
+            return false;
+        }
+        // The very quotients and sums of `ConfigSpace::step_into` (exact division).
+        let t = ids.map(|i| i as f64 / n as f64);
+        cols.resize(dof, [0.0; LANES]);
+        for ((col, &aj), &dj) in cols.iter_mut().zip(a).zip(delta) {
+            *col = t.map(|t| aj + t * dj);
+        }
+        if let Some(e) = end {
+            for (col, &v) in cols.iter_mut().zip(e) {
+                col[0] = v;
+            }
+        }
+        true
+    }
+
+    fn row<'s>(&'s self, i: usize, dof: usize, cols: &[[f64; LANES]], buf: &'s mut Vec<f64>) -> &'s [f64] {
+        buf.clear();
+        buf.extend(cols.iter().take(dof).map(|c| c[i]));
+        buf
+    }
+}
+
 /// Working memory of the single-precision batch.
 #[derive(Debug, Clone)]
 pub(crate) struct LaneScratch {
@@ -293,6 +377,8 @@ pub(crate) struct LaneScratch {
     cos: Vec<F8>,
     /// Per degree of freedom, its values in the lanes (see `transpose`).
     cols: Vec<[f64; LANES]>,
+    /// One lane's configuration, for the cell tables of a [`LaneInput::Segment`].
+    row: Vec<f64>,
     /// The batch now posed, counted from 1: the marks above need no clearing per batch (a
     /// clear and fill went through two `memset` calls a batch, and their `vzeroupper`s in the
     /// AVX2 kernel).
@@ -320,6 +406,7 @@ impl LaneScratch {
             sin: Vec::new(),
             cos: Vec::new(),
             cols: Vec::new(),
+            row: Vec::new(),
             batch: 0,
             link_g: Vec::new(),
             link_g_for: None,
@@ -491,6 +578,20 @@ fn transpose<const D: usize>(qs: &[f64], cols: &mut Vec<[f64; LANES]>) -> bool {
     cols.resize(D, [0.0; LANES]);
     for (j, col) in cols.iter_mut().enumerate() {
         *col = std::array::from_fn(|i| rows[i][j]);
+    }
+    true
+}
+
+/// [`transpose`] for any number of values `dof` a configuration (a loop).
+fn transpose_any(qs: &[f64], dof: usize, cols: &mut Vec<[f64; LANES]>) -> bool {
+    if dof == 0 || qs.len() != LANES * dof {
+        return false;
+    }
+    cols.resize(dof, [0.0; LANES]);
+    for (i, row) in qs.chunks_exact(dof).enumerate() {
+        for (col, &v) in cols.iter_mut().zip(row) {
+            col[i] = v;
+        }
     }
     true
 }
@@ -715,16 +816,16 @@ impl SphereGeom {
 }
 
 /// One call of [`SphereGeom::free_lanes`], compiled for each instruction set.
-struct Batch<'a> {
+struct Batch<'a, S> {
     geom: &'a SphereGeom,
-    qs: &'a [f64],
+    qs: S,
     dof: usize,
     obstacles: &'a Solids32,
     margins: LaneMargins<'a>,
     s: &'a mut LaneScratch,
 }
 
-impl Kernel for Batch<'_> {
+impl<S: Source> Kernel for Batch<'_, S> {
     type Output = Lanes8;
 
     #[inline(always)]
@@ -735,29 +836,37 @@ impl Kernel for Batch<'_> {
 }
 
 impl SphereGeom {
-    /// Of the [`LANES`] configurations `qs` (`dof` values each, one after another), the lanes
+    /// Of the [`LANES`] configurations `qs` (`dof` values each), the lanes
     /// certainly free when grown by `margins` (see [`LaneMargins`]): bit `i` for lane `i`. See
     /// the module documentation; lanes not set may or may not be free. A lane certainly in
     /// contact (exactly, without margins) ends the batch: then only `hit` is set. The
     /// instruction set is the scratch's (see `simd8`; the answer is the same with either).
     pub(crate) fn free_lanes(
         &self,
-        qs: &[f64],
+        qs: LaneInput<'_>,
         dof: usize,
         obstacles: &Solids32,
         margins: LaneMargins<'_>,
         s: &mut LaneScratch,
     ) -> Lanes8 {
         let isa = s.isa;
-        simd8::dispatch(Batch { geom: self, qs, dof, obstacles, margins, s }, isa)
+        match qs {
+            LaneInput::Rows(qs) => {
+                simd8::dispatch(Batch { geom: self, qs: RowsIn(qs), dof, obstacles, margins, s }, isa)
+            }
+            LaneInput::Segment { a, delta, n, ids, end } => {
+                let qs = SegmentIn { a, delta, n, ids, end };
+                simd8::dispatch(Batch { geom: self, qs, dof, obstacles, margins, s }, isa)
+            }
+        }
     }
 
     /// [`Self::free_lanes`] on the instruction set of `o`.
     #[inline(always)]
-    fn free_lanes_in<O: Ops>(
+    fn free_lanes_in<O: Ops, S: Source>(
         &self,
         o: O,
-        qs: &[f64],
+        qs: S,
         dof: usize,
         obstacles: &Solids32,
         margins: LaneMargins<'_>,
@@ -768,7 +877,7 @@ impl SphereGeom {
         let lanes = &self.lanes;
         let margins_fit =
             uniform.is_some() || (link_m.len() == self.links.len() && pair_m.len() == self.self_pairs.len());
-        if !margins_fit || self.fixed != Check::Free || qs.len() != LANES * dof || !lanes.centre_err.is_finite() {
+        if !margins_fit || self.fixed != Check::Free || !lanes.centre_err.is_finite() {
             return none;
         }
         let link_margin = |l: usize| uniform.unwrap_or_else(|| link_m[l]);
@@ -869,10 +978,13 @@ impl SphereGeom {
             }
             // The lanes whose cells the table does not prove free, then whose spheres come near.
             if let (Some(Some(table)), Some(step)) = (self.tables.get(k), step) {
-                for i in 0..LANES {
-                    let q = &qs[i * dof..(i + 1) * dof];
-                    if near & (1 << i) != 0 && if point_cells { table.proves(q) } else { table.proves_box(q, step) } {
-                        near &= !(1 << i);
+                if point_cells {
+                    near &= !table.proves_lanes(&s.cols, near);
+                } else {
+                    for i in 0..LANES {
+                        if near & (1 << i) != 0 && table.proves_box(qs.row(i, dof, &s.cols, &mut s.row), step) {
+                            near &= !(1 << i);
+                        }
                     }
                 }
                 if near == 0 {
@@ -929,7 +1041,7 @@ impl SphereGeom {
     /// Bodies of the configurations `qs`; `false` when a joint value is not finite or a
     /// prismatic travel exceeds [`PRISMATIC_BOUND`].
     #[inline(always)]
-    fn pose_lanes<O: Ops>(&self, o: O, qs: &[f64], dof: usize, s: &mut LaneScratch) -> bool {
+    fn pose_lanes<O: Ops, S: Source>(&self, o: O, qs: S, dof: usize, s: &mut LaneScratch) -> bool {
         let lanes = &self.lanes;
         let n = self.bodies.len();
         // Sized once per model shape: seven `resize` calls a batch cost about 300 instructions.
@@ -940,34 +1052,19 @@ impl SphereGeom {
         }
         s.rot[0] = lanes.base_r.map(|v| F8([v; LANES]));
         s.pos[0] = lanes.base_t.map(|v| F8([v; LANES]));
-        if qs.len() != LANES * dof {
+        // Each joint's values in the lanes, one row per joint.
+        let ready = qs.columns(dof, &mut s.cols);
+        if !ready {
             return false;
         }
         // First every joint's sine and cosine (a prismatic joint's travel in `sin`): they depend
         // neither on one another nor on the frames, so their long chains of dependent operations
         // can overlap; the frames below only read them. (Computed body by body between the
         // frames: about 1% slower per MotionBenchMaker cage problem, 30 alternating rounds.)
-        // Each joint's values in the lanes, one row per joint: for the common arm sizes in one
-        // unrolled pass over rows of known length (read from the configurations body by body,
-        // about 40 instructions a body).
-        let transposed = match dof {
-            6 => transpose::<6>(qs, &mut s.cols),
-            7 => transpose::<7>(qs, &mut s.cols),
-            _ => false,
-        };
         for (k, (b, a)) in lanes.bodies.iter().zip(&self.angles).enumerate() {
             // The joint's value in each lane, read first, then turned into the angle in one
             // vectorisable pass (reading and arithmetic lane by lane in one loop was not).
-            let mut x = [0.0f64; LANES];
-            if transposed {
-                if let Some(c) = s.cols.get(a.dof) {
-                    x = *c;
-                }
-            } else if a.dof < dof {
-                for (x, row) in x.iter_mut().zip(qs.chunks_exact(dof)) {
-                    *x = row[a.dof];
-                }
-            }
+            let x = s.cols.get(a.dof).copied().unwrap_or([0.0; LANES]);
             let v = x.map(|x| (x * a.scale + a.add) + a.offset);
             // `fold` with `&`, not `all`: no branch per lane.
             let finite = v.iter().fold(true, |f, v| f & (v.abs() < SIN_COS_RANGE));
@@ -1261,7 +1358,7 @@ mod tests {
                 s.posed.fill(0);
                 s.link_posed.fill(0);
             }
-            assert!(geom.pose_lanes(Base, &qs, dof, &mut s));
+            assert!(geom.pose_lanes(Base, RowsIn(&qs), dof, &mut s));
             for l in 0..geom.links.len() {
                 geom.pose_lane_link(Base, l, &mut s);
             }
@@ -1311,5 +1408,79 @@ mod tests {
         // The bound is not loose by orders of magnitude (it would hide a wrong kernel).
         assert!(worst > 0.25 * SIN_COS_ERR, "largest error {worst:e} of a bound {SIN_COS_ERR:e}");
         eprintln!("largest error {:.2}u of {:.0}u", worst / U, SIN_COS_ERR / U);
+    }
+
+    /// A segment's points written into the lanes joint by joint are the same points as rows,
+    /// to the bit, and settle exactly what the rows do (free and contact lanes, on both
+    /// instruction sets), with the end over
+    /// lane 0 or not, unused lanes repeating the last point: on an arm with every body form
+    /// among boxes, balls and cylinders, on random segments.
+    #[test]
+    fn segment_lanes_settle_what_their_rows_do() {
+        use crate::collision::{CollisionModel, Environment, Obstacle};
+        use crate::{ConfigSpace, Shape};
+        let robot = every_body_form();
+        let dof = robot.dof();
+        let mut env = Environment::new();
+        let mut rng = crate::Rng::new(23);
+        for k in 0..9 {
+            let at = Isometry3::from_parts(
+                Vector3::new(rng.range(-0.8, 0.8), rng.range(-0.8, 0.8), rng.range(0.0, 1.0)).into(),
+                UnitQuaternion::from_euler_angles(0.0, 0.0, rng.range(-3.0, 3.0)),
+            );
+            let shape = match k % 3 {
+                0 => Shape::cuboid(0.1, 0.15, 0.08),
+                1 => Shape::sphere(0.12),
+                _ => Shape::cylinder(0.06, 0.2),
+            };
+            env.add(Obstacle::new(format!("o{k}"), at, shape));
+        }
+        let model = CollisionModel::new(&robot, env);
+        assert!(model.certifies_in_batches());
+        let mut s = model.scratch();
+        let mut base = model.scratch().with_baseline_vectors();
+        let (mut free, mut hit) = (0u32, 0u32);
+        for k in 0..400 {
+            let a = robot.random_configuration(&mut rng);
+            let b = robot.random_configuration(&mut rng);
+            let delta: Vec<f64> = a.iter().zip(&b).map(|(a, b)| b - a).collect();
+            let n = 2 + k % 23;
+            let used = 3 + k % 6;
+            let end = (k % 2 == 0).then_some(&b[..]);
+            let mut ids = [0u32; LANES];
+            for (l, id) in ids.iter_mut().enumerate() {
+                let i = (l.min(used - 1) * 7 + k) % n;
+                *id = if end.is_some() && l == 0 { 0 } else { i.max(1) as u32 };
+            }
+            let mut rows = Vec::new();
+            for &i in &ids {
+                match end {
+                    Some(e) if rows.is_empty() => rows.extend_from_slice(e),
+                    _ => {
+                        let at = rows.len();
+                        rows.resize(at + dof, 0.0);
+                        ConfigSpace::step_into(&a, &delta, f64::from(i) / n as f64, &mut rows[at..]);
+                    }
+                }
+            }
+            // The lanes hold the rows' values to the bit, and give each lane's row back.
+            let segment = SegmentIn { a: &a, delta: &delta, n: n as u32, ids, end };
+            let (mut by_cols, mut by_rows_cols, mut row) = (Vec::new(), Vec::new(), Vec::new());
+            assert!(segment.columns(dof, &mut by_cols) && RowsIn(&rows).columns(dof, &mut by_rows_cols));
+            let bits = |c: &[[f64; LANES]]| c.iter().flat_map(|c| c.map(f64::to_bits)).collect::<Vec<_>>();
+            assert_eq!(bits(&by_cols), bits(&by_rows_cols), "segment {k}");
+            for (i, r) in rows.chunks(dof).enumerate() {
+                assert_eq!(segment.row(i, dof, &by_cols, &mut row), r);
+            }
+            let input = LaneInput::Segment { a: &a, delta: &delta, n: n as u32, ids, end };
+            let by_segment = model.settle_lanes(input, used, 0.0, &mut s).expect("a batch");
+            let by_rows = model.settle_lanes(LaneInput::Rows(&rows), used, 0.0, &mut s).expect("a batch");
+            assert_eq!(by_segment, by_rows, "segment {k}");
+            assert_eq!(model.settle_lanes(input, used, 0.0, &mut base), Some(by_rows), "segment {k}");
+            free += by_rows.free.count_ones();
+            hit += u32::from(by_rows.colliding != 0);
+        }
+        // Both kinds of answer were met.
+        assert!(free > 400 && hit > 40, "{free} free lanes, {hit} contacts");
     }
 }

@@ -13,7 +13,7 @@
 
 use std::sync::{Arc, Mutex};
 
-use super::{SphereGeom, SphereScratch};
+use super::{LANES, SphereGeom, SphereScratch};
 use crate::collision::Value;
 
 /// At most this many relative joints per table.
@@ -97,6 +97,30 @@ impl CellTable {
     #[inline(always)]
     pub(super) fn proves(&self, q: &[f64]) -> bool {
         self.cell(q).is_some_and(|i| self.is_proven(i))
+    }
+
+    /// [`Self::proves`] of each lane of `lanes` whose configuration is in `cols` (value `j` of
+    /// lane `i` at `cols[j][i]`, as the single-precision batch holds them): the lanes proven.
+    /// The very operations of [`Self::cell`], lane by lane in vector registers, with no rows.
+    #[inline(always)]
+    pub(super) fn proves_lanes(&self, cols: &[[f64; LANES]], lanes: u32) -> u32 {
+        let mask = (1i64 << self.level) - 1;
+        let mut index = [0i64; LANES];
+        let mut ok = [true; LANES];
+        for &j in &self.joints {
+            let Some(c) = cols.get(j) else { return 0 };
+            for i in 0..LANES {
+                ok[i] &= c[i].abs() < MAX_ANGLE; // false for NaN
+                index[i] = (index[i] << self.level) | (floor_bits(c[i] * self.scale) & mask);
+            }
+        }
+        let mut out = 0;
+        for i in 0..LANES {
+            if lanes & (1 << i) != 0 && ok[i] && self.is_proven(index[i] as usize) {
+                out |= 1 << i;
+            }
+        }
+        out
     }
 
     /// Whether every cell of the box `q ± step` (over the relative joints) is proven free, the
