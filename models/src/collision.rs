@@ -83,6 +83,16 @@ pub const BATCH_LANES: usize = spheres::LANES;
 /// are checked one by one.
 const SETTLE_MIN: usize = 3;
 
+/// An edge probe of [`CollisionModel::probe_collides`]: its end (point 0) when given, and the
+/// points `a + (i / n) delta`.
+#[derive(Debug, Clone, Copy)]
+struct Probe<'a> {
+    a: &'a [f64],
+    end: Option<&'a [f64]>,
+    delta: &'a [f64],
+    n: u32,
+}
+
 /// What [`CollisionModel::settle_batch`] settled: bit `i` for the `i`-th configuration.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct BatchSettled {
@@ -1188,70 +1198,88 @@ impl CollisionModel {
             s.probe = points;
             return hit;
         }
-        // The points of the next batch: 0 for the end, `i` for inner point `i`.
-        let mut ids = [0usize; lanes::LANES];
+        let Ok(n) = u32::try_from(n) else { return true };
+        let probe = Probe { a, end, delta, n };
+        // The points of the next batch: 0 for the end, `i` for inner point `i` (below `n`).
+        let mut ids = [0u32; lanes::LANES];
         let mut count = usize::from(end.is_some());
         let mut hit = false;
-        bisection_order(n, |i| {
-            ids[count] = i;
+        bisection_order(n as usize, |i| {
+            ids[count] = i as u32;
             count += 1;
             if count < lanes::LANES {
                 return true;
             }
             count = 0;
-            hit = self.probe_batch(a, end, delta, n, &ids, s);
+            hit = self.probe_batch(&probe, &ids, lanes::LANES, s);
             !hit
         });
-        hit || (count > 0 && self.probe_batch(a, end, delta, n, &ids[..count], s))
+        hit || (count > 0 && self.probe_batch(&probe, &ids, count, s))
     }
 
-    /// Whether any of the probe points `ids` (see [`Self::probe_collides`]) collides: in one
-    /// batch, its unused lanes copies of the last point, or one by one when they are few.
+    /// Whether any of the first `count` points `ids` of `probe` collides: in one batch, its
+    /// unused lanes copies of the last point, or one by one when they are few. (Through
+    /// `settle_lanes`, with the one-by-one checks' closures built every time, about 300
+    /// instructions a probe more.)
     fn probe_batch(
         &self,
-        a: &[f64],
-        end: Option<&[f64]>,
-        delta: &[f64],
-        n: usize,
-        ids: &[usize],
+        probe: &Probe<'_>,
+        ids: &[u32; lanes::LANES],
+        count: usize,
         s: &mut CollisionScratch,
     ) -> bool {
-        let Some(&last) = ids.last() else { return false };
+        let used = (1u32 << count) - 1;
+        let (Some(fast), Some(solids32), true) = (&self.fast, &self.solids32, count >= SETTLE_MIN) else {
+            return self.probe_one_by_one(probe, ids, used, s);
+        };
+        let &Probe { a, end, delta, n } = probe;
         let end = end.filter(|_| ids[0] == 0);
-        let point = |i: usize, out: &mut Vec<f64>| {
-            out.clear();
-            match end {
-                Some(e) if i == 0 => out.extend_from_slice(e),
-                _ => {
-                    out.resize(a.len(), 0.0);
-                    ConfigSpace::step_into(a, delta, i as f64 / n as f64, out);
-                }
-            }
-        };
-        let one_by_one = |lanes: u32, s: &mut CollisionScratch| {
-            let mut row = std::mem::take(&mut s.probe);
-            let hit = ids.iter().enumerate().any(|(l, &i)| {
-                lanes & (1 << l) != 0 && {
-                    point(i, &mut row);
-                    self.collides_with(&row, s)
-                }
-            });
-            s.probe = row;
-            hit
-        };
-        let all = (1u32 << ids.len()) - 1;
-        if ids.len() < SETTLE_MIN {
-            return one_by_one(all, s);
-        }
         // Unused lanes repeat the last point (the end only ever comes first).
-        let lane_ids = std::array::from_fn(|l| ids.get(l).copied().unwrap_or(last) as u32);
-        let (Ok(n32), true) = (u32::try_from(n), ids.iter().all(|&i| i < n)) else { return one_by_one(all, s) };
-        let input = LaneInput::Segment { a, delta, n: n32, ids: lane_ids, end };
-        match self.settle_lanes(input, ids.len(), 0.0, s) {
-            Some(settled) if settled.colliding != 0 => true,
-            Some(settled) => one_by_one(all & !settled.free, s),
-            None => one_by_one(all, s),
+        let mut lane_ids = [ids[count - 1]; lanes::LANES];
+        lane_ids[..count].copy_from_slice(&ids[..count]);
+        // No step: each lane's own cell of the self-collision tables.
+        let dof = a.len();
+        if s.step.len() != dof || s.step.iter().any(|&v| v != 0.0) {
+            s.step.clear();
+            s.step.resize(dof, 0.0);
         }
+        let margins = LaneMargins { link: &[], pair: &[], uniform: Some(0.0), step: Some(&s.step) };
+        let input = LaneInput::Segment { a, delta, n, ids: lane_ids, end };
+        let answer = fast.free_lanes(input, dof, solids32, margins, &mut s.spheres.lanes);
+        if answer.hit & used != 0 {
+            return true;
+        }
+        let rest = used & !answer.free;
+        rest != 0 && self.probe_one_by_one(probe, ids, rest, s)
+    }
+
+    /// Whether any of the points `ids` of `probe` whose bits are set in `lanes` collides,
+    /// checked one by one in double precision.
+    fn probe_one_by_one(
+        &self,
+        probe: &Probe<'_>,
+        ids: &[u32; lanes::LANES],
+        lanes: u32,
+        s: &mut CollisionScratch,
+    ) -> bool {
+        let &Probe { a, end, delta, n } = probe;
+        let mut row = std::mem::take(&mut s.probe);
+        let hit = ids.iter().enumerate().any(|(l, &i)| {
+            lanes & (1 << l) != 0 && {
+                row.clear();
+                match end {
+                    // Point 0 is the end only in a probe's first batch.
+                    Some(e) if i == 0 => row.extend_from_slice(e),
+                    _ => {
+                        row.resize(a.len(), 0.0);
+                        ConfigSpace::step_into(a, delta, f64::from(i) / f64::from(n), &mut row);
+                    }
+                }
+                self.collides_with(&row, s)
+            }
+        });
+        s.probe = row;
+        hit
     }
 
     /// The colliding configurations of a batch (1 to [`BATCH_LANES`] whole configurations);
