@@ -77,7 +77,11 @@ impl ConfigSpace {
     /// on continuous joints), written over `out`: for [`Self::step_into`].
     pub fn deltas_into(&self, a: &[f64], b: &[f64], out: &mut Vec<f64>) {
         out.clear();
-        if !self.any_wrap && a.len() == b.len() {
+        // The common arm sizes in a few vector operations (about 70 instructions a six-joint
+        // segment through the iterator).
+        if let (false, Ok(a6), Ok(b6)) = (self.any_wrap, <&[f64; 6]>::try_from(a), <&[f64; 6]>::try_from(b)) {
+            out.extend_from_slice(&std::array::from_fn::<f64, 6, _>(|i| b6[i] - a6[i]));
+        } else if !self.any_wrap && a.len() == b.len() {
             out.extend(a.iter().zip(b).map(|(a, b)| b - a));
         } else {
             out.extend((0..a.len()).map(|i| self.delta(i, a[i], b[i])));
