@@ -288,15 +288,11 @@ pub(crate) enum LaneInput<'a> {
 }
 
 /// A batch's configurations as the kernel reads them (one kernel compiled for each kind, so
-/// that neither pays for the other's branches: one kernel for both cost the certificate's
-/// batches about 500 instructions each, by its worse register use).
+/// that neither pays for the other's branches).
 trait Source: Copy {
     /// Writes value `j` of every lane over `cols[j]` (sized here); `false` (the batch gives up)
     /// unless the configurations hold `dof` values each.
     fn columns(&self, dof: usize, cols: &mut Vec<[f64; LANES]>) -> bool;
-    /// Lane `i`'s configuration (`dof` values), gathered from `cols` (as
-    /// [`Self::columns`] wrote them) into `buf` when it is not at hand.
-    fn row<'s>(&'s self, i: usize, dof: usize, cols: &[[f64; LANES]], buf: &'s mut Vec<f64>) -> &'s [f64];
 }
 
 #[derive(Debug, Clone, Copy)]
@@ -312,11 +308,6 @@ impl Source for RowsIn<'_> {
             7 => transpose::<7>(self.0, cols),
             _ => transpose_any(self.0, dof, cols),
         }
-    }
-
-    #[inline(always)]
-    fn row<'s>(&'s self, i: usize, dof: usize, _: &[[f64; LANES]], _: &'s mut Vec<f64>) -> &'s [f64] {
-        &self.0[i * dof..(i + 1) * dof]
     }
 }
 
@@ -351,12 +342,6 @@ impl Source for SegmentIn<'_> {
         }
         true
     }
-
-    fn row<'s>(&'s self, i: usize, dof: usize, cols: &[[f64; LANES]], buf: &'s mut Vec<f64>) -> &'s [f64] {
-        buf.clear();
-        buf.extend(cols.iter().take(dof).map(|c| c[i]));
-        buf
-    }
 }
 
 /// Working memory of the single-precision batch.
@@ -377,8 +362,6 @@ pub(crate) struct LaneScratch {
     cos: Vec<F8>,
     /// Per degree of freedom, its values in the lanes (see `transpose`).
     cols: Vec<[f64; LANES]>,
-    /// One lane's configuration, for the cell tables of a [`LaneInput::Segment`].
-    row: Vec<f64>,
     /// The batch now posed, counted from 1: the marks above need no clearing per batch (a
     /// clear and fill went through two `memset` calls a batch, and their `vzeroupper`s in the
     /// AVX2 kernel).
@@ -406,7 +389,6 @@ impl LaneScratch {
             sin: Vec::new(),
             cos: Vec::new(),
             cols: Vec::new(),
-            row: Vec::new(),
             batch: 0,
             link_g: Vec::new(),
             link_g_for: None,
@@ -978,15 +960,11 @@ impl SphereGeom {
             }
             // The lanes whose cells the table does not prove free, then whose spheres come near.
             if let (Some(Some(table)), Some(step)) = (self.tables.get(k), step) {
-                if point_cells {
-                    near &= !table.proves_lanes(&s.cols, near);
+                near &= !if point_cells {
+                    table.proves_lanes(&s.cols, near)
                 } else {
-                    for i in 0..LANES {
-                        if near & (1 << i) != 0 && table.proves_box(qs.row(i, dof, &s.cols, &mut s.row), step) {
-                            near &= !(1 << i);
-                        }
-                    }
-                }
+                    table.proves_box_lanes(&s.cols, step, near)
+                };
                 if near == 0 {
                     continue;
                 }
@@ -1463,15 +1441,12 @@ mod tests {
                     }
                 }
             }
-            // The lanes hold the rows' values to the bit, and give each lane's row back.
+            // The lanes hold the rows' values to the bit.
             let segment = SegmentIn { a: &a, delta: &delta, n: n as u32, ids, end };
-            let (mut by_cols, mut by_rows_cols, mut row) = (Vec::new(), Vec::new(), Vec::new());
+            let (mut by_cols, mut by_rows_cols) = (Vec::new(), Vec::new());
             assert!(segment.columns(dof, &mut by_cols) && RowsIn(&rows).columns(dof, &mut by_rows_cols));
             let bits = |c: &[[f64; LANES]]| c.iter().flat_map(|c| c.map(f64::to_bits)).collect::<Vec<_>>();
             assert_eq!(bits(&by_cols), bits(&by_rows_cols), "segment {k}");
-            for (i, r) in rows.chunks(dof).enumerate() {
-                assert_eq!(segment.row(i, dof, &by_cols, &mut row), r);
-            }
             let input = LaneInput::Segment { a: &a, delta: &delta, n: n as u32, ids, end };
             let by_segment = model.settle_lanes(input, used, 0.0, &mut s).expect("a batch");
             let by_rows = model.settle_lanes(LaneInput::Rows(&rows), used, 0.0, &mut s).expect("a batch");

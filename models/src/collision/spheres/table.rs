@@ -123,6 +123,59 @@ impl CellTable {
         out
     }
 
+    /// [`Self::proves_box`] of each lane of `lanes` whose configuration is in `cols` (value `j`
+    /// of lane `i` at `cols[j][i]`): the lanes proven. The cell bounds of all lanes first, then
+    /// per lane only the distinct corners (the subsets of the joints whose box spans two cells),
+    /// with no rows built: the same answer (an `and` over the same corners) in about a third of
+    /// the instructions of a row-by-row proof.
+    #[inline(always)]
+    pub(super) fn proves_box_lanes(&self, cols: &[[f64; LANES]], step: &[f64], lanes: u32) -> u32 {
+        let floor = floor_bits;
+        let mask = (1i64 << self.level) - 1;
+        let n = self.joints.len();
+        let mut lo = [[0i64; LANES]; MAX_JOINTS];
+        let mut two = [0u32; LANES];
+        let mut ok = lanes;
+        for (d, &j) in self.joints.iter().enumerate().take(MAX_JOINTS) {
+            let (Some(c), Some(&e)) = (cols.get(j), step.get(j)) else { return 0 };
+            for i in 0..LANES {
+                let v = c[i];
+                let in_range = v.abs() + e < MAX_ANGLE; // false for NaN
+                let (a, b) = (floor((v - e) * self.scale), floor((v + e) * self.scale));
+                if !in_range || b - a > 1 {
+                    ok &= !(1 << i);
+                }
+                lo[d][i] = a;
+                two[i] |= u32::from(b > a) << d;
+            }
+        }
+        let mut out = 0;
+        for i in 0..LANES {
+            if ok & (1 << i) == 0 {
+                continue;
+            }
+            // Every distinct corner: each subset of the joints that span two cells.
+            let twos = two[i];
+            let mut up = twos;
+            let proven = loop {
+                let mut index = 0usize;
+                for (d, lo) in lo.iter().enumerate().take(n) {
+                    let cell = lo[i] + i64::from((up >> d) & 1);
+                    index = (index << self.level) | (cell & mask) as usize;
+                }
+                if !self.is_proven(index) {
+                    break false;
+                }
+                if up == 0 {
+                    break true;
+                }
+                up = (up - 1) & twos;
+            };
+            out |= u32::from(proven) << i;
+        }
+        out
+    }
+
     /// Whether every cell of the box `q ± step` (over the relative joints) is proven free, the
     /// box spanning at most two cells per joint (else `false`).
     #[inline]
@@ -349,6 +402,54 @@ mod tests {
         disable_always_colliding(&mut robot, 300, 3);
         let g = RobotGeom::new(&robot);
         (robot, g)
+    }
+
+    /// The lanes' box proof answers as the row-by-row one, lane by lane: on tables of one to
+    /// three joints with random proven cells, on values anywhere in a few turns, on cell edges,
+    /// with steps that span one, two and more cells, and on values that are NaN or too large,
+    /// for any set of lanes asked.
+    #[test]
+    fn box_proofs_of_lanes_answer_as_row_by_row() {
+        use super::LANES;
+        let mut rng = Rng::new(31);
+        let mut proven_lanes = 0;
+        for k in 0..3000 {
+            let n = 1 + k % 3;
+            let level = [2u32, 3, 5][k % 3];
+            let cells = 1usize << (level as usize * n);
+            // Dense and sparse tables (a corner left out would change the answer of some).
+            let proven = (0..cells.div_ceil(64))
+                .map(|_| if k % 2 == 0 { rng.next_u64() | rng.next_u64() } else { rng.next_u64() })
+                .collect();
+            let joints: Vec<usize> = (0..n).map(|d| (d * 2 + k) % 6).collect();
+            let t = CellTable { joints, level, scale: (1u64 << level) as f64 / TAU, proven };
+            let w = TAU / (1u64 << level) as f64;
+            let mut cols = [[0.0; LANES]; 6];
+            for (j, col) in cols.iter_mut().enumerate() {
+                for (i, v) in col.iter_mut().enumerate() {
+                    *v = match (i + j + k) % 7 {
+                        0 => (rng.below(40) as f64 - 20.0) * w,
+                        1 => f64::NAN,
+                        2 => 1500.0,
+                        _ => rng.range(-10.0, 10.0),
+                    };
+                }
+            }
+            let step: Vec<f64> = (0..6).map(|j| [0.0, 0.3 * w, 0.9 * w, 2.5 * w, 0.6 * w][(j + k / 3) % 5]).collect();
+            let lanes = rng.next_u64() as u32 & 0xff;
+            let by_lanes = t.proves_box_lanes(&cols, &step, lanes);
+            for i in 0..LANES {
+                let q: Vec<f64> = cols.iter().map(|c| c[i]).collect();
+                let expected = lanes & (1 << i) != 0 && t.proves_box(&q, &step);
+                assert_eq!(by_lanes & (1 << i) != 0, expected, "table {k}, lane {i}: {q:?} ± {step:?}");
+                proven_lanes += usize::from(expected);
+            }
+            assert_eq!(
+                t.proves_box_lanes(&cols[..1], &step, lanes),
+                if t.joints.iter().all(|&j| j < 1) { by_lanes } else { 0 }
+            );
+        }
+        assert!(proven_lanes > 500, "{proven_lanes} lanes proven");
     }
 
     #[test]
