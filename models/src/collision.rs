@@ -61,7 +61,7 @@ use std::sync::Arc;
 
 use nalgebra::{Isometry3, Matrix3, Point3, Translation3, Unit, UnitQuaternion, Vector3};
 
-use crate::cspace::{ConfigSpace, bisection_order};
+use crate::cspace::{ConfigSpace, bisection_order, probe_points_into};
 use crate::geometry::{ConvexHull, Shape};
 use crate::joint::JointKind;
 use crate::rng::Rng;
@@ -1184,16 +1184,7 @@ impl CollisionModel {
         }
         if dof == 0 || !self.certifies_in_batches() {
             let mut points = std::mem::take(&mut s.probe);
-            points.clear();
-            if let Some(e) = end {
-                points.extend_from_slice(e);
-            }
-            bisection_order(n, |i| {
-                let at = points.len();
-                points.resize(at + dof, 0.0);
-                ConfigSpace::step_into(a, delta, i as f64 / n as f64, &mut points[at..]);
-                true
-            });
+            probe_points_into(a, end, delta, n, &mut points);
             let hit = self.any_collides_settled(&points, s);
             s.probe = points;
             return hit;

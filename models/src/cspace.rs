@@ -139,6 +139,22 @@ impl ConfigSpace {
     }
 }
 
+/// The points of an edge probe one after another, written over `out`: `end` first when given,
+/// then the inner points `a + (i / n) delta` of the segment cut into `n` steps
+/// ([`ConfigSpace::step_into`] with `t = i / n`), `i` from 1 to `n - 1` in [`bisection_order`].
+pub fn probe_points_into(a: &[f64], end: Option<&[f64]>, delta: &[f64], n: usize, out: &mut Vec<f64>) {
+    out.clear();
+    if let Some(e) = end {
+        out.extend_from_slice(e);
+    }
+    bisection_order(n, |i| {
+        let at = out.len();
+        out.resize(at + a.len(), 0.0);
+        ConfigSpace::step_into(a, delta, i as f64 / n as f64, &mut out[at..]);
+        true
+    });
+}
+
 /// The inner points `1..n` of a segment cut into `n` equal steps, in bisection order (the
 /// largest power-of-two stride below `n` first, then each finer level's new points), while
 /// `visit` returns true; whether every point was visited.

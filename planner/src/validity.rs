@@ -18,7 +18,7 @@
 //! ([`StateValidity::any_collides`]), so that a model may check them in vector lanes.
 
 use embodied_models::collision::{CollisionModel, CollisionScratch};
-use embodied_models::cspace::bisection_order;
+use embodied_models::cspace::{bisection_order, probe_points_into};
 use embodied_models::{ConfigSpace, Robot};
 
 use crate::error::PlanError;
@@ -90,17 +90,8 @@ pub trait StateValidity: Sync {
         n: usize,
         scratch: &mut Self::Scratch,
     ) -> bool {
-        let dof = a.len();
-        let mut points = Vec::with_capacity(n.min(64) * dof);
-        if let Some(e) = end {
-            points.extend_from_slice(e);
-        }
-        bisection_order(n, |i| {
-            let at = points.len();
-            points.resize(at + dof, 0.0);
-            ConfigSpace::step_into(a, delta, i as f64 / n as f64, &mut points[at..]);
-            true
-        });
+        let mut points = Vec::new();
+        probe_points_into(a, end, delta, n, &mut points);
         self.any_collides(&points, scratch)
     }
 
