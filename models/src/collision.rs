@@ -1169,7 +1169,7 @@ impl CollisionModel {
     /// [`ConfigSpace::step_into`] computes it). On the sphere path among balls, boxes and
     /// cylinders the points are written into the batch's lanes joint by joint, straight from
     /// `a` and `delta`, with no rows to build and turn. `a`, `delta` and `end` of another
-    /// length than the robot's DOFs count as colliding.
+    /// length than the robot's DOFs, and more than `u32::MAX` steps, count as colliding.
     pub fn probe_collides(
         &self,
         a: &[f64],
