@@ -135,27 +135,29 @@ impl CellTable {
         let n = self.joints.len();
         let mut lo = [[0i64; LANES]; MAX_JOINTS];
         let mut two = [0u32; LANES];
-        let mut ok = lanes;
+        let mut bad = [false; LANES];
         for (d, &j) in self.joints.iter().enumerate().take(MAX_JOINTS) {
             let (Some(c), Some(&e)) = (cols.get(j), step.get(j)) else { return 0 };
             for i in 0..LANES {
                 let v = c[i];
                 let in_range = v.abs() + e < MAX_ANGLE; // false for NaN
                 let (a, b) = (floor((v - e) * self.scale), floor((v + e) * self.scale));
-                if !in_range || b - a > 1 {
-                    ok &= !(1 << i);
-                }
+                bad[i] |= !in_range | (b - a > 1);
                 lo[d][i] = a;
                 two[i] |= u32::from(b > a) << d;
             }
         }
+        let mut ok = lanes;
+        for (i, &bad) in bad.iter().enumerate() {
+            ok &= !(u32::from(bad) << i);
+        }
         let mut out = 0;
-        for i in 0..LANES {
-            if ok & (1 << i) == 0 {
-                continue;
-            }
+        // The lanes left, lowest first.
+        while ok != 0 {
+            let i = ok.trailing_zeros() as usize;
+            ok &= ok - 1;
+            let Some(&twos) = two.get(i) else { break };
             // Every distinct corner: each subset of the joints that span two cells.
-            let twos = two[i];
             let mut up = twos;
             let proven = loop {
                 let mut index = 0usize;
