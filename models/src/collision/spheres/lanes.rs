@@ -280,11 +280,8 @@ pub(crate) struct Lanes8 {
 pub(crate) enum LaneInput<'a> {
     /// One after another, `dof` values each.
     Rows(&'a [f64]),
-    /// Points of a segment from `a` by the joint steps `delta` cut into `n` steps: lane `i`
-    /// holds `a + (ids[i] / n) delta` (each value as `ConfigSpace::step_into` computes it),
-    /// except lane 0, which holds `end` when it is given. Worked out joint by joint in the
-    /// batch's vector registers: no rows to build and turn.
-    Segment { a: &'a [f64], delta: &'a [f64], n: u32, ids: [u32; LANES], end: Option<&'a [f64]> },
+    /// Points of a segment ([`SegmentIn`]).
+    Segment(SegmentIn<'a>),
 }
 
 /// A batch's configurations as the kernel reads them (one kernel compiled for each kind, so
@@ -311,13 +308,17 @@ impl Source for RowsIn<'_> {
     }
 }
 
+/// Points of a segment from `a` by the joint steps `delta` cut into `n` steps: lane `i` holds
+/// `a + (ids[i] / n) delta` (each value as `ConfigSpace::step_into` computes it), except lane
+/// 0, which holds `end` when it is given. Worked out joint by joint in the batch's vector
+/// registers: no rows to build and turn.
 #[derive(Debug, Clone, Copy)]
-struct SegmentIn<'a> {
-    a: &'a [f64],
-    delta: &'a [f64],
-    n: u32,
-    ids: [u32; LANES],
-    end: Option<&'a [f64]>,
+pub(crate) struct SegmentIn<'a> {
+    pub a: &'a [f64],
+    pub delta: &'a [f64],
+    pub n: u32,
+    pub ids: [u32; LANES],
+    pub end: Option<&'a [f64]>,
 }
 
 impl Source for SegmentIn<'_> {
@@ -836,10 +837,7 @@ impl SphereGeom {
             LaneInput::Rows(qs) => {
                 simd8::dispatch(Batch { geom: self, qs: RowsIn(qs), dof, obstacles, margins, s }, isa)
             }
-            LaneInput::Segment { a, delta, n, ids, end } => {
-                let qs = SegmentIn { a, delta, n, ids, end };
-                simd8::dispatch(Batch { geom: self, qs, dof, obstacles, margins, s }, isa)
-            }
+            LaneInput::Segment(qs) => simd8::dispatch(Batch { geom: self, qs, dof, obstacles, margins, s }, isa),
         }
     }
 
@@ -1447,7 +1445,7 @@ mod tests {
             assert!(segment.columns(dof, &mut by_cols) && RowsIn(&rows).columns(dof, &mut by_rows_cols));
             let bits = |c: &[[f64; LANES]]| c.iter().flat_map(|c| c.map(f64::to_bits)).collect::<Vec<_>>();
             assert_eq!(bits(&by_cols), bits(&by_rows_cols), "segment {k}");
-            let input = LaneInput::Segment { a: &a, delta: &delta, n: n as u32, ids, end };
+            let input = LaneInput::Segment(segment);
             let by_segment = model.settle_lanes(input, used, 0.0, &mut s).expect("a batch");
             let by_rows = model.settle_lanes(LaneInput::Rows(&rows), used, 0.0, &mut s).expect("a batch");
             assert_eq!(by_segment, by_rows, "segment {k}");
