@@ -154,15 +154,20 @@ impl Draw {
     }
 
     /// The next configuration into `q`.
+    #[inline]
     pub fn next_into(&mut self, robot: &Robot, rng: &mut Rng, q: &mut [f64]) {
         match self.sampler {
             // The same draws as `Robot::random_configuration_into` (`lower + width * u` is its
             // `rng.range(lower, upper)` to the bit), without its per-joint lookups; robots with
             // actuator strokes redraw there until the strokes hold.
             Sampler::Uniform if robot.actuators().is_empty() && q.len() == self.boxes.len() => {
+                // The generator's state in a local for the loop: in registers, not read from
+                // and written back to memory for every number.
+                let mut local = rng.clone();
                 for (v, &(lower, width)) in q.iter_mut().zip(&self.boxes) {
-                    *v = lower + width * rng.uniform();
+                    *v = lower + width * local.uniform();
                 }
+                *rng = local;
             }
             Sampler::Uniform => robot.random_configuration_into(rng, q),
             Sampler::Halton => {
