@@ -93,6 +93,16 @@ struct Probe<'a> {
     n: u32,
 }
 
+/// `step` := `dof` zeros (a batch of points, each in its own cell of the self-collision
+/// tables), written only when it holds anything else.
+#[inline(always)]
+fn zero_steps(step: &mut Vec<f64>, dof: usize) {
+    if step.len() != dof || step.iter().any(|&v| v != 0.0) {
+        step.clear();
+        step.resize(dof, 0.0);
+    }
+}
+
 /// What [`CollisionModel::settle_batch`] settled: bit `i` for the `i`-th configuration.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct BatchSettled {
@@ -1151,10 +1161,7 @@ impl CollisionModel {
         if !(margin.is_finite() && margin >= 0.0) || n == 0 || n > lanes::LANES {
             return None;
         }
-        if s.step.len() != dof || s.step.iter().any(|&v| v != 0.0) {
-            s.step.clear();
-            s.step.resize(dof, 0.0);
-        }
+        zero_steps(&mut s.step, dof);
         let step = (margin == 0.0).then_some(&s.step[..]);
         let grow = LaneMargins { link: &[], pair: &[], uniform: Some(margin), step };
         let answer = fast.free_lanes(input, dof, solids32, grow, &mut s.spheres.lanes);
@@ -1231,10 +1238,7 @@ impl CollisionModel {
         lane_ids[..count].copy_from_slice(&ids[..count]);
         // No step: each lane's own cell of the self-collision tables.
         let dof = a.len();
-        if s.step.len() != dof || s.step.iter().any(|&v| v != 0.0) {
-            s.step.clear();
-            s.step.resize(dof, 0.0);
-        }
+        zero_steps(&mut s.step, dof);
         let margins = LaneMargins { link: &[], pair: &[], uniform: Some(0.0), step: Some(&s.step) };
         let input = LaneInput::Segment(SegmentIn { a, delta, n, ids: lane_ids, end });
         let answer = fast.free_lanes(input, dof, solids32, margins, &mut s.spheres.lanes);
