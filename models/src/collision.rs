@@ -652,6 +652,14 @@ fn span_margins(half: f64, travel: &[f64], steps: &[f64], margins: &mut Vec<f64>
     step.extend(steps.iter().map(|d| d * scale));
 }
 
+/// `dir` := the signed joint changes `delta` of a segment times the scale [`span_margins`] gives
+/// a sub-interval of half-length `half` (the same relative slack).
+fn span_dir(half: f64, delta: &[f64], dir: &mut Vec<f64>) {
+    let scale = half * (1.0 + 1e-9);
+    dir.clear();
+    dir.extend(delta.iter().map(|d| d * scale));
+}
+
 /// How far either side of a sub-interval's midpoint (in segment fraction) a listing query
 /// certified free, from the sub-interval's half-length `half` and the query's `reach` (the
 /// smallest ratio of a near item's gap to its margin, see `SphereScratch::reach`): 0 to halve.
@@ -715,6 +723,8 @@ pub struct CollisionScratch {
     /// The joint steps of the segment a certificate checks (signed).
     delta: Vec<f64>,
     step: Vec<f64>,
+    /// The signed counterpart of `step` (see [`Inflation::dir`]).
+    dir: Vec<f64>,
     inflation: Vec<f64>,
     margins: Vec<f64>,
     /// The points of an edge probe, or one of them (see [`CollisionModel::probe_collides`]).
@@ -749,6 +759,7 @@ impl CollisionScratch {
             steps: Vec::new(),
             delta: Vec::new(),
             step: Vec::new(),
+            dir: Vec::new(),
             inflation: Vec::new(),
             margins: Vec::new(),
             probe: Vec::new(),
@@ -884,6 +895,8 @@ pub(crate) struct Inflation<'a> {
     /// `|dq_i|` over the whole segment times the scale of the sub-interval (half its share of
     /// the segment): the sphere path computes its tighter per-sphere margins from it.
     pub step: &'a [f64],
+    /// `dq_i` (signed) times the same scale: the sub-interval is `q(tm) + s dir`, `|s| <= 1`.
+    pub dir: &'a [f64],
 }
 
 /// Which pair collided, by slot/obstacle index (no allocation on the hot path).
@@ -1842,8 +1855,10 @@ impl CollisionModel {
         let half = 0.5 * (t1 - t0);
         let (mut margins, mut step) = (Vec::new(), Vec::new());
         span_margins(half, &travel, &steps, &mut margins, &mut step);
+        let mut dir = Vec::new();
+        span_dir(half, &delta, &mut dir);
         let slots = g.links.len();
-        let inflation = Inflation { link: &margins[..slots], pair: &margins[slots..], step: &step };
+        let inflation = Inflation { link: &margins[..slots], pair: &margins[slots..], step: &step, dir: &dir };
         let mut q = vec![0.0; g.dof];
         ConfigSpace::step_into(qa, &delta, t0 + half, &mut q);
         s.spheres.items.clear();
@@ -1895,6 +1910,7 @@ impl CollisionModel {
         }
         let mut steps = std::mem::take(&mut s.steps);
         let mut step = std::mem::take(&mut s.step);
+        let mut dir = std::mem::take(&mut s.dir);
         let mut travel = std::mem::take(&mut s.inflation);
         let mut margins = std::mem::take(&mut s.margins);
         let mut spans = std::mem::take(&mut s.spans);
@@ -1950,10 +1966,11 @@ impl CollisionModel {
             if half.to_bits() != margins_for {
                 margins_for = half.to_bits();
                 span_margins(half, &travel, &steps, &mut margins, &mut step);
+                span_dir(half, &delta, &mut dir);
             }
             ConfigSpace::step_into(qa, &delta, tm, &mut q);
             checks += 1;
-            let inflation = Inflation { link: &margins[..slots], pair: &margins[slots..], step: &step };
+            let inflation = Inflation { link: &margins[..slots], pair: &margins[slots..], step: &step, dir: &dir };
             // On the sphere path, a half is checked against only what was near over the whole.
             let first_item = s.spheres.items.len();
             let answer = match &self.fast {
@@ -1987,6 +2004,7 @@ impl CollisionModel {
         s.steps = steps;
         s.delta = delta;
         s.step = step;
+        s.dir = dir;
         s.inflation = travel;
         s.margins = margins;
         s.spans = spans;

@@ -1051,14 +1051,14 @@ impl SphereGeom {
         let (la, lb) = (&self.links[a], &self.links[b]);
         let mut near = false;
         for i in la.first..la.end {
-            let ei = self.margin(i, stop, step, None);
+            let ei = self.margin(i, stop, step, None, None);
             for j in lb.first..lb.end {
                 let d2 = (s.centre[i] - s.centre[j]).norm_squared();
                 let r = self.radius[i] + self.radius[j];
                 if d2 <= r * r {
                     return Check::Hit;
                 }
-                let re = r + ei + self.margin(j, stop, step, None);
+                let re = r + ei + self.margin(j, stop, step, None, None);
                 near |= d2 <= re * re;
             }
         }
@@ -1134,7 +1134,7 @@ impl SphereGeom {
                             if d2 > rel * rel {
                                 continue;
                             }
-                            let m = self.margin(k, 0, inf.step, Some(s));
+                            let m = self.margin(k, 0, inf.step, Some(s), Some(inf.dir));
                             let re = r + m;
                             if d2 > re * re {
                                 continue;
@@ -1147,7 +1147,7 @@ impl SphereGeom {
                             if sep.distance <= 0.0 {
                                 return Check::Hit;
                             }
-                            let m = self.margin(k, 0, inf.step, Some(s));
+                            let m = self.margin(k, 0, inf.step, Some(s), Some(inf.dir));
                             if sep.distance > m {
                                 continue;
                             }
@@ -1167,7 +1167,7 @@ impl SphereGeom {
                     if d2 > grown * grown {
                         continue;
                     }
-                    let m = self.pair_margin(i, j, self.pair_common[p] as usize, inf.step, s);
+                    let m = self.pair_margin(i, j, self.pair_common[p] as usize, inf.step, Some(inf.dir), s);
                     let re = r + m;
                     if d2 > re * re {
                         continue;
@@ -1298,7 +1298,7 @@ impl SphereGeom {
                                         if d2 > rl * rl {
                                             continue;
                                         }
-                                        let m = self.margin(k, 0, i.step, Some(s));
+                                        let m = self.margin(k, 0, i.step, Some(s), Some(i.dir));
                                         let re = r + m;
                                         if d2 <= re * re {
                                             near = true;
@@ -1318,7 +1318,7 @@ impl SphereGeom {
                                     return Check::Hit;
                                 }
                                 if let Some(i) = inf {
-                                    let m = self.margin(k, 0, i.step, Some(s));
+                                    let m = self.margin(k, 0, i.step, Some(s), Some(i.dir));
                                     if sep.distance <= m {
                                         near = true;
                                         if COLLECT {
@@ -1435,7 +1435,7 @@ impl SphereGeom {
                                     self.pose_link(run.outer, s);
                                     self.pose_link(rp.link as usize, s);
                                     let stop = self.pair_common[p] as usize;
-                                    let pm = self.pair_margin(i, first + m, stop, inf_now.step, s);
+                                    let pm = self.pair_margin(i, first + m, stop, inf_now.step, Some(inf_now.dir), s);
                                     let re = r + pm;
                                     if d2 <= re * re {
                                         *near = true;

@@ -372,7 +372,7 @@ impl SphereGeom {
                     for j in rp.first as usize..rp.end as usize {
                         let d2: f64 = (s.centre[i] - s.centre[j]).norm_squared();
                         let r = self.radius[i] + self.radius[j];
-                        let re = r + self.pair_margin(i, j, stop, step, s);
+                        let re = r + self.pair_margin(i, j, stop, step, None, s);
                         // (A NaN distance proves nothing.)
                         if d2.partial_cmp(&(re * re)) != Some(std::cmp::Ordering::Greater) {
                             return false;

@@ -122,19 +122,21 @@ fn centres(fast: &SphereGeom, q: &[f64], s: &mut SphereScratch, out: &mut Vec<Ve
 
 /// Checks every bound of the sub-interval `[t0, t1]` of the segment `qa`-`qb` against the
 /// paths of the spheres sampled at `n` points each side of the midpoint; returns, per sphere
-/// and frame, (sampled path length, margin at the midpoint, static margin).
+/// and frame, (sampled path length, margin along the straight motion, margin at the midpoint
+/// for any motion in the box of the steps, static margin).
 fn check_span(
     robot: &Robot,
     fast: &SphereGeom,
     (qa, qb): (&[f64], &[f64]),
     (t0, t1): (f64, f64),
     n: usize,
-) -> Result<Vec<(f64, f64, f64)>, TestCaseError> {
+) -> Result<Vec<(f64, f64, f64, f64)>, TestCaseError> {
     let space = robot.config_space();
     let dof = qa.len();
     let half = 0.5 * (t1 - t0);
     let tm = t0 + half;
-    let step: Vec<f64> = (0..dof).map(|i| space.delta(i, qa[i], qb[i]).abs() * half * (1.0 + 1e-9)).collect();
+    let dir: Vec<f64> = (0..dof).map(|i| space.delta(i, qa[i], qb[i]) * half * (1.0 + 1e-9)).collect();
+    let step: Vec<f64> = dir.iter().map(|d| d.abs()).collect();
     // The query's pose at the midpoint, every link posed.
     let mut at = SphereScratch::new();
     fast.pose(&space.interpolate(qa, qb, tm), &mut at);
@@ -188,7 +190,8 @@ fn check_span(
         let link_bound = fast.link_margin(l, &step, &at);
         for k in lk.first..lk.end {
             // The link's midpoint margin bounds each of its spheres' against the world.
-            let (world_moved, world_tight) = (length[k][length[k].len() - 1], fast.margin(k, 0, &step, Some(&at)));
+            let (world_moved, world_tight) =
+                (length[k][length[k].len() - 1], fast.margin(k, 0, &step, Some(&at), None));
             prop_assert!(
                 world_moved <= link_bound && world_tight <= link_bound * (1.0 + 1e-12) + 1e-12,
                 "{}: sphere {k} moves {world_moved} over [{t0}, {t1}], margin {world_tight}, link {l}'s bound {link_bound}",
@@ -206,27 +209,29 @@ fn check_span(
             }
             frames.push(0);
             for (e, &stop) in frames.iter().enumerate() {
-                let tight = fast.margin(k, stop, &step, Some(&at));
-                let loose = fast.margin(k, stop, &step, None);
+                let straight = fast.margin(k, stop, &step, Some(&at), Some(&dir));
+                let tight = fast.margin(k, stop, &step, Some(&at), None);
+                let loose = fast.margin(k, stop, &step, None, None);
                 let moved = length[k][e];
                 prop_assert!(
-                    moved <= tight && tight <= loose * (1.0 + 1e-12),
-                    "{}: sphere {k} relative to body {stop} moves {moved} over [{t0}, {t1}]: margins {tight} (midpoint), {loose} (static)",
+                    moved <= straight && straight <= tight * (1.0 + 1e-12) && tight <= loose * (1.0 + 1e-12),
+                    "{}: sphere {k} relative to body {stop} moves {moved} over [{t0}, {t1}]: margins {straight} (straight), {tight} (midpoint), {loose} (static)",
                     robot.name()
                 );
-                out.push((moved, tight, loose));
+                out.push((moved, straight, tight, loose));
             }
         }
     }
     for p in 0..fast.self_pairs.len() {
         let stop = fast.pair_common[p] as usize;
         for (i, j) in pair_spheres(p) {
-            let bound = fast.pair_margin(i, j, stop, &step, &at);
-            let sum = fast.margin(i, stop, &step, Some(&at)) + fast.margin(j, stop, &step, Some(&at));
+            let straight = fast.pair_margin(i, j, stop, &step, Some(&dir), &at);
+            let bound = fast.pair_margin(i, j, stop, &step, None, &at);
+            let sum = fast.margin(i, stop, &step, Some(&at), None) + fast.margin(j, stop, &step, Some(&at), None);
             let worst = shrink[&(i, j)];
             prop_assert!(
-                worst <= bound && bound <= sum * (1.0 + 1e-12),
-                "{}: pair {p}, spheres {i} and {j}: distance shrinks by {worst} over [{t0}, {t1}], bound {bound} (sum of margins {sum})",
+                worst <= straight && straight <= bound * (1.0 + 1e-12) && bound <= sum * (1.0 + 1e-12),
+                "{}: pair {p}, spheres {i} and {j}: distance shrinks by {worst} over [{t0}, {t1}], bound {straight} (straight), {bound} (any motion in the box; sum of margins {sum})",
                 robot.name()
             );
         }
@@ -387,8 +392,10 @@ proptest! {
         let (qa, qb) = segment(robot, seed, scale);
         let space = robot.config_space();
         let half = 0.5f64.powi((seed % 5) as i32 + 1);
-        let step: Vec<f64> = (0..qa.len()).map(|i| space.delta(i, qa[i], qb[i]).abs() * half).collect();
+        let dir: Vec<f64> = (0..qa.len()).map(|i| space.delta(i, qa[i], qb[i]) * half).collect();
+        let step: Vec<f64> = dir.iter().map(|d| d.abs()).collect();
         let part: Vec<f64> = step.iter().map(|d| d * a).collect();
+        let part_dir: Vec<f64> = dir.iter().map(|d| d * a).collect();
         let mut at = SphereScratch::new();
         fast.pose(&space.interpolate(&qa, &qb, Rng::new(seed).uniform()), &mut at);
         for l in 0..fast.links.len() {
@@ -399,8 +406,11 @@ proptest! {
             for k in lk.first..lk.end {
                 let mut b = lk.body;
                 loop {
-                    let (small, whole) = (fast.margin(k, b, &part, Some(&at)), fast.margin(k, b, &step, Some(&at)));
-                    prop_assert!(within(small, whole, 1e-12), "{}: sphere {k} against body {b}: {small} for {a} of {whole}", robot.name());
+                    for d in [None, Some((&part_dir, &dir))] {
+                        let small = fast.margin(k, b, &part, Some(&at), d.map(|d| &d.0[..]));
+                        let whole = fast.margin(k, b, &step, Some(&at), d.map(|d| &d.1[..]));
+                        prop_assert!(within(small, whole, 1e-12), "{}: sphere {k} against body {b}: {small} for {a} of {whole}", robot.name());
+                    }
                     if b == 0 {
                         break;
                     }
@@ -414,9 +424,11 @@ proptest! {
             let (la, lb) = (&fast.links[la as usize], &fast.links[lb as usize]);
             for i in la.first..la.end {
                 for j in lb.first..lb.end {
-                    let small = fast.pair_margin(i, j, stop, &part, &at);
-                    let whole = fast.pair_margin(i, j, stop, &step, &at);
-                    prop_assert!(within(small, whole, 2e-12), "{}: pair {p} ({i}, {j}): {small} for {a} of {whole}", robot.name());
+                    for d in [None, Some((&part_dir, &dir))] {
+                        let small = fast.pair_margin(i, j, stop, &part, d.map(|d| &d.0[..]), &at);
+                        let whole = fast.pair_margin(i, j, stop, &step, d.map(|d| &d.1[..]), &at);
+                        prop_assert!(within(small, whole, 2e-12), "{}: pair {p} ({i}, {j}): {small} for {a} of {whole}", robot.name());
+                    }
                 }
             }
         }
@@ -488,9 +500,10 @@ fn certified_segments_are_free_when_sampled_finely() {
     }
 }
 
-/// How much tighter the midpoint margins are than the static ones, and how far both are from
-/// the sampled motion (`cargo test -p embodied-models tightness -- --nocapture` prints the
-/// medians): both bound the motion, and the midpoint margins are the tighter by median.
+/// How much tighter the straight-motion margins are than the midpoint ones, and those than the
+/// static ones, and how far all are from the sampled motion (`cargo test -p embodied-models
+/// tightness -- --nocapture` prints the medians): all bound the motion, and each is the tighter
+/// by median.
 #[test]
 fn tightness() {
     let robot = ur5();
@@ -498,14 +511,15 @@ fn tightness() {
     let fast = SphereGeom::new(&g, false).unwrap();
     for scale in [0.02, 0.1, 0.3] {
         for level in [0, 2, 4, 6] {
-            let (mut tight, mut loose) = (Vec::new(), Vec::new());
+            let (mut straight, mut tight, mut loose) = (Vec::new(), Vec::new(), Vec::new());
             for seed in 0..30 {
                 let (qa, qb) = segment(&robot, seed, scale);
                 let w = 0.5f64.powi(level);
                 let k = (seed as usize * 7) % (1 << level);
                 let out = check_span(&robot, &fast, (&qa, &qb), (k as f64 * w, (k + 1) as f64 * w), 16).unwrap();
-                for (moved, t, l) in out {
+                for (moved, st, t, l) in out {
                     if moved > 1e-6 {
+                        straight.push(st / moved);
                         tight.push(t / moved);
                         loose.push(l / moved);
                     }
@@ -515,11 +529,12 @@ fn tightness() {
                 v.sort_by(f64::total_cmp);
                 v[v.len() / 2]
             };
-            let lowest = tight.iter().chain(&loose).fold(f64::INFINITY, |m, &r| m.min(r));
-            let (mid, stat) = (med(&mut tight), med(&mut loose));
+            let lowest = straight.iter().chain(&tight).chain(&loose).fold(f64::INFINITY, |m, &r| m.min(r));
+            let (line, mid, stat) = (med(&mut straight), med(&mut tight), med(&mut loose));
             eprintln!(
-                "scale {scale} level {level}: margin / sampled motion, median: midpoint {mid:.2}, static {stat:.2}"
+                "scale {scale} level {level}: margin / sampled motion, median: straight {line:.2}, midpoint {mid:.2}, static {stat:.2}"
             );
+            assert!(line < mid, "scale {scale} level {level}: straight {line} not tighter than midpoint {mid}");
             assert!(lowest >= 1.0 - 1e-9, "scale {scale} level {level}: a margin below the motion ({lowest})");
             assert!(mid < stat, "scale {scale} level {level}: midpoint {mid} not tighter than static {stat}");
         }
@@ -540,7 +555,7 @@ fn the_snake_has_pairs_deeper_than_deep_and_shallower() {
             let stop = fast.pair_common[p] as usize;
             [a, b].map(|l| {
                 let mut n = 0;
-                fast.walk(fast.links[l as usize].first, stop, &step, None, |_, _, _| n += 1);
+                fast.walk(fast.links[l as usize].first, stop, &step, None, None, |_, _, _| n += 1);
                 n
             })
         })
