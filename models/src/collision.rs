@@ -73,7 +73,7 @@ pub use narrow::{
 };
 use spheres::lanes::{self, LaneInput, LaneMargins, SegmentIn, Solids32};
 use spheres::simd8::Isa;
-use spheres::{Check, Solid, SphereGeom, SphereScratch};
+use spheres::{Check, Scope, Solid, SphereGeom, SphereScratch};
 
 /// How many configurations [`CollisionModel::batch_collisions_with`] checks at once (on the
 /// sphere path, one per vector lane).
@@ -638,6 +638,9 @@ struct Span {
     t0: f64,
     t1: f64,
     within: Option<(usize, usize)>,
+    /// The self pairs are certainly free over the sub-interval (a single-precision batch said
+    /// so): its double-precision check tests the obstacles alone.
+    pairs_free: bool,
 }
 
 /// The inflation of a sub-interval of half-length `half` (a share of the segment): `margins` :=
@@ -688,7 +691,7 @@ fn bit_reversed_pieces(spans: &mut Vec<Span>, pieces: usize) {
     spans.clear();
     spans.extend((1..=pieces).map(|k| {
         let i = piece_in_order(k, pieces);
-        Span { t0: i as f64 * width, t1: (i + 1) as f64 * width, within: None }
+        Span { t0: i as f64 * width, t1: (i + 1) as f64 * width, within: None, pairs_free: false }
     }));
 }
 
@@ -1176,7 +1179,7 @@ impl CollisionModel {
         }
         zero_steps(&mut s.step, dof);
         let step = (margin == 0.0).then_some(&s.step[..]);
-        let grow = LaneMargins { link: &[], pair: &[], uniform: Some(margin), step };
+        let grow = LaneMargins { link: &[], pair: &[], uniform: Some(margin), step, pairs_of_near: false };
         let answer = fast.free_lanes(input, dof, solids32, grow, &mut s.spheres.lanes);
         let used = (1u32 << n) - 1;
         Some(BatchSettled { free: answer.free & used, colliding: answer.hit & used })
@@ -1252,7 +1255,8 @@ impl CollisionModel {
         // No step: each lane's own cell of the self-collision tables.
         let dof = a.len();
         zero_steps(&mut s.step, dof);
-        let margins = LaneMargins { link: &[], pair: &[], uniform: Some(0.0), step: Some(&s.step) };
+        let margins =
+            LaneMargins { link: &[], pair: &[], uniform: Some(0.0), step: Some(&s.step), pairs_of_near: false };
         let input = LaneInput::Segment(SegmentIn { a, delta, n, ids: lane_ids, end });
         let answer = fast.free_lanes(input, dof, solids32, margins, &mut s.spheres.lanes);
         if answer.hit & used != 0 {
@@ -1832,6 +1836,39 @@ impl CollisionModel {
         }
     }
 
+    /// The pieces the certificate's single-precision first level leaves of `qa`-`qb` to the
+    /// double-precision checks, each with whether its self pairs were found free: `(t0, t1,
+    /// pairs free)`; `None` when the segment's first level runs no batch, or a batch finds a
+    /// contact.
+    #[cfg(test)]
+    pub(crate) fn first_level_left(
+        &self,
+        qa: &[f64],
+        qb: &[f64],
+        s: &mut CollisionScratch,
+    ) -> Option<Vec<(f64, f64, bool)>> {
+        let g = &*self.geom;
+        let (fast, solids32) = (self.fast.as_ref()?, self.solids32.as_ref()?);
+        if qa.len() != g.dof || qb.len() != g.dof {
+            return None;
+        }
+        let mut delta = Vec::new();
+        g.cspace.deltas_into(qa, qb, &mut delta);
+        let steps: Vec<f64> = delta.iter().map(|d| d.abs()).collect();
+        let mut travel = Vec::new();
+        g.travel_into(&steps, &mut travel);
+        let most = travel.iter().copied().fold(0.0, f64::max);
+        let mut pieces = 1usize;
+        while pieces < 1 << CERTIFY_START_LEVELS && most * 0.5 / pieces as f64 > CERTIFY_START_MARGIN {
+            pieces *= 2;
+        }
+        let (mut margins, mut step, mut spans) = (Vec::new(), Vec::new(), Vec::new());
+        let first = (&travel[..], &steps[..], most, pieces);
+        let (batches, hit) =
+            self.first_level_in_lanes(fast, solids32, qa, &delta, first, &mut spans, (&mut margins, &mut step), s);
+        (batches > 0 && !hit).then(|| spans.iter().map(|sp| (sp.t0, sp.t1, sp.pairs_free)).collect())
+    }
+
     /// The query the certificate makes of the sub-interval `[t0, t1]` of `qa`-`qb` on the sphere
     /// path, listing what is near, and how far either side of its midpoint it certified free
     /// (`None` off the sphere path or for configurations of the wrong length).
@@ -1862,7 +1899,7 @@ impl CollisionModel {
         let mut q = vec![0.0; g.dof];
         ConfigSpace::step_into(qa, &delta, t0 + half, &mut q);
         s.spheres.items.clear();
-        let answer = fast.check_listed(&q, &self.obstacles, &self.solids, inflation, None, &mut s.spheres);
+        let answer = fast.check_listed(&q, &self.obstacles, &self.solids, inflation, Scope::Everything, &mut s.spheres);
         let rho = if answer == Check::Near { reach_of(half, s.spheres.reach) } else { 0.0 };
         Some((answer, rho))
     }
@@ -1958,7 +1995,7 @@ impl CollisionModel {
                 free = false;
                 break;
             }
-            let Span { t0, t1, within } = spans[head];
+            let Span { t0, t1, within, pairs_free } = spans[head];
             head += 1;
             let half = 0.5 * (t1 - t0);
             let tm = t0 + half;
@@ -1975,8 +2012,12 @@ impl CollisionModel {
             let first_item = s.spheres.items.len();
             let answer = match &self.fast {
                 Some(fast) if listed => {
-                    let within = within.map(|(a, b)| a..b);
-                    fast.check_listed(&q, &self.obstacles, &self.solids, inflation, within, &mut s.spheres)
+                    let scope = match within {
+                        Some((a, b)) => Scope::Items(a..b),
+                        None if pairs_free => Scope::Obstacles,
+                        None => Scope::Everything,
+                    };
+                    fast.check_listed(&q, &self.obstacles, &self.solids, inflation, scope, &mut s.spheres)
                 }
                 _ => self.check(&q, Some(inflation), s),
             };
@@ -1996,8 +2037,8 @@ impl CollisionModel {
                     // around `tm` it certified free: only the rest is checked again.
                     let reach = if near_items.is_some() { s.spheres.reach } else { 0.0 };
                     let rho = reach_of(half, reach);
-                    spans.push(Span { t0, t1: tm - rho, within: near_items });
-                    spans.push(Span { t0: tm + rho, t1, within: near_items });
+                    spans.push(Span { t0, t1: tm - rho, within: near_items, pairs_free });
+                    spans.push(Span { t0: tm + rho, t1, within: near_items, pairs_free });
                 }
             }
         }
@@ -2064,8 +2105,13 @@ impl CollisionModel {
                 ConfigSpace::step_into(qa, delta, (*i as f64 + 0.5) * width, row);
             }
             from += lanes::LANES;
-            let grow =
-                LaneMargins { link: &margins[..slots], pair: &margins[slots..], uniform: None, step: Some(step) };
+            let grow = LaneMargins {
+                link: &margins[..slots],
+                pair: &margins[slots..],
+                uniform: None,
+                step: Some(step),
+                pairs_of_near: true,
+            };
             let answer = fast.free_lanes(LaneInput::Rows(&buf), dof, solids32, grow, &mut s.spheres.lanes);
             batches += 1;
             if answer.hit & ((1u32 << n) - 1) != 0 {
@@ -2074,7 +2120,8 @@ impl CollisionModel {
             }
             for (k, &i) in lane_piece[..n].iter().enumerate() {
                 if answer.free & (1 << k) == 0 {
-                    left.push(Span { t0: i as f64 * width, t1: (i + 1) as f64 * width, within: None });
+                    let pairs_free = answer.pairs_free & (1 << k) != 0;
+                    left.push(Span { t0: i as f64 * width, t1: (i + 1) as f64 * width, within: None, pairs_free });
                 }
             }
         }

@@ -495,6 +495,18 @@ pub(crate) struct SphereScratch {
     pub(crate) lanes: lanes::LaneScratch,
 }
 
+/// What a listing query of the certificate tests ([`SphereGeom::check_listed`]).
+#[derive(Debug, Clone)]
+pub(crate) enum Scope {
+    /// Every obstacle and self pair.
+    Everything,
+    /// The obstacles alone: the self pairs are known free over the sub-interval.
+    Obstacles,
+    /// The items of a sub-interval holding this one (a range of `s.items`), the only things
+    /// that can be near or in contact here.
+    Items(std::ops::Range<usize>),
+}
+
 /// One thing an inflated query found *near*: its grown shapes touch, its exact ones do not. A
 /// query that lists them ([`SphereGeom::check_listed`]) certifies everything else free over
 /// its whole sub-interval, so a check of a part of that sub-interval need test these alone.
@@ -1076,28 +1088,28 @@ impl SphereGeom {
         s: &mut SphereScratch,
     ) -> Check {
         match inflation {
-            Some(_) => self.check_impl::<true, false>(q, obstacles, solids, inflation, s),
-            None => self.check_impl::<false, false>(q, obstacles, solids, None, s),
+            Some(_) => self.check_impl::<true, false>(q, obstacles, solids, inflation, false, s),
+            None => self.check_impl::<false, false>(q, obstacles, solids, None, false, s),
         }
     }
 
     /// An inflated query of the motion certificate that lists what it finds near (see
-    /// [`Item`]) at the end of `s.items`. `within`: the items of a sub-interval holding this
-    /// one, the only things that can be near or in contact here (a range of `s.items`); `None`
-    /// tests everything. The answer is [`Self::check`]'s, but for things certified free over a
-    /// larger sub-interval, which stay free even where the smaller one's bounds would not say so.
+    /// [`Item`]) at the end of `s.items`; what it tests is `scope`'s. The answer is
+    /// [`Self::check`]'s, but for things certified free over a larger sub-interval, which stay
+    /// free even where the smaller one's bounds would not say so.
     pub(crate) fn check_listed(
         &self,
         q: &[f64],
         obstacles: &[ObstacleGeom],
         solids: &[Solid],
         inflation: Inflation<'_>,
-        within: Option<std::ops::Range<usize>>,
+        scope: Scope,
         s: &mut SphereScratch,
     ) -> Check {
-        match within {
-            None => self.check_impl::<true, true>(q, obstacles, solids, Some(inflation), s),
-            Some(range) => self.check_items(q, obstacles, solids, inflation, range, s),
+        match scope {
+            Scope::Everything => self.check_impl::<true, true>(q, obstacles, solids, Some(inflation), false, s),
+            Scope::Obstacles => self.check_impl::<true, true>(q, obstacles, solids, Some(inflation), true, s),
+            Scope::Items(range) => self.check_items(q, obstacles, solids, inflation, range, s),
         }
     }
 
@@ -1191,6 +1203,7 @@ impl SphereGeom {
         obstacles: &[ObstacleGeom],
         solids: &[Solid],
         inflation: Option<Inflation<'_>>,
+        pairs_free: bool,
         s: &mut SphereScratch,
     ) -> Check {
         self.pose(q, s);
@@ -1335,7 +1348,7 @@ impl SphereGeom {
                 }
             }
         }
-        if self.self_pass::<GROW, COLLECT>(q, &mut inf, &mut near, s) {
+        if !pairs_free && self.self_pass::<GROW, COLLECT>(q, &mut inf, &mut near, s) {
             return Check::Hit;
         }
         if near { Check::Near } else { Check::Free }

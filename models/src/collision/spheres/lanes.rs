@@ -263,6 +263,10 @@ pub(crate) struct LaneMargins<'a> {
     /// Every link and pair margin is this one (the plain checks of a planner: 0).
     pub uniform: Option<f64>,
     pub step: Option<&'a [f64]>,
+    /// Test the self pairs of the lanes already near an obstacle too (unless every lane is),
+    /// and say which lanes' pairs are free ([`Lanes8::pairs_free`]): the certificate's
+    /// double-precision check of a piece then skips its self pairs.
+    pub pairs_of_near: bool,
 }
 
 /// The answer of a batch: bit `i` for lane `i`.
@@ -273,6 +277,9 @@ pub(crate) struct Lanes8 {
     /// Lanes certainly in contact (exact); when not empty, the batch stopped there and `free`
     /// is empty.
     pub hit: u32,
+    /// With [`LaneMargins::pairs_of_near`], the lanes whose self pairs are certainly free
+    /// (inflated), near an obstacle or not; otherwise empty.
+    pub pairs_free: u32,
 }
 
 /// Where a batch's [`LANES`] configurations are.
@@ -852,8 +859,8 @@ impl SphereGeom {
         margins: LaneMargins<'_>,
         s: &mut LaneScratch,
     ) -> Lanes8 {
-        let LaneMargins { link: link_m, pair: pair_m, uniform, step } = margins;
-        let none = Lanes8 { free: 0, hit: 0 };
+        let LaneMargins { link: link_m, pair: pair_m, uniform, step, pairs_of_near } = margins;
+        let none = Lanes8 { free: 0, hit: 0, pairs_free: 0 };
         let lanes = &self.lanes;
         let margins_fit =
             uniform.is_some() || (link_m.len() == self.links.len() && pair_m.len() == self.self_pairs.len());
@@ -931,7 +938,7 @@ impl SphereGeom {
                         if mk != 0 {
                             let hit = mk & within(d2, contact(self.radius[k]));
                             if hit != 0 {
-                                return Lanes8 { free: 0, hit };
+                                return Lanes8 { free: 0, hit, pairs_free: 0 };
                             }
                         }
                         live &= !mk;
@@ -943,7 +950,12 @@ impl SphereGeom {
             }
         }
         // Self pairs, by group pair (as the scalar query): the two group spheres, the cell
-        // table, then each pair's link spheres and spheres.
+        // table, then each pair's link spheres and spheres. With `pairs_of_near`, of every lane,
+        // those near an obstacle too (unless all were: the batch stopped there, most often at
+        // a segment that does not certify).
+        let all: u32 = (1 << LANES) - 1;
+        let tested = if pairs_of_near { all } else { live };
+        let mut pairs_near = 0;
         for (k, gp) in self.group_pairs.iter().enumerate() {
             let Some(range) = lanes.pair_ranges.get(k) else { break };
             let pairs = &lanes.pairs[range.clone()];
@@ -952,7 +964,8 @@ impl SphereGeom {
                 None => pairs.iter().map(|pr| pair_m[pr[0] as usize]).fold(0.0, f64::max),
             };
             let tg = thr(up(gp.rr + eg + grow), 0.0, 0.0);
-            let mut near = live & within(dist2(&load(o, &s.group_c[gp.outer]), &load(o, &s.group_c[gp.inner])), tg);
+            let mut near = (tested & !pairs_near)
+                & within(dist2(&load(o, &s.group_c[gp.outer]), &load(o, &s.group_c[gp.inner])), tg);
             if near == 0 {
                 continue;
             }
@@ -996,7 +1009,7 @@ impl SphereGeom {
                         if t != 0 {
                             let hit = t & within(d2, contact(r));
                             if hit != 0 {
-                                return Lanes8 { free: 0, hit };
+                                return Lanes8 { free: 0, hit, pairs_free: 0 };
                             }
                             touch |= t;
                         }
@@ -1007,11 +1020,12 @@ impl SphereGeom {
                 }
             }
             live &= !touch;
-            if live == 0 {
+            pairs_near |= touch;
+            if live == 0 && (!pairs_of_near || pairs_near == all) {
                 return none;
             }
         }
-        Lanes8 { free: live, hit: 0 }
+        Lanes8 { free: live, hit: 0, pairs_free: if pairs_of_near { all & !pairs_near } else { 0 } }
     }
 
     /// Bodies of the configurations `qs`; `false` when a joint value is not finite or a
