@@ -902,6 +902,15 @@ pub(crate) struct Inflation<'a> {
     pub dir: &'a [f64],
 }
 
+/// What [`CollisionModel::segment_for_tests`] gives.
+#[cfg(test)]
+struct SegmentForTests<'a> {
+    fast: &'a SphereGeom,
+    delta: Vec<f64>,
+    steps: Vec<f64>,
+    travel: Vec<f64>,
+}
+
 /// Which pair collided, by slot/obstacle index (no allocation on the hot path).
 #[derive(Debug, Clone, Copy)]
 enum Hit {
@@ -1836,6 +1845,23 @@ impl CollisionModel {
         }
     }
 
+    /// What a certificate of `qa`-`qb` starts from on the sphere path: the geometry, the joint
+    /// changes, their magnitudes and how far each link and self pair can travel (`None` off the
+    /// sphere path or for configurations of the wrong length).
+    #[cfg(test)]
+    fn segment_for_tests(&self, qa: &[f64], qb: &[f64]) -> Option<SegmentForTests<'_>> {
+        let (g, fast) = (&*self.geom, self.fast.as_ref()?);
+        if qa.len() != g.dof || qb.len() != g.dof {
+            return None;
+        }
+        let mut delta = Vec::new();
+        g.cspace.deltas_into(qa, qb, &mut delta);
+        let steps: Vec<f64> = delta.iter().map(|d| d.abs()).collect();
+        let mut travel = Vec::new();
+        g.travel_into(&steps, &mut travel);
+        Some(SegmentForTests { fast, delta, steps, travel })
+    }
+
     /// The pieces the certificate's single-precision first level leaves of `qa`-`qb` to the
     /// double-precision checks, each with whether its self pairs were found free: `(t0, t1,
     /// pairs free)`; `None` when the segment's first level runs no batch, or a batch finds a
@@ -1847,16 +1873,8 @@ impl CollisionModel {
         qb: &[f64],
         s: &mut CollisionScratch,
     ) -> Option<Vec<(f64, f64, bool)>> {
-        let g = &*self.geom;
-        let (fast, solids32) = (self.fast.as_ref()?, self.solids32.as_ref()?);
-        if qa.len() != g.dof || qb.len() != g.dof {
-            return None;
-        }
-        let mut delta = Vec::new();
-        g.cspace.deltas_into(qa, qb, &mut delta);
-        let steps: Vec<f64> = delta.iter().map(|d| d.abs()).collect();
-        let mut travel = Vec::new();
-        g.travel_into(&steps, &mut travel);
+        let solids32 = self.solids32.as_ref()?;
+        let SegmentForTests { fast, delta, steps, travel } = self.segment_for_tests(qa, qb)?;
         let most = travel.iter().copied().fold(0.0, f64::max);
         let mut pieces = 1usize;
         while pieces < 1 << CERTIFY_START_LEVELS && most * 0.5 / pieces as f64 > CERTIFY_START_MARGIN {
@@ -1880,15 +1898,8 @@ impl CollisionModel {
         (t0, t1): (f64, f64),
         s: &mut CollisionScratch,
     ) -> Option<(Check, f64)> {
-        let (g, fast) = (&*self.geom, self.fast.as_ref()?);
-        if qa.len() != g.dof || qb.len() != g.dof {
-            return None;
-        }
-        let mut delta = Vec::new();
-        g.cspace.deltas_into(qa, qb, &mut delta);
-        let steps: Vec<f64> = delta.iter().map(|d| d.abs()).collect();
-        let mut travel = Vec::new();
-        g.travel_into(&steps, &mut travel);
+        let g = &*self.geom;
+        let SegmentForTests { fast, delta, steps, travel } = self.segment_for_tests(qa, qb)?;
         let half = 0.5 * (t1 - t0);
         let (mut margins, mut step) = (Vec::new(), Vec::new());
         span_margins(half, &travel, &steps, &mut margins, &mut step);
