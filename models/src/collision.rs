@@ -663,6 +663,17 @@ fn span_dir(half: f64, delta: &[f64], dir: &mut Vec<f64>) {
     dir.extend(delta.iter().map(|d| d * scale));
 }
 
+/// The certificate's first level for a segment whose links travel at most `most`: equal pieces
+/// small enough that the largest margin is at most [`CERTIFY_START_MARGIN`], never more than
+/// 2^[`CERTIFY_START_LEVELS`].
+fn first_pieces(most: f64) -> usize {
+    let mut pieces = 1usize;
+    while pieces < 1 << CERTIFY_START_LEVELS && most * 0.5 / pieces as f64 > CERTIFY_START_MARGIN {
+        pieces *= 2;
+    }
+    pieces
+}
+
 /// How far either side of a sub-interval's midpoint (in segment fraction) a listing query
 /// certified free, from the sub-interval's half-length `half` and the query's `reach` (the
 /// smallest ratio of a near item's gap to its margin, see `SphereScratch::reach`): 0 to halve.
@@ -1876,10 +1887,7 @@ impl CollisionModel {
         let solids32 = self.solids32.as_ref()?;
         let SegmentForTests { fast, delta, steps, travel } = self.segment_for_tests(qa, qb)?;
         let most = travel.iter().copied().fold(0.0, f64::max);
-        let mut pieces = 1usize;
-        while pieces < 1 << CERTIFY_START_LEVELS && most * 0.5 / pieces as f64 > CERTIFY_START_MARGIN {
-            pieces *= 2;
-        }
+        let pieces = first_pieces(most);
         let (mut margins, mut step, mut spans) = (Vec::new(), Vec::new(), Vec::new());
         let first = (&travel[..], &steps[..], most, pieces);
         let (batches, hit) =
@@ -1975,12 +1983,7 @@ impl CollisionModel {
         q.clear();
         q.resize(dof, 0.0);
         spans.clear();
-        // The first level: equal pieces small enough that the largest margin is at most
-        // `CERTIFY_START_MARGIN` (never more than 2^CERTIFY_START_LEVELS pieces).
-        let mut pieces = 1usize;
-        while pieces < 1 << CERTIFY_START_LEVELS && most * 0.5 / pieces as f64 > CERTIFY_START_MARGIN {
-            pieces *= 2;
-        }
+        let pieces = first_pieces(most);
         s.spheres.items.clear();
         let mut free = true;
         if listed && let (Some(fast), Some(solids32)) = (&self.fast, &self.solids32) {
