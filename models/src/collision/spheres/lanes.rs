@@ -185,6 +185,16 @@ pub(crate) struct Lanes {
     pub(crate) centre_err: f64,
     /// The largest group bounding radius (m).
     max_group_r: f64,
+    /// This program's number, unique in the process: a scratch keeps thresholds derived from
+    /// it under this number (see [`Grown`]).
+    id: u64,
+}
+
+/// Numbers for [`Lanes::id`].
+static NEXT_ID: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(1);
+
+fn next_id() -> u64 {
+    NEXT_ID.fetch_add(1, std::sync::atomic::Ordering::Relaxed)
 }
 
 /// Obstacles in single precision, and what their rounding adds to the error bound.
@@ -269,6 +279,27 @@ pub(crate) struct LaneMargins<'a> {
     pub pairs_of_near: bool,
 }
 
+/// The thresholds a batch derives from a uniform margin (the planner's probes), kept in the
+/// scratch for the next batch with the same robot, margin and obstacle scale. Derived in
+/// each batch, the group and group-pair thresholds took about 100 instructions of a probe
+/// batch on MotionBenchMaker's cage problems.
+#[derive(Debug, Clone)]
+struct Grown {
+    /// What they were derived from: the robot's [`Lanes::id`], the margin's bits and the
+    /// obstacles' scale (bits); `None` when nothing is kept.
+    key: Option<(u64, u64, u64)>,
+    /// The rounding allowance `√3 η` of the module documentation.
+    grow: f64,
+    /// Per link, the margin plus the allowance, rounded up.
+    link: Vec<f32>,
+    /// Per group, its radius plus the margin and the allowance, rounded up.
+    group: Vec<f32>,
+    /// Per group pair, the threshold of its two group spheres.
+    group_pair: Vec<f32>,
+    /// The margin plus the allowance, rounded up (every self pair's).
+    pair: f32,
+}
+
 /// The answer of a batch: bit `i` for lane `i`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub(crate) struct Lanes8 {
@@ -339,17 +370,52 @@ impl Source for SegmentIn<'_> {
         }
         // The very quotients and sums of `ConfigSpace::step_into` (exact division).
         let t = ids.map(|i| i as f64 / n as f64);
-        cols.resize(dof, [0.0; LANES]);
-        for ((col, &aj), &dj) in cols.iter_mut().zip(a).zip(delta) {
-            *col = t.map(|t| aj + t * dj);
-        }
-        if let Some(e) = end {
-            for (col, &v) in cols.iter_mut().zip(e) {
-                col[0] = v;
+        // For the common arm sizes, loops of known length (unrolled): about 100 instructions
+        // a probe less on a six-joint arm than the loop over `dof`.
+        match dof {
+            6 => segment_columns::<6>(a, delta, end, &t, cols),
+            7 => segment_columns::<7>(a, delta, end, &t, cols),
+            _ => {
+                cols.resize(dof, [0.0; LANES]);
+                for ((col, &aj), &dj) in cols.iter_mut().zip(a).zip(delta) {
+                    *col = t.map(|t| aj + t * dj);
+                }
+                if let Some(e) = end {
+                    for (col, &v) in cols.iter_mut().zip(e) {
+                        col[0] = v;
+                    }
+                }
+                true
             }
         }
-        true
     }
+}
+
+/// [`SegmentIn::columns`] for `D` joints: lane `i` of joint `j` is `a[j] + t[i] delta[j]`, the
+/// end over lane 0. `false` unless `a`, `delta` and `end` hold `D` values.
+#[inline(always)]
+fn segment_columns<const D: usize>(
+    a: &[f64],
+    delta: &[f64],
+    end: Option<&[f64]>,
+    t: &[f64; LANES],
+    cols: &mut Vec<[f64; LANES]>,
+) -> bool {
+    let (Ok(a), Ok(delta)) = (<&[f64; D]>::try_from(a), <&[f64; D]>::try_from(delta)) else { return false };
+    if cols.len() != D {
+        cols.resize(D, [0.0; LANES]);
+    }
+    let Ok(cols) = <&mut [[f64; LANES]; D]>::try_from(&mut cols[..]) else { return false };
+    for j in 0..D {
+        cols[j] = t.map(|t| a[j] + t * delta[j]);
+    }
+    if let Some(e) = end {
+        let Ok(e) = <&[f64; D]>::try_from(e) else { return false };
+        for j in 0..D {
+            cols[j][0] = e[j];
+        }
+    }
+    true
 }
 
 /// Working memory of the single-precision batch.
@@ -374,10 +440,11 @@ pub(crate) struct LaneScratch {
     /// clear and fill went through two `memset` calls a batch, and their `vzeroupper`s in the
     /// AVX2 kernel).
     batch: u32,
-    /// Per link, its margin plus the rounding allowance, rounded up.
+    /// Per link, its margin plus the rounding allowance, rounded up, for a batch whose
+    /// margins are not uniform (derived anew in each).
     link_g: Vec<f32>,
-    /// The uniform margin and allowance `link_g` holds (bits), if it was filled for one.
-    link_g_for: Option<(u64, u64)>,
+    /// The thresholds of the last uniform margin.
+    grown: Grown,
     /// The instruction set of the batches (see `simd8`).
     pub(crate) isa: Isa,
     /// The bodies, groups, links and spheres the buffers above are sized for.
@@ -399,7 +466,14 @@ impl LaneScratch {
             cols: Vec::new(),
             batch: 0,
             link_g: Vec::new(),
-            link_g_for: None,
+            grown: Grown {
+                key: None,
+                grow: 0.0,
+                link: Vec::new(),
+                group: Vec::new(),
+                group_pair: Vec::new(),
+                pair: 0.0,
+            },
             isa: Isa::Best,
             shape: [0; 4],
         }
@@ -676,6 +750,7 @@ impl Lanes {
             pair_ranges: Vec::new(),
             centre_err: f64::INFINITY,
             max_group_r: 0.0,
+            id: next_id(),
         }
     }
 
@@ -782,6 +857,7 @@ impl Lanes {
             pair_ranges,
             centre_err,
             max_group_r: g.groups.iter().map(|gr| gr.r).fold(0.0, f64::max),
+            id: next_id(),
         }
     }
 }
@@ -802,6 +878,25 @@ impl SphereGeom {
         let r_max = (max_group_r + max_link_m).max(2.0 * max_group_r + max_pair_m);
         let eta = 3.0 * lanes.centre_err + 32.0 * U * (obstacles.scale + r_max);
         eta.is_finite().then(|| 3f64.sqrt() * eta)
+    }
+
+    /// The thresholds of the uniform margin `m` among `obstacles` in `out` (see [`Grown`]);
+    /// `false` (and nothing kept) when the allowance is not finite.
+    #[cold]
+    #[inline(never)]
+    fn grow_uniform(&self, obstacles: &Solids32, m: f64, out: &mut Grown) -> bool {
+        out.key = None;
+        let Some(grow) = self.allowance(obstacles, m, m) else { return false };
+        out.grow = grow;
+        out.link.clear();
+        out.link.extend(self.links.iter().map(|_| up(m + grow)));
+        out.group.clear();
+        out.group.extend(self.groups.iter().map(|g| up(g.r + m + grow)));
+        out.group_pair.clear();
+        out.group_pair.extend(self.group_pairs.iter().map(|gp| thr(up(gp.rr + m + grow), 0.0, 0.0)));
+        out.pair = up(m + grow);
+        out.key = Some((self.lanes.id, m.to_bits(), obstacles.scale.to_bits()));
+        true
     }
 }
 
@@ -867,29 +962,33 @@ impl SphereGeom {
         if !margins_fit || self.fixed != Check::Free || !lanes.centre_err.is_finite() {
             return none;
         }
-        let link_margin = |l: usize| uniform.unwrap_or_else(|| link_m[l]);
-        let pair_margin = |p: usize| uniform.unwrap_or_else(|| pair_m[p]);
-        // The largest radius any test asks about, and the component error bound η.
-        let (max_link_m, max_pair_m) = match uniform {
-            Some(m) => (m, m),
-            None => (link_m.iter().copied().fold(0.0, f64::max), pair_m.iter().copied().fold(0.0, f64::max)),
+        // The allowance, and per link its margin plus the allowance: for a uniform margin
+        // kept from the last batch with the same (see `Grown`), otherwise derived here.
+        let grow = match uniform {
+            Some(m) => {
+                let key = Some((lanes.id, m.to_bits(), obstacles.scale.to_bits()));
+                if s.grown.key != key && !self.grow_uniform(obstacles, m, &mut s.grown) {
+                    return none;
+                }
+                s.grown.grow
+            }
+            None => {
+                // The largest radius any test asks about, and the component error bound η.
+                let max_link_m = link_m.iter().copied().fold(0.0, f64::max);
+                let max_pair_m = pair_m.iter().copied().fold(0.0, f64::max);
+                let Some(grow) = self.allowance(obstacles, max_link_m, max_pair_m) else { return none };
+                s.link_g.clear();
+                s.link_g.extend(link_m.iter().map(|&m| up(m + grow)));
+                grow
+            }
         };
-        let Some(grow) = self.allowance(obstacles, max_link_m, max_pair_m) else { return none };
-        // Per link, its margin plus the allowance (for a uniform margin, once per margin).
-        let key = uniform.map(|m| (m.to_bits(), grow.to_bits()));
-        if key.is_none() || s.link_g_for != key || s.link_g.len() != self.links.len() {
-            s.link_g.clear();
-            s.link_g.extend((0..self.links.len()).map(|l| up(link_margin(l) + grow)));
-            s.link_g_for = key;
-        }
+        let kept = uniform.is_some();
         // Certainly in contact: at most this (rounded down), see the module documentation.
         let contact = |r: f64| contact_thr(r, grow);
         if !self.pose_lanes(o, qs, dof, s) {
             return none;
         }
         let mut live: u32 = (1 << LANES) - 1;
-        // No step (the edge probes): a lane's own cell, not a box of cells.
-        let point_cells = step.is_some_and(|st| st.iter().all(|&d| d == 0.0));
         // Against obstacles: group, link, sphere; the groups farthest down the chain first
         // (they meet obstacles most often, so a contact ends the batch sooner). The order may
         // change which lanes a batch settles, never what its callers conclude: a lane left
@@ -897,15 +996,15 @@ impl SphereGeom {
         for (gi, g) in self.groups.iter().enumerate().rev() {
             let links = &self.group_links[g.first..g.end];
             let single = links.len() == 1;
-            let eg = match uniform {
-                Some(m) => m,
-                None => links.iter().map(|&l| link_m[l as usize]).fold(0.0, f64::max),
-            };
             // The group's centre, kept for the self pairs below (which run only after every
             // group has been here): a batch that ends in a contact skips the groups after it.
             let gc = place(o, &load(o, &s.rot[g.body]), &load(o, &s.pos[g.body]), &lanes.groups[gi]);
             store(&gc, &mut s.group_c[gi]);
-            let gg = up(g.r + eg + grow);
+            let gg = if kept {
+                s.grown.group[gi]
+            } else {
+                up(g.r + links.iter().map(|&l| link_m[l as usize]).fold(0.0, f64::max) + grow)
+            };
             let tg = thr(gg, 0.0, 0.0);
             for (ob, (bc, br)) in obstacles.solids.iter().zip(&obstacles.bound) {
                 // The spheres around the group and the solid first.
@@ -919,7 +1018,7 @@ impl SphereGeom {
                 for &l in links {
                     let l = l as usize;
                     let link = &self.links[l];
-                    let lg = s.link_g[l];
+                    let lg = if kept { s.grown.link[l] } else { s.link_g[l] };
                     // A group of one link is that link's bounding sphere (a hair larger): the
                     // link's own test would repeat the group's, so its lanes go on as they are.
                     let ml = if single {
@@ -956,14 +1055,16 @@ impl SphereGeom {
         let all: u32 = (1 << LANES) - 1;
         let tested = if pairs_of_near { all } else { live };
         let mut pairs_near = 0;
+        // No step (the edge probes): a lane's own cell, not a box of cells.
+        let point_cells = step.is_some_and(|st| st.iter().all(|&d| d == 0.0));
         for (k, gp) in self.group_pairs.iter().enumerate() {
             let Some(range) = lanes.pair_ranges.get(k) else { break };
             let pairs = &lanes.pairs[range.clone()];
-            let eg = match uniform {
-                Some(m) => m,
-                None => pairs.iter().map(|pr| pair_m[pr[0] as usize]).fold(0.0, f64::max),
+            let tg = if kept {
+                s.grown.group_pair[k]
+            } else {
+                thr(up(gp.rr + pairs.iter().map(|pr| pair_m[pr[0] as usize]).fold(0.0, f64::max) + grow), 0.0, 0.0)
             };
-            let tg = thr(up(gp.rr + eg + grow), 0.0, 0.0);
             let mut near = (tested & !pairs_near)
                 & within(dist2(&load(o, &s.group_c[gp.outer]), &load(o, &s.group_c[gp.inner])), tg);
             if near == 0 {
@@ -983,11 +1084,10 @@ impl SphereGeom {
             let mut touch = 0;
             for &[p, a, b] in pairs {
                 let (p, a, b) = (p as usize, a as usize, b as usize);
-                let m = pair_margin(p);
+                let pg = if kept { s.grown.pair } else { up(pair_m[p] + grow) };
                 let (la, lb) = (&self.links[a], &self.links[b]);
                 let ca = self.lane_link_centre(o, a, s);
                 let cb = self.lane_link_centre(o, b, s);
-                let pg = up(m + grow);
                 let tl = thr(lanes.link_r_up[a], lanes.link_r_up[b], pg);
                 let close = near & !touch & within(dist2(&ca, &cb), tl);
                 if close == 0 {
@@ -1246,11 +1346,16 @@ mod tests {
     /// permutations with either sign (the fused turn), after a skewed origin (a matrix) and
     /// with a DH-style turn after the joint, a prismatic joint and a mimic joint.
     fn every_body_form() -> crate::Robot {
+        every_body_form_of(0.04)
+    }
+
+    /// [`every_body_form`] with spheres of radius `r`.
+    fn every_body_form_of(r: f64) -> crate::Robot {
         use crate::{JointKind, JointLimits, PlacedShape, RobotBuilder, Shape};
         let balls = |points: &[[f64; 3]]| -> Vec<PlacedShape> {
             points
                 .iter()
-                .map(|p| PlacedShape::new(Isometry3::translation(p[0], p[1], p[2]), Shape::sphere(0.04)))
+                .map(|p| PlacedShape::new(Isometry3::translation(p[0], p[1], p[2]), Shape::sphere(r)))
                 .collect()
         };
         let at = |x: f64, y: f64, z: f64, r: f64, p: f64, w: f64| {
@@ -1469,5 +1574,94 @@ mod tests {
         }
         // Both kinds of answer were met.
         assert!(free > 400 && hit > 40, "{free} free lanes, {hit} contacts");
+    }
+
+    /// A segment's lanes hold its points to the bit for every number of joints (the unrolled
+    /// six and seven and the loop for the others), with the end over lane 0 or not; values of
+    /// the wrong length give no lanes.
+    #[test]
+    fn segment_columns_hold_the_points_for_any_number_of_joints() {
+        let mut rng = crate::Rng::new(31);
+        for dof in 1..=9 {
+            for k in 0..20 {
+                let a: Vec<f64> = (0..dof).map(|_| rng.range(-4.0, 4.0)).collect();
+                let delta: Vec<f64> = (0..dof).map(|_| rng.range(-2.0, 2.0)).collect();
+                let b: Vec<f64> = (0..dof).map(|_| rng.range(-4.0, 4.0)).collect();
+                let n = 1 + k as u32 % 17;
+                let ids: [u32; LANES] = std::array::from_fn(|i| (i as u32 * 3 + k as u32) % (n + 1));
+                let end = (k % 2 == 0).then_some(&b[..]);
+                let mut cols = vec![[7.0; LANES]; (k % 3) * 4];
+                assert!(SegmentIn { a: &a, delta: &delta, n, ids, end }.columns(dof, &mut cols));
+                assert_eq!(cols.len(), dof);
+                let mut q = vec![0.0; dof];
+                for (i, &id) in ids.iter().enumerate() {
+                    match end {
+                        Some(e) if i == 0 => q.copy_from_slice(e),
+                        _ => crate::ConfigSpace::step_into(&a, &delta, f64::from(id) / f64::from(n), &mut q),
+                    }
+                    for j in 0..dof {
+                        assert_eq!(cols[j][i].to_bits(), q[j].to_bits(), "dof {dof}, case {k}, lane {i}, joint {j}");
+                    }
+                }
+                let short = &delta[..dof - 1];
+                assert!(!SegmentIn { a: &a, delta: short, n, ids, end }.columns(dof, &mut cols));
+                let end = Some(&b[..dof - 1]);
+                assert!(!SegmentIn { a: &a, delta: &delta, n, ids, end }.columns(dof, &mut cols));
+            }
+        }
+    }
+
+    /// The thresholds a scratch keeps for a uniform margin follow the robot, the margin and
+    /// the obstacles: one scratch passed between two robots of the same shape but other sphere
+    /// radii, two sets of obstacles of different extent and three margins answers every batch
+    /// as a fresh scratch does.
+    #[test]
+    fn kept_thresholds_follow_robot_margin_and_obstacles() {
+        use crate::Shape;
+        use crate::collision::{CollisionModel, Environment, Obstacle};
+        let mut rng = crate::Rng::new(41);
+        let near = |rng: &mut crate::Rng, far: f64| {
+            let mut env = Environment::new();
+            for k in 0..3 {
+                let at = Vector3::new(rng.range(-0.7, 0.7), rng.range(-0.7, 0.7), rng.range(0.0, 0.9));
+                let shape = if k % 2 == 0 { Shape::cuboid(0.06, 0.08, 0.05) } else { Shape::sphere(0.06) };
+                env.add(Obstacle::new(format!("o{k}"), Isometry3::translation(at.x, at.y, at.z), shape));
+            }
+            // One far obstacle sets the scale of the rounding allowance.
+            env.add(Obstacle::new("far", Isometry3::translation(far, 0.0, 0.0), Shape::sphere(0.1)));
+            env
+        };
+        let (small, large) = (every_body_form_of(0.04), every_body_form_of(0.07));
+        // The same near obstacles in each.
+        let env = |far: f64| near(&mut crate::Rng::new(5), far);
+        let first = CollisionModel::new(&small, env(3.0));
+        // The same robot (the same program) among obstacles whose extent grows the allowance
+        // by about 6 mm.
+        let mut wide = first.clone();
+        wide.set_environment(env(3000.0));
+        let models = [first, CollisionModel::new(&large, env(3.0)), wide];
+        let mut shared = models[0].scratch();
+        let (mut differ_by_robot, mut differ_by_extent, mut settled) = (0, 0, 0);
+        for k in 0..600 {
+            // Model and margin at random: each kind of change from one batch to the next occurs.
+            let margin = [0.0, 0.02, 0.05][rng.below(3)];
+            let rows: Vec<f64> = (0..LANES).flat_map(|_| small.random_configuration(&mut rng)).collect();
+            let answers: Vec<_> = models
+                .iter()
+                .map(|m| m.settle_lanes(LaneInput::Rows(&rows), LANES, margin, &mut m.scratch()).expect("a batch"))
+                .collect();
+            let m = rng.below(models.len());
+            let kept = models[m].settle_lanes(LaneInput::Rows(&rows), LANES, margin, &mut shared).expect("a batch");
+            assert_eq!(kept, answers[m], "batch {k}, model {m}, margin {margin}");
+            differ_by_robot += usize::from(answers[0] != answers[1]);
+            differ_by_extent += usize::from(answers[0] != answers[2]);
+            settled += answers[m].free.count_ones();
+        }
+        // The robots and the extents answer differently often enough for a threshold of the
+        // wrong one to show.
+        assert!(
+            differ_by_robot > 30 && differ_by_extent > 10 && settled > 500,
+            "{differ_by_robot} / {differ_by_extent} batches differ, {settled} lanes free"
+        );
     }
 }
