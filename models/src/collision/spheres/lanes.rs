@@ -185,16 +185,28 @@ pub(crate) struct Lanes {
     pub(crate) centre_err: f64,
     /// The largest group bounding radius (m).
     max_group_r: f64,
-    /// This program's number, unique in the process: a scratch keeps thresholds derived from
-    /// it under this number (see [`Grown`]).
-    id: u64,
+    /// This program's number: a scratch keeps thresholds derived from it under this number
+    /// (see [`Grown`]).
+    id: ProgramId,
 }
 
-/// Numbers for [`Lanes::id`].
-static NEXT_ID: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(1);
+/// A number unique in the process, given to each [`Lanes`] built (a clone keeps its own).
+/// Its `Debug` form is the same for all: a model's `Debug` form keys the cache of the
+/// self-collision cell tables (see `table`), and equal models must meet there.
+#[derive(Clone, Copy, PartialEq, Eq)]
+struct ProgramId(u64);
 
-fn next_id() -> u64 {
-    NEXT_ID.fetch_add(1, std::sync::atomic::Ordering::Relaxed)
+impl ProgramId {
+    fn next() -> ProgramId {
+        static NEXT: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(1);
+        ProgramId(NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed))
+    }
+}
+
+impl std::fmt::Debug for ProgramId {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("ProgramId")
+    }
 }
 
 /// Obstacles in single precision, and what their rounding adds to the error bound.
@@ -287,7 +299,7 @@ pub(crate) struct LaneMargins<'a> {
 struct Grown {
     /// What they were derived from: the robot's [`Lanes::id`], the margin's bits and the
     /// obstacles' scale (bits); `None` when nothing is kept.
-    key: Option<(u64, u64, u64)>,
+    key: Option<(ProgramId, u64, u64)>,
     /// The rounding allowance `√3 η` of the module documentation.
     grow: f64,
     /// Per link, the margin plus the allowance, rounded up.
@@ -750,7 +762,7 @@ impl Lanes {
             pair_ranges: Vec::new(),
             centre_err: f64::INFINITY,
             max_group_r: 0.0,
-            id: next_id(),
+            id: ProgramId::next(),
         }
     }
 
@@ -857,7 +869,7 @@ impl Lanes {
             pair_ranges,
             centre_err,
             max_group_r: g.groups.iter().map(|gr| gr.r).fold(0.0, f64::max),
-            id: next_id(),
+            id: ProgramId::next(),
         }
     }
 }

@@ -406,6 +406,21 @@ mod tests {
         (robot, g)
     }
 
+    /// Two models of one robot meet in the cache: the second takes the first's tables, not
+    /// proving them again (which took 17 s over the 296 public MotionBenchMaker problems when a
+    /// number unique to each model showed in the key).
+    #[test]
+    fn models_of_one_robot_share_their_tables() {
+        let (_, g) = ur5_geom();
+        let (a, b) = (SphereGeom::new(&g, true).unwrap(), SphereGeom::new(&g, true).unwrap());
+        let shared = a.tables.iter().zip(&b.tables).filter(|(x, y)| match (x, y) {
+            (Some(x), Some(y)) => std::sync::Arc::ptr_eq(x, y),
+            _ => false,
+        });
+        let proven = a.tables.iter().flatten().count();
+        assert!(proven > 0 && shared.count() == proven, "{proven} tables");
+    }
+
     /// The lanes' box proof answers as the row-by-row one, lane by lane: on tables of one to
     /// three joints with random proven cells, on values anywhere in a few turns, on cell edges,
     /// with steps that span one, two and more cells, and on values that are NaN or too large,
