@@ -303,14 +303,12 @@ struct Grown {
     key: Option<(ProgramId, u64, u64)>,
     /// The rounding allowance `√3 η` of the module documentation.
     grow: f64,
-    /// Per link, the margin plus the allowance, rounded up.
-    link: Vec<f32>,
+    /// The margin plus the allowance, rounded up: every link's and every self pair's.
+    margin: f32,
     /// Per group, its radius plus the margin and the allowance, rounded up.
     group: Vec<f32>,
     /// Per group pair, the threshold of its two group spheres.
     group_pair: Vec<f32>,
-    /// The margin plus the allowance, rounded up (every self pair's).
-    pair: f32,
 }
 
 /// The answer of a batch: bit `i` for lane `i`.
@@ -479,14 +477,7 @@ impl LaneScratch {
             cols: Vec::new(),
             batch: 0,
             link_g: Vec::new(),
-            grown: Grown {
-                key: None,
-                grow: 0.0,
-                link: Vec::new(),
-                group: Vec::new(),
-                group_pair: Vec::new(),
-                pair: 0.0,
-            },
+            grown: Grown { key: None, grow: 0.0, margin: 0.0, group: Vec::new(), group_pair: Vec::new() },
             isa: Isa::Best,
             shape: [0; 4],
         }
@@ -901,13 +892,11 @@ impl SphereGeom {
         out.key = None;
         let Some(grow) = self.allowance(obstacles, m, m) else { return false };
         out.grow = grow;
-        out.link.clear();
-        out.link.extend(self.links.iter().map(|_| up(m + grow)));
         out.group.clear();
         out.group.extend(self.groups.iter().map(|g| up(g.r + m + grow)));
         out.group_pair.clear();
         out.group_pair.extend(self.group_pairs.iter().map(|gp| thr(up(gp.rr + m + grow), 0.0, 0.0)));
-        out.pair = up(m + grow);
+        out.margin = up(m + grow);
         out.key = Some((self.lanes.id, m.to_bits(), obstacles.scale.to_bits()));
         true
     }
@@ -1031,7 +1020,7 @@ impl SphereGeom {
                 for &l in links {
                     let l = l as usize;
                     let link = &self.links[l];
-                    let lg = if kept { s.grown.link[l] } else { s.link_g[l] };
+                    let lg = if kept { s.grown.margin } else { s.link_g[l] };
                     // A group of one link is that link's bounding sphere (a hair larger): the
                     // link's own test would repeat the group's, so its lanes go on as they are.
                     let ml = if single {
@@ -1097,7 +1086,7 @@ impl SphereGeom {
             let mut touch = 0;
             for &[p, a, b] in pairs {
                 let (p, a, b) = (p as usize, a as usize, b as usize);
-                let pg = if kept { s.grown.pair } else { up(pair_m[p] + grow) };
+                let pg = if kept { s.grown.margin } else { up(pair_m[p] + grow) };
                 let (la, lb) = (&self.links[a], &self.links[b]);
                 let ca = self.lane_link_centre(o, a, s);
                 let cb = self.lane_link_centre(o, b, s);
