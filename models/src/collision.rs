@@ -1199,7 +1199,8 @@ impl CollisionModel {
         }
         zero_steps(&mut s.step, dof);
         let step = (margin == 0.0).then_some(&s.step[..]);
-        let grow = LaneMargins { link: &[], pair: &[], uniform: Some(margin), step, pairs_of_near: false };
+        let grow =
+            LaneMargins { link: &[], pair: &[], uniform: Some(margin), step, pairs_of_near: false, along: false };
         let answer = fast.free_lanes(input, dof, solids32, grow, &mut s.spheres.lanes);
         let used = (1u32 << n) - 1;
         Some(BatchSettled { free: answer.free & used, colliding: answer.hit & used })
@@ -1275,8 +1276,14 @@ impl CollisionModel {
         // No step: each lane's own cell of the self-collision tables.
         let dof = a.len();
         zero_steps(&mut s.step, dof);
-        let margins =
-            LaneMargins { link: &[], pair: &[], uniform: Some(0.0), step: Some(&s.step), pairs_of_near: false };
+        let margins = LaneMargins {
+            link: &[],
+            pair: &[],
+            uniform: Some(0.0),
+            step: Some(&s.step),
+            pairs_of_near: false,
+            along: false,
+        };
         let input = LaneInput::Segment(SegmentIn { a, delta, n, ids: lane_ids, end });
         let answer = fast.free_lanes(input, dof, solids32, margins, &mut s.spheres.lanes);
         if answer.hit & used != 0 {
@@ -1888,10 +1895,18 @@ impl CollisionModel {
         let SegmentForTests { fast, delta, steps, travel } = self.segment_for_tests(qa, qb)?;
         let most = travel.iter().copied().fold(0.0, f64::max);
         let pieces = first_pieces(most);
-        let (mut margins, mut step, mut spans) = (Vec::new(), Vec::new(), Vec::new());
+        let (mut margins, mut step, mut dir, mut spans) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
         let first = (&travel[..], &steps[..], most, pieces);
-        let (batches, hit) =
-            self.first_level_in_lanes(fast, solids32, qa, &delta, first, &mut spans, (&mut margins, &mut step), s);
+        let (batches, hit) = self.first_level_in_lanes(
+            fast,
+            solids32,
+            qa,
+            &delta,
+            first,
+            &mut spans,
+            (&mut margins, &mut step, &mut dir),
+            s,
+        );
         (batches > 0 && !hit).then(|| spans.iter().map(|sp| (sp.t0, sp.t1, sp.pairs_free)).collect())
     }
 
@@ -1988,7 +2003,7 @@ impl CollisionModel {
         let mut free = true;
         if listed && let (Some(fast), Some(solids32)) = (&self.fast, &self.solids32) {
             // The batches cut their own pieces (finer), or leave these to the loop below.
-            let bufs = (&mut margins, &mut step);
+            let bufs = (&mut margins, &mut step, &mut dir);
             let first = (&travel[..], &steps[..], most, pieces);
             let (batches, hit) = self.first_level_in_lanes(fast, solids32, qa, &delta, first, &mut spans, bufs, s);
             checks += batches;
@@ -2081,7 +2096,7 @@ impl CollisionModel {
         delta: &[f64],
         (travel, steps, most, first): (&[f64], &[f64], f64, usize),
         spans: &mut Vec<Span>,
-        (margins, step): (&mut Vec<f64>, &mut Vec<f64>),
+        (margins, step, dir): (&mut Vec<f64>, &mut Vec<f64>, &mut Vec<f64>),
         s: &mut CollisionScratch,
     ) -> (u32, bool) {
         let g = &*self.geom;
@@ -2098,7 +2113,10 @@ impl CollisionModel {
         }
         // Their margins (as the double-precision loop computes them).
         span_margins(0.5 / pieces as f64, travel, steps, margins, step);
-        let mut buf = std::mem::take(&mut s.spheres.batch_q);
+        // Every piece is a straight motion of one length: spheres near with their link's margin
+        // are tested again with their own along it.
+        span_dir(0.5 / pieces as f64, delta, dir);
+        fast.set_lane_motion(solids32, (&margins[..slots], &margins[slots..]), (step, dir), &mut s.spheres.lanes);
         let mut left = std::mem::take(&mut s.spans_left);
         left.clear();
         let mut batches = 0;
@@ -2110,14 +2128,15 @@ impl CollisionModel {
         let mut from = 1;
         while from <= pieces {
             let n = lanes::LANES.min(pieces + 1 - from);
-            // Written in place, lane by lane (through `q` and a copy: about 400 instructions a
-            // batch more).
-            buf.resize(lanes::LANES * dof, 0.0);
-            for ((k, i), row) in lane_piece.iter_mut().enumerate().zip(buf.chunks_exact_mut(dof)) {
+            for (k, i) in lane_piece.iter_mut().enumerate() {
                 *i = piece_in_order(from + k.min(n - 1), pieces);
-                // Exact: the midpoint `(t0 + t1) / 2` of the piece's ends (a power-of-two width).
-                ConfigSpace::step_into(qa, delta, (*i as f64 + 0.5) * width, row);
             }
+            // Piece `i`'s midpoint is `(2i + 1) / 2 pieces` of the way (exact: `(i + 0.5)
+            // width` for a power-of-two width, the value `ConfigSpace::step_into` is given),
+            // written into the lanes from the segment (rows built first and turned cost
+            // about 700 instructions a batch more).
+            let points =
+                SegmentIn { a: qa, delta, n: 2 * pieces as u32, ids: lane_piece.map(|i| 2 * i as u32 + 1), end: None };
             from += lanes::LANES;
             let grow = LaneMargins {
                 link: &margins[..slots],
@@ -2125,8 +2144,9 @@ impl CollisionModel {
                 uniform: None,
                 step: Some(step),
                 pairs_of_near: true,
+                along: true,
             };
-            let answer = fast.free_lanes(LaneInput::Rows(&buf), dof, solids32, grow, &mut s.spheres.lanes);
+            let answer = fast.free_lanes(LaneInput::Segment(points), dof, solids32, grow, &mut s.spheres.lanes);
             batches += 1;
             if answer.hit & ((1u32 << n) - 1) != 0 {
                 hit = true;
@@ -2141,7 +2161,6 @@ impl CollisionModel {
         }
         spans.clear();
         spans.extend_from_slice(&left);
-        s.spheres.batch_q = buf;
         s.spans_left = left;
         (batches, hit)
     }

@@ -240,6 +240,46 @@ impl SphereGeom {
         Walked { sum: m, v, second }
     }
 
+    /// For the batches' straight-motion margins (`lanes`): sphere `k`'s second-order term
+    /// `sum_j a_j (A_j + d_j / 2)` of the module documentation with every `rho_j` its static
+    /// arm (valid at every pose, so at the midpoint of every piece), and the sum of its chain's
+    /// joint steps `sum_j d_j`, for the joint steps `step` (already scaled) up to the world.
+    /// `None` when `step` does not hold a value for every DOF the chain reads.
+    pub(super) fn static_second(&self, k: usize, step: &[f64]) -> Option<(f64, f64)> {
+        let arms = &self.arms;
+        let mut b = *arms.body.get(k)? as usize;
+        let mut e = arms.off[k] as usize;
+        let (mut m, mut climbed, mut a_climbed, mut a_d) = (0.0, 0.0, 0.0, 0.0);
+        while b != 0 {
+            let body = &self.bodies[b];
+            let d = match body.value {
+                Value::Dof(i) => *step.get(i)?,
+                Value::Mimic(i, mult, _) => step.get(i)? * mult.abs(),
+                Value::Zero => 0.0,
+            };
+            if d > 0.0 {
+                let a = arms.arm[e] * d;
+                climbed += d;
+                a_climbed += a * climbed;
+                a_d += a * d;
+                m += a;
+            }
+            e += 1;
+            b = body.parent;
+        }
+        Some((climbed * m - a_climbed + 0.5 * a_d, climbed))
+    }
+
+    /// Body `b`'s joint change, with its sign, when the DOFs change by `dir` (`None` when `dir`
+    /// holds no value for its DOF).
+    pub(super) fn body_dir(&self, b: usize, dir: &[f64]) -> Option<f64> {
+        Some(match self.bodies.get(b)?.value {
+            Value::Dof(i) => *dir.get(i)?,
+            Value::Mimic(i, mult, _) => dir.get(i)? * mult,
+            Value::Zero => 0.0,
+        })
+    }
+
     /// A bound on [`Self::margin`] against the world for every sphere of link `l`, from the
     /// link's bounding sphere at the midpoint pose (`l`'s centre posed in `s`): a sphere's
     /// distance from a joint's axis is at most the bounding centre's plus the bounding radius,

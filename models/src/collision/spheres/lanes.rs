@@ -185,6 +185,8 @@ pub(crate) struct Lanes {
     pub(crate) centre_err: f64,
     /// The largest group bounding radius (m).
     max_group_r: f64,
+    /// `√3 ε` of [`LaneMotion`]; infinite when the robot gets no motion terms.
+    twist_err: f64,
     /// This program's number: a scratch keeps thresholds derived from it under this number
     /// (see [`Grown`]).
     id: ProgramId,
@@ -290,7 +292,58 @@ pub(crate) struct LaneMargins<'a> {
     /// and say which lanes' pairs are free ([`Lanes8::pairs_free`]): the certificate's
     /// double-precision check of a piece then skips its self pairs.
     pub pairs_of_near: bool,
+    /// Every lane is the midpoint of a piece of one straight motion, whose terms the scratch
+    /// holds ([`SphereGeom::set_lane_motion`], for these margins): a sphere near an obstacle
+    /// with its link's margin is tested again with its own margin along the motion (see
+    /// [`LaneMotion`]).
+    pub along: bool,
 }
+
+/// A straight motion's terms for the batches of its pieces (all of one length, see
+/// [`LaneMargins::along`]).
+///
+/// Every lane is the midpoint `q(tm)` of a piece `q(tm) + s dir`, `|s| <= 1`. A sphere centre
+/// `p` then moves by at most `|v| + S` over the piece (`spheres::arms`, "along the straight
+/// motion"), where `v` is its velocity `dp/ds` at the midpoint and `S` the second-order term,
+/// here with the static arms (valid at every pose, so one value per sphere for all pieces).
+///
+/// The batch computes `v` in each lane from the frames it posed, as a twist: every body's
+/// angular velocity `ω = sum_j ḋ_j w_j` and the velocity `ν = sum_j ḋ_j (o_j × w_j)` of the
+/// point at the world's origin moving with it, over the joints `j` up its chain (`w_j` the
+/// axis, `o_j` a point on it, `ḋ_j` the joint's change over `dir`; a prismatic joint adds
+/// `ḋ_j w_j` to `ν` only), so that `v = ν + ω × p`. In exact arithmetic this is
+/// `sum_j ḋ_j w_j × (p - o_j)`, the velocity `spheres::arms` sums.
+///
+/// *Rounding.* Let `e_R`, `e_o` and `e_c` bound the errors of the batch's rotation entries,
+/// body origins and centres, `M` every origin's and centre's coordinates (plus one), `n` the
+/// bodies and `D = sum_j |ḋ_j|` over the sphere's chain. Each term's cross product errs by at
+/// most `2 (e_R M + e_o)` or `2 (e_R M + e_c)` per coordinate from its inputs (two products of
+/// entries at most 1 and coordinates at most `M`), rounding `ḋ_j` to `f32` by `u |ḋ_j| 2M`,
+/// and the products, the cross products' differences and the sums of at most `n + 2` terms of
+/// magnitude at most `|ḋ_j| 2M` (then `ω × p`, whose `ω` already carries the sums' error) add
+/// at most `γ_{n+4} D 4M`. Summed, every coordinate of the computed `v̂` is within
+/// `D (4 e_R M + 2 e_o + 2 e_c + (4n + 20) u M)` of `v`'s, half of `D ε` with
+/// `ε = 8 e_R M + 4 (e_o + e_c) + 8 (n + 4) u M`, and
+/// `|v| ≤ |v̂| + √3 D ε`; the computed norm `n̂` (a sum of three squares and a square root)
+/// has `|v̂| ≤ (1 + 4u) n̂`. The margin is taken as `n̂ K + A` in `f32` with
+/// `K = 1 + 2^-16` and `A` at least `(1 + 2^-20)(S + √3 D ε + √3 η)` rounded up (`√3 η` the
+/// distance test's allowance, as in every margin of the batch): the two roundings lose at
+/// most a factor `(1 - u)²` of `n̂ K` and `(1 - u)` of `A`, which `K` and `2^-20` cover. The
+/// threshold is then formed as [`thr`]'s. Robots with a body posed after its joint (`post`)
+/// get no motion terms (their joint's frame is not stored).
+#[derive(Debug, Clone, Default)]
+pub(crate) struct LaneMotion {
+    /// The allowance's bits these terms hold (`None`: none held); a batch whose own
+    /// allowance differs does not use them.
+    grow: Option<u64>,
+    /// Per moving body (body `k + 1` at `k`), its joint's change over `dir`.
+    speed: Vec<f32>,
+    /// Per sphere, `A` above.
+    add: Vec<f32>,
+}
+
+/// `K` of [`LaneMotion`].
+const ALONG_K: f32 = 1.0 + 1.0 / 65_536.0;
 
 /// The thresholds a batch derives from a uniform margin (the planner's probes), kept in the
 /// scratch for the next batch with the same robot, margin and obstacle scale (kept, with the
@@ -456,6 +509,16 @@ pub(crate) struct LaneScratch {
     link_g: Vec<f32>,
     /// The thresholds of the last uniform margin.
     grown: Grown,
+    /// The straight motion of the batches with [`LaneMargins::along`].
+    motion: LaneMotion,
+    /// Per body, its twist `ω`, `ν` (see [`LaneMotion`]) in the batch `twisted` (marked as
+    /// `posed`).
+    omega: Vec<[F8; 3]>,
+    nu: Vec<[F8; 3]>,
+    twisted: u32,
+    /// Per sphere, its threshold with its margin along the motion, in the batch `along_at`.
+    along: Vec<F8>,
+    along_at: Vec<u32>,
     /// The instruction set of the batches (see `simd8`).
     pub(crate) isa: Isa,
     /// The bodies, groups, links and spheres the buffers above are sized for.
@@ -478,6 +541,12 @@ impl LaneScratch {
             batch: 0,
             link_g: Vec::new(),
             grown: Grown { key: None, grow: 0.0, margin: 0.0, group: Vec::new(), group_pair: Vec::new() },
+            motion: LaneMotion { grow: None, speed: Vec::new(), add: Vec::new() },
+            omega: Vec::new(),
+            nu: Vec::new(),
+            twisted: 0,
+            along: Vec::new(),
+            along_at: Vec::new(),
             isa: Isa::Best,
             shape: [0; 4],
         }
@@ -499,6 +568,12 @@ impl LaneScratch {
         self.posed.resize(links, 0);
         self.link_posed.clear();
         self.link_posed.resize(links, 0);
+        self.omega.resize(bodies, [F8::ZERO; 3]);
+        self.nu.resize(bodies, [F8::ZERO; 3]);
+        self.twisted = 0;
+        self.along.resize(centres, F8::ZERO);
+        self.along_at.clear();
+        self.along_at.resize(centres, 0);
         self.batch = 1;
         self.shape = shape;
     }
@@ -754,6 +829,7 @@ impl Lanes {
             pair_ranges: Vec::new(),
             centre_err: f64::INFINITY,
             max_group_r: 0.0,
+            twist_err: f64::INFINITY,
             id: ProgramId::next(),
         }
     }
@@ -837,6 +913,15 @@ impl Lanes {
             centre_err = centre_err.max(point(er[b], ep[b], mp[b], &gr.c));
         }
         let centre_err = if centre_err.is_finite() { centre_err * (1.0 + 1e-6) } else { f64::INFINITY };
+        // `√3 ε` of `LaneMotion`: `M` bounds every origin and every centre (an origin's
+        // coordinates plus the farthest centre from it), plus one.
+        let far = g.centre.iter().chain(g.links.iter().map(|l| &l.c)).map(|c| c.norm()).fold(0.0, f64::max);
+        let big_m = mp.iter().copied().fold(0.0, f64::max) + far + 1.0;
+        let e_r = er.iter().copied().fold(0.0, f64::max);
+        let e_o = ep.iter().copied().fold(0.0, f64::max);
+        let eps = 8.0 * e_r * big_m + 4.0 * (e_o + centre_err) + 8.0 * (n as f64 + 4.0) * U * big_m;
+        let posted = g.bodies.iter().skip(1).any(|b| b.post.is_some());
+        let twist_err = if eps.is_finite() && !posted { 3f64.sqrt() * eps * (1.0 + 1e-6) } else { f64::INFINITY };
         let mut pairs = Vec::new();
         let mut pair_ranges = Vec::new();
         for gp in &g.group_pairs {
@@ -861,6 +946,7 @@ impl Lanes {
             pair_ranges,
             centre_err,
             max_group_r: g.groups.iter().map(|gr| gr.r).fold(0.0, f64::max),
+            twist_err,
             id: ProgramId::next(),
         }
     }
@@ -902,8 +988,107 @@ impl SphereGeom {
     }
 }
 
+impl SphereGeom {
+    /// Hold in `s` the terms of the straight motion `q(tm) + s dir` (`step`: `|dir|`) for
+    /// batches with the margins `link_m`, `pair_m` among `obstacles` (see [`LaneMotion`]);
+    /// none are held (and such batches test no sphere again) when the robot gets none or a
+    /// value is missing or not finite.
+    pub(crate) fn set_lane_motion(
+        &self,
+        obstacles: &Solids32,
+        (link_m, pair_m): (&[f64], &[f64]),
+        (step, dir): (&[f64], &[f64]),
+        s: &mut LaneScratch,
+    ) {
+        let mo = &mut s.motion;
+        mo.grow = None;
+        let err = self.lanes.twist_err;
+        let max_link_m = link_m.iter().copied().fold(0.0, f64::max);
+        let max_pair_m = pair_m.iter().copied().fold(0.0, f64::max);
+        let Some(grow) = self.allowance(obstacles, max_link_m, max_pair_m) else { return };
+        if !err.is_finite() {
+            return;
+        }
+        mo.speed.clear();
+        for b in 1..self.bodies.len() {
+            match self.body_dir(b, dir) {
+                Some(d) if d.is_finite() => mo.speed.push(f(d)),
+                _ => return,
+            }
+        }
+        mo.add.clear();
+        for k in 0..self.centre.len() {
+            let Some((second, sum)) = self.static_second(k, step) else { return };
+            let a = (second + sum * err + grow) * (1.0 + 1.0 / 1_048_576.0);
+            if !a.is_finite() {
+                return;
+            }
+            mo.add.push(up(a));
+        }
+        mo.grow = Some(grow.to_bits());
+    }
+
+    /// Every body's twist in every lane (see [`LaneMotion`]), from the frames posed.
+    #[inline(always)]
+    fn pose_twists<O: Ops>(&self, o: O, s: &mut LaneScratch) {
+        s.omega[0] = [F8::ZERO; 3];
+        s.nu[0] = [F8::ZERO; 3];
+        for (k, b) in self.lanes.bodies.iter().enumerate() {
+            let d = s.motion.speed[k];
+            if d == 0.0 {
+                (s.omega[k + 1], s.nu[k + 1]) = (s.omega[b.parent], s.nu[b.parent]);
+                continue;
+            }
+            let (w, n) = (load(o, &s.omega[b.parent]), load(o, &s.nu[b.parent]));
+            let r = load(o, &s.rot[k + 1]);
+            let d = splat(o, d);
+            if b.prismatic {
+                let ax = splat3(o, &b.axis);
+                let row = |i: usize| r[3 * i] * ax[0] + r[3 * i + 1] * ax[1] + r[3 * i + 2] * ax[2];
+                let u = [row(0), row(1), row(2)];
+                store(&[n[0] + d * u[0], n[1] + d * u[1], n[2] + d * u[2]], &mut s.nu[k + 1]);
+                s.omega[k + 1] = s.omega[b.parent];
+            } else {
+                // The frame is the joint's: z along its axis, the origin on it.
+                let z = [r[2], r[5], r[8]];
+                let p = load(o, &s.pos[k + 1]);
+                let oz = [p[1] * z[2] - p[2] * z[1], p[2] * z[0] - p[0] * z[2], p[0] * z[1] - p[1] * z[0]];
+                store(&[w[0] + d * z[0], w[1] + d * z[1], w[2] + d * z[2]], &mut s.omega[k + 1]);
+                store(&[n[0] + d * oz[0], n[1] + d * oz[1], n[2] + d * oz[2]], &mut s.nu[k + 1]);
+            }
+        }
+    }
+
+    /// Sphere `k`'s (of link `l`, posed) threshold against an obstacle with its own margin
+    /// along the motion, once per batch (see [`LaneMotion`]).
+    #[inline(always)]
+    fn along_thr<O: Ops>(&self, o: O, l: usize, k: usize, s: &mut LaneScratch) -> F<O> {
+        if s.along_at[k] != s.batch {
+            if s.twisted != s.batch {
+                self.pose_twists(o, s);
+                s.twisted = s.batch;
+            }
+            let b = self.links[l].body;
+            let (w, n, p) = (load(o, &s.omega[b]), load(o, &s.nu[b]), load(o, &s.centre[k]));
+            let v = [
+                n[0] + (w[1] * p[2] - w[2] * p[1]),
+                n[1] + (w[2] * p[0] - w[0] * p[2]),
+                n[2] + (w[0] * p[1] - w[1] * p[0]),
+            ];
+            let norm = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+            let m = norm * splat(o, ALONG_K) + splat(o, s.motion.add[k]);
+            let x = (splat(o, self.lanes.radius_up[k]) + m) * splat(o, WIDEN);
+            s.along[k] = (x * x).store();
+            s.along_at[k] = s.batch;
+        }
+        L::load(o, s.along[k])
+    }
+}
+
 /// One call of [`SphereGeom::free_lanes`], compiled for each instruction set.
-struct Batch<'a, S> {
+/// `ALONG`: [`LaneMargins::along`] (a kernel of its own: the test it adds in the sphere loop
+/// made the other batches' code slower).
+struct Batch<'a, S, const ALONG: bool> {
     geom: &'a SphereGeom,
     qs: S,
     dof: usize,
@@ -912,13 +1097,13 @@ struct Batch<'a, S> {
     s: &'a mut LaneScratch,
 }
 
-impl<S: Source> Kernel for Batch<'_, S> {
+impl<S: Source, const ALONG: bool> Kernel for Batch<'_, S, ALONG> {
     type Output = Lanes8;
 
     #[inline(always)]
     fn run<O: Ops>(self, o: O) -> Lanes8 {
         let Batch { geom, qs, dof, obstacles, margins, s } = self;
-        geom.free_lanes_in(o, qs, dof, obstacles, margins, s)
+        geom.free_lanes_in::<O, S, ALONG>(o, qs, dof, obstacles, margins, s)
     }
 }
 
@@ -938,16 +1123,23 @@ impl SphereGeom {
     ) -> Lanes8 {
         let isa = s.isa;
         match qs {
+            // Rows are never pieces of one motion here: their batches leave `along` out (it
+            // only settles more lanes, never changes what a settled lane means).
             LaneInput::Rows(qs) => {
-                simd8::dispatch(Batch { geom: self, qs: RowsIn(qs), dof, obstacles, margins, s }, isa)
+                simd8::dispatch(Batch::<_, false> { geom: self, qs: RowsIn(qs), dof, obstacles, margins, s }, isa)
             }
-            LaneInput::Segment(qs) => simd8::dispatch(Batch { geom: self, qs, dof, obstacles, margins, s }, isa),
+            LaneInput::Segment(qs) if margins.along => {
+                simd8::dispatch(Batch::<_, true> { geom: self, qs, dof, obstacles, margins, s }, isa)
+            }
+            LaneInput::Segment(qs) => {
+                simd8::dispatch(Batch::<_, false> { geom: self, qs, dof, obstacles, margins, s }, isa)
+            }
         }
     }
 
     /// [`Self::free_lanes`] on the instruction set of `o`.
     #[inline(always)]
-    fn free_lanes_in<O: Ops, S: Source>(
+    fn free_lanes_in<O: Ops, S: Source, const ALONG: bool>(
         &self,
         o: O,
         qs: S,
@@ -956,7 +1148,7 @@ impl SphereGeom {
         margins: LaneMargins<'_>,
         s: &mut LaneScratch,
     ) -> Lanes8 {
-        let LaneMargins { link: link_m, pair: pair_m, uniform, step, pairs_of_near } = margins;
+        let LaneMargins { link: link_m, pair: pair_m, uniform, step, pairs_of_near, along } = margins;
         let none = Lanes8 { free: 0, hit: 0, pairs_free: 0 };
         let lanes = &self.lanes;
         let margins_fit =
@@ -985,6 +1177,14 @@ impl SphereGeom {
             }
         };
         let kept = uniform.is_some();
+        // Spheres near with their link's margin are tested again with their own along the
+        // motion, when the scratch holds its terms for these margins.
+        let along = ALONG
+            && along
+            && !kept
+            && s.motion.grow == Some(grow.to_bits())
+            && s.motion.speed.len() + 1 == self.bodies.len()
+            && s.motion.add.len() == self.centre.len();
         // Certainly in contact: at most this (rounded down), see the module documentation.
         let contact = |r: f64| contact_thr(r, grow);
         if !self.pose_lanes(o, qs, dof, s) {
@@ -1035,11 +1235,14 @@ impl SphereGeom {
                     self.pose_lane_link(o, l, s);
                     for k in link.first..link.end {
                         let d2 = gap2(o, ob, &load(o, &s.centre[k]));
-                        let mk = ml & within(d2, thr(lanes.radius_up[k], lg, 0.0));
+                        let mut mk = ml & within(d2, thr(lanes.radius_up[k], lg, 0.0));
                         if mk != 0 {
                             let hit = mk & within(d2, contact(self.radius[k]));
                             if hit != 0 {
                                 return Lanes8 { free: 0, hit, pairs_free: 0 };
+                            }
+                            if along {
+                                mk &= d2.le_mask_v(self.along_thr(o, l, k, s));
                             }
                         }
                         live &= !mk;
@@ -1353,6 +1556,11 @@ mod tests {
 
     /// [`every_body_form`] with spheres of radius `r`.
     fn every_body_form_of(r: f64) -> crate::Robot {
+        every_body_form_with(r, true)
+    }
+
+    /// [`every_body_form_of`], with the DH-style turn after the last arm joint or without it.
+    fn every_body_form_with(r: f64, turn_after: bool) -> crate::Robot {
         use crate::{JointKind, JointLimits, PlacedShape, RobotBuilder, Shape};
         let balls = |points: &[[f64; 3]]| -> Vec<PlacedShape> {
             points
@@ -1369,7 +1577,7 @@ mod tests {
         let mut b = RobotBuilder::new("every-body-form").base(at(0.1, -0.2, 0.3, 0.0, 0.0, 0.4));
         let mut parent = b.link("base", balls(&[[0.0, 0.0, 0.05]]));
         // (origin, axis, kind, after the joint); the last a DH-style turn and shift.
-        let dh = at(0.02, 0.0, 0.01, 0.2, 0.0, 0.0);
+        let dh = if turn_after { at(0.02, 0.0, 0.01, 0.2, 0.0, 0.0) } else { id };
         let joints = [
             (at(0.0, 0.0, 0.1, 0.0, 0.0, 0.0), Vector3::z(), JointKind::Revolute, id),
             (at(0.0, 0.13, 0.0, 0.0, half, 0.0), Vector3::y(), JointKind::Revolute, id),
@@ -1665,5 +1873,73 @@ mod tests {
             differ_by_robot > 30 && differ_by_extent > 10 && settled > 500,
             "{differ_by_robot} / {differ_by_extent} batches differ, {settled} lanes free"
         );
+    }
+
+    /// The margin along the motion a batch gives each sphere bounds how far its centre moves
+    /// over the piece, sampled densely in double precision, on an arm with every form of body
+    /// but a turn after a joint (prismatic, mimic, matrices, permutations), at random
+    /// midpoints and directions, short and long. It is not loose either: over all samples it
+    /// is within 1.5 times the largest motion (the link margins: about 2-3 times). A robot with a
+    /// turn after a joint gets no motion terms.
+    #[test]
+    fn margins_along_the_motion_bound_the_sampled_motion() {
+        use crate::collision::RobotGeom;
+        let posted = every_body_form_with(0.04, true);
+        let geom = SphereGeom::new(&RobotGeom::new(&posted), false).expect("a sphere robot");
+        assert!(!geom.lanes.twist_err.is_finite(), "a turn after a joint: no motion terms");
+        let robot = every_body_form_with(0.04, false);
+        let geom = SphereGeom::new(&RobotGeom::new(&robot), false).expect("a sphere robot");
+        let err = geom.lanes.twist_err;
+        assert!(err.is_finite() && err > 0.0 && err < 0.1, "{err:e}");
+        let dof = robot.dof();
+        let solid = Solid::new(&World::Sphere { c: nalgebra::Point3::new(0.4, 0.1, 0.5), r: 0.1 });
+        let obstacles = Solids32::new(&[solid]).expect("a ball has a closed form");
+        let mut rng = crate::Rng::new(29);
+        let mut s = LaneScratch::new();
+        let mut f = super::super::SphereScratch::new();
+        let (mut worst, mut tightest): (f64, f64) = (f64::INFINITY, 0.0);
+        for trial in 0..300 {
+            // A direction of 0.001-0.3 per joint (rad or m), some joints still.
+            let scale = [0.001, 0.03, 0.3][trial % 3];
+            let dir: Vec<f64> =
+                (0..dof).map(|_| if rng.below(5) == 0 { 0.0 } else { rng.range(-scale, scale) }).collect();
+            let step: Vec<f64> = dir.iter().map(|d| d.abs()).collect();
+            let link_m = vec![0.05; geom.links.len()];
+            let pair_m = vec![0.1; geom.self_pairs.len()];
+            geom.set_lane_motion(&obstacles, (&link_m, &pair_m), (&step, &dir), &mut s);
+            let grow = geom.allowance(&obstacles, 0.05, 0.1).expect("finite");
+            assert_eq!(s.motion.grow, Some(grow.to_bits()), "trial {trial}: terms held");
+            let qs: Vec<f64> = (0..LANES).flat_map(|_| robot.random_configuration(&mut rng)).collect();
+            assert!(geom.pose_lanes(Base, RowsIn(&qs), dof, &mut s));
+            for (l, link) in geom.links.iter().enumerate() {
+                geom.pose_lane_link(Base, l, &mut s);
+                for k in link.first..link.end {
+                    let t = geom.along_thr(Base, l, k, &mut s).store().0;
+                    for (i, q) in qs.chunks(dof).enumerate() {
+                        // The margin the threshold stands for, without the distance test's
+                        // allowance (the threshold is rounded up: a hair more).
+                        let m = f64::from(t[i]).sqrt() / f64::from(WIDEN) - f64::from(geom.lanes.radius_up[k]) - grow;
+                        let at = |u: f64, f: &mut super::super::SphereScratch| {
+                            let qu: Vec<f64> = q.iter().zip(&dir).map(|(a, d)| a + u * d).collect();
+                            geom.pose(&qu, f);
+                            f.rot[link.body] * geom.centre[k] + f.pos[link.body]
+                        };
+                        let p0 = at(0.0, &mut f);
+                        let moved =
+                            (0..=400).map(|j| (at(-1.0 + j as f64 / 200.0, &mut f) - p0).norm()).fold(0.0, f64::max);
+                        assert!(
+                            moved <= m + 1e-7,
+                            "trial {trial}, sphere {k}, lane {i}: moves {moved:e}, margin {m:e}"
+                        );
+                        if moved > 1e-3 {
+                            worst = worst.min(m / moved);
+                            tightest = tightest.max(moved / m);
+                        }
+                    }
+                }
+            }
+        }
+        eprintln!("margin over the sampled motion: at least {worst:.3}; tightest {tightest:.3}");
+        assert!(tightest > 1.0 / 1.5, "the margins are loose: the motion is at most {tightest} of them");
     }
 }

@@ -47,6 +47,8 @@ pub(crate) trait Ops: Copy {
     fn sqrt(self, a: Self::V) -> Self::V;
     /// Bit `i` set where lane `i` of `a` is at most `t` (never for NaN).
     fn le_mask(self, a: Self::V, t: f32) -> u32;
+    /// Bit `i` set where lane `i` of `a` is at most lane `i` of `t` (never for NaN).
+    fn le_mask_v(self, a: Self::V, t: Self::V) -> u32;
 }
 
 /// The x86-64 baseline (and every other target): `wide`'s `f32x8`.
@@ -97,6 +99,11 @@ impl Ops for Base {
         use wide::CmpLe;
         a.cmp_le(wide::f32x8::splat(t)).move_mask() as u32
     }
+    #[inline(always)]
+    fn le_mask_v(self, a: wide::f32x8, t: wide::f32x8) -> u32 {
+        use wide::CmpLe;
+        a.cmp_le(t).move_mask() as u32
+    }
 }
 
 #[cfg(target_arch = "x86_64")]
@@ -144,6 +151,11 @@ impl Ops for pulp::x86::V3 {
         let m = self.cmp_le_f32x8(a, self.splat_f32x8(t));
         self.avx._mm256_movemask_ps(pulp::cast(m)) as u32
     }
+    #[inline(always)]
+    fn le_mask_v(self, a: pulp::f32x8, t: pulp::f32x8) -> u32 {
+        let m = self.cmp_le_f32x8(a, t);
+        self.avx._mm256_movemask_ps(pulp::cast(m)) as u32
+    }
 }
 
 /// A vector of lanes with its instruction set, so that kernels read as arithmetic.
@@ -181,6 +193,10 @@ impl<O: Ops> L<O> {
     #[inline(always)]
     pub(crate) fn le_mask(self, t: f32) -> u32 {
         self.o.le_mask(self.v, t)
+    }
+    #[inline(always)]
+    pub(crate) fn le_mask_v(self, t: Self) -> u32 {
+        self.o.le_mask_v(self.v, t.v)
     }
 }
 

@@ -664,7 +664,7 @@ fn pieces_left_with_their_self_pairs_free_have_no_self_contact() {
         let (mut freed, mut kept) = (0, 0);
         let mut q = vec![0.0; robot.dof()];
         let zero = vec![0.0; robot.dof()];
-        for _ in 0..150 {
+        for _ in 0..500 {
             let (qa, qb) = free_ends(robot, &model, &mut rng, 0.05, 1.0);
             let Some(left) = model.first_level_left(&qa, &qb, &mut s) else { continue };
             for (t0, t1, pairs_free) in left {
