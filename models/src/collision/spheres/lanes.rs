@@ -340,6 +340,9 @@ pub(crate) struct LaneMotion {
     speed: Vec<f32>,
     /// Per sphere, `A` above.
     add: Vec<f32>,
+    /// Working memory of `SphereGeom::static_seconds`.
+    factor: Vec<f64>,
+    above: Vec<f64>,
 }
 
 /// `K` of [`LaneMotion`].
@@ -541,7 +544,13 @@ impl LaneScratch {
             batch: 0,
             link_g: Vec::new(),
             grown: Grown { key: None, grow: 0.0, margin: 0.0, group: Vec::new(), group_pair: Vec::new() },
-            motion: LaneMotion { grow: None, speed: Vec::new(), add: Vec::new() },
+            motion: LaneMotion {
+                grow: None,
+                speed: Vec::new(),
+                add: Vec::new(),
+                factor: Vec::new(),
+                above: Vec::new(),
+            },
             omega: Vec::new(),
             nu: Vec::new(),
             twisted: 0,
@@ -1017,15 +1026,16 @@ impl SphereGeom {
             }
         }
         mo.add.clear();
-        for k in 0..self.centre.len() {
-            let Some((second, sum)) = self.static_second(k, step) else { return };
+        let add = &mut mo.add;
+        let mut finite = true;
+        let stepped = self.static_seconds(step, (&mut mo.factor, &mut mo.above), |_, second, sum| {
             let a = (second + sum * err + grow) * (1.0 + 1.0 / 1_048_576.0);
-            if !a.is_finite() {
-                return;
-            }
-            mo.add.push(up(a));
+            finite &= a.is_finite();
+            add.push(up(a));
+        });
+        if stepped && finite && add.len() == self.centre.len() {
+            mo.grow = Some(grow.to_bits());
         }
-        mo.grow = Some(grow.to_bits());
     }
 
     /// Every body's twist in every lane (see [`LaneMotion`]), from the frames posed.
