@@ -2116,7 +2116,7 @@ impl CollisionModel {
         // Every piece is a straight motion of one length: spheres near with their link's margin
         // are tested again with their own along it.
         span_dir(0.5 / pieces as f64, delta, dir);
-        fast.set_lane_motion(solids32, (&margins[..slots], &margins[slots..]), (step, dir), &mut s.spheres.lanes);
+        fast.set_lane_motion((step, dir), &mut s.spheres.lanes);
         let mut left = std::mem::take(&mut s.spans_left);
         left.clear();
         let mut batches = 0;

@@ -244,25 +244,16 @@ impl SphereGeom {
     }
 
     /// For the batches' straight-motion margins (`lanes`), for the joint steps `step` (already
-    /// scaled): `each(k, second, sum)` for every sphere `k`, with its second-order term
-    /// `sum_j a_j (A_j + d_j / 2)` of the module documentation, every `rho_j` its static arm
-    /// (valid at every pose, so at the midpoint of every piece), and the sum of its chain's joint
-    /// steps `sum_j d_j`, up to the world. The joints' factors `d_j (A_j + d_j / 2)` (`A_j` the
-    /// steps of the joints above `j`) depend on the joint only, so they are worked out once per
-    /// body, and each sphere's term is its static arms times them (walking each sphere's chain
-    /// cost 5% of the planning instructions on the public MotionBenchMaker UR5 problems).
-    /// `false` when `step` does not hold a value for every DOF a joint reads. `factor` and
-    /// `above` are working memory.
-    pub(super) fn static_seconds(
-        &self,
-        step: &[f64],
-        (factor, above): (&mut Vec<f64>, &mut Vec<f64>),
-        mut each: impl FnMut(usize, f64, f64),
-    ) -> bool {
+    /// scaled): per body, the factor `d_j (A_j + d_j / 2)` of its joint in the second-order term
+    /// `sum_j a_j (A_j + d_j / 2)` of the module documentation (`A_j` the steps of the joints
+    /// above `j`), and the steps of its joint and all above it (`above`). The factors depend on
+    /// the joint only, so a sphere's term is its static arms times them ([`Self::static_second`]):
+    /// with every `rho_j` its static arm, valid at every pose, so at the midpoint of every piece.
+    /// `false` when `step` does not hold a value for every DOF a joint reads.
+    pub(super) fn second_factors(&self, step: &[f64], factor: &mut Vec<f64>, above: &mut Vec<f64>) -> bool {
         let n = self.bodies.len();
         factor.clear();
         factor.resize(n, 0.0);
-        // Per body, the steps of its joint and every joint above it.
         above.clear();
         above.resize(n, 0.0);
         for b in 1..n {
@@ -286,18 +277,19 @@ impl SphereGeom {
             factor[b] = d * (a + 0.5 * d);
             above[b] = a + d;
         }
-        let arms = &self.arms;
-        for (k, (&body, &off)) in arms.body.iter().zip(&arms.off).enumerate() {
-            let end = arms.off.get(k + 1).map_or(arms.arm.len(), |&e| e as usize);
-            let entries = off as usize..end;
-            let second = arms.arm[entries.clone()]
-                .iter()
-                .zip(&arms.entry_body[entries])
-                .map(|(&arm, &b)| arm * factor[b as usize])
-                .sum();
-            each(k, second, above[body as usize]);
-        }
         true
+    }
+
+    /// Sphere `k`'s second-order term with its static arms and the joints' `factor`s
+    /// ([`Self::second_factors`]), and the steps of its chain (`above` of its body).
+    #[inline]
+    pub(super) fn static_second(&self, k: usize, factor: &[f64], above: &[f64]) -> (f64, f64) {
+        let arms = &self.arms;
+        let off = arms.off[k] as usize;
+        let end = arms.off.get(k + 1).map_or(arms.arm.len(), |&e| e as usize);
+        let second =
+            arms.arm[off..end].iter().zip(&arms.entry_body[off..end]).map(|(&arm, &b)| arm * factor[b as usize]).sum();
+        (second, above[arms.body[k] as usize])
     }
 
     /// Body `b`'s joint change, with its sign, when the DOFs change by `dir` (`None` when `dir`

@@ -293,7 +293,7 @@ pub(crate) struct LaneMargins<'a> {
     /// double-precision check of a piece then skips its self pairs.
     pub pairs_of_near: bool,
     /// Every lane is the midpoint of a piece of one straight motion, whose terms the scratch
-    /// holds ([`SphereGeom::set_lane_motion`], for these margins): a sphere near an obstacle
+    /// holds ([`SphereGeom::set_lane_motion`]): a sphere near an obstacle
     /// with its link's margin is tested again with its own margin along the motion (see
     /// [`LaneMotion`]).
     pub along: bool,
@@ -333,16 +333,22 @@ pub(crate) struct LaneMargins<'a> {
 /// get no motion terms (their joint's frame is not stored).
 #[derive(Debug, Clone, Default)]
 pub(crate) struct LaneMotion {
-    /// The allowance's bits these terms hold (`None`: none held); a batch whose own
-    /// allowance differs does not use them.
-    grow: Option<u64>,
+    /// Terms are held (for the motion numbered `seg`).
+    ready: bool,
+    /// The motion's number, counted from 1; a sphere's `A` is worked out in the first batch
+    /// that needs it, and kept for the motion's other batches.
+    seg: u32,
+    /// The allowance's bits the `A`s kept hold.
+    grow: u64,
     /// Per moving body (body `k + 1` at `k`), its joint's change over `dir`.
     speed: Vec<f32>,
-    /// Per sphere, `A` above.
-    add: Vec<f32>,
-    /// Working memory of `SphereGeom::static_seconds`.
+    /// Per body, the factors of the second-order term and the steps of the joints at and above
+    /// it (`SphereGeom::second_factors`).
     factor: Vec<f64>,
     above: Vec<f64>,
+    /// Per sphere, `A` above, for the motion `add_at`.
+    add: Vec<f32>,
+    add_at: Vec<u32>,
 }
 
 /// `K` of [`LaneMotion`].
@@ -545,11 +551,14 @@ impl LaneScratch {
             link_g: Vec::new(),
             grown: Grown { key: None, grow: 0.0, margin: 0.0, group: Vec::new(), group_pair: Vec::new() },
             motion: LaneMotion {
-                grow: None,
+                ready: false,
+                seg: 0,
+                grow: 0,
                 speed: Vec::new(),
-                add: Vec::new(),
                 factor: Vec::new(),
                 above: Vec::new(),
+                add: Vec::new(),
+                add_at: Vec::new(),
             },
             omega: Vec::new(),
             nu: Vec::new(),
@@ -998,24 +1007,22 @@ impl SphereGeom {
 }
 
 impl SphereGeom {
-    /// Hold in `s` the terms of the straight motion `q(tm) + s dir` (`step`: `|dir|`) for
-    /// batches with the margins `link_m`, `pair_m` among `obstacles` (see [`LaneMotion`]);
-    /// none are held (and such batches test no sphere again) when the robot gets none or a
-    /// value is missing or not finite.
-    pub(crate) fn set_lane_motion(
-        &self,
-        obstacles: &Solids32,
-        (link_m, pair_m): (&[f64], &[f64]),
-        (step, dir): (&[f64], &[f64]),
-        s: &mut LaneScratch,
-    ) {
+    /// Hold in `s` the terms of the straight motion `q(tm) + s dir` (`step`: `|dir|`) for the
+    /// batches of its pieces (see [`LaneMotion`]); none are held (and such batches test no
+    /// sphere again) when the robot gets none or a value is missing or not finite. Each
+    /// sphere's own term is worked out only in a batch that needs it (for all spheres here:
+    /// 5% of the planning instructions on the public MotionBenchMaker UR5 problems).
+    pub(crate) fn set_lane_motion(&self, (step, dir): (&[f64], &[f64]), s: &mut LaneScratch) {
         let mo = &mut s.motion;
-        mo.grow = None;
-        let err = self.lanes.twist_err;
-        let max_link_m = link_m.iter().copied().fold(0.0, f64::max);
-        let max_pair_m = pair_m.iter().copied().fold(0.0, f64::max);
-        let Some(grow) = self.allowance(obstacles, max_link_m, max_pair_m) else { return };
-        if !err.is_finite() {
+        mo.ready = false;
+        mo.seg = mo.seg.wrapping_add(1);
+        if mo.seg == 0 || mo.add_at.len() != self.centre.len() {
+            mo.add_at.clear();
+            mo.add_at.resize(self.centre.len(), 0);
+            mo.add.resize(self.centre.len(), 0.0);
+            mo.seg = 1;
+        }
+        if !self.lanes.twist_err.is_finite() {
             return;
         }
         mo.speed.clear();
@@ -1025,17 +1032,21 @@ impl SphereGeom {
                 _ => return,
             }
         }
-        mo.add.clear();
-        let add = &mut mo.add;
-        let mut finite = true;
-        let stepped = self.static_seconds(step, (&mut mo.factor, &mut mo.above), |_, second, sum| {
-            let a = (second + sum * err + grow) * (1.0 + 1.0 / 1_048_576.0);
-            finite &= a.is_finite();
-            add.push(up(a));
-        });
-        if stepped && finite && add.len() == self.centre.len() {
-            mo.grow = Some(grow.to_bits());
+        mo.ready = self.second_factors(step, &mut mo.factor, &mut mo.above)
+            && mo.factor.iter().chain(&mo.above).all(|v| v.is_finite());
+    }
+
+    /// Sphere `k`'s `A` (see [`LaneMotion`]) with the allowance `grow`, kept for the motion;
+    /// infinite (no sphere is settled by it) when not finite.
+    #[inline]
+    fn along_add(&self, k: usize, grow: f64, mo: &mut LaneMotion) -> f32 {
+        if mo.add_at[k] != mo.seg {
+            let (second, sum) = self.static_second(k, &mo.factor, &mo.above);
+            let a = (second + sum * self.lanes.twist_err + grow) * (1.0 + 1.0 / 1_048_576.0);
+            mo.add[k] = if a.is_finite() { up(a) } else { f32::INFINITY };
+            mo.add_at[k] = mo.seg;
         }
+        mo.add[k]
     }
 
     /// Every body's twist in every lane (see [`LaneMotion`]), from the frames posed.
@@ -1072,7 +1083,7 @@ impl SphereGeom {
     /// Sphere `k`'s (of link `l`, posed) threshold against an obstacle with its own margin
     /// along the motion, once per batch (see [`LaneMotion`]).
     #[inline(always)]
-    fn along_thr<O: Ops>(&self, o: O, l: usize, k: usize, s: &mut LaneScratch) -> F<O> {
+    fn along_thr<O: Ops>(&self, o: O, l: usize, k: usize, grow: f64, s: &mut LaneScratch) -> F<O> {
         if s.along_at[k] != s.batch {
             if s.twisted != s.batch {
                 self.pose_twists(o, s);
@@ -1086,7 +1097,8 @@ impl SphereGeom {
                 n[2] + (w[0] * p[1] - w[1] * p[0]),
             ];
             let norm = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
-            let m = norm * splat(o, ALONG_K) + splat(o, s.motion.add[k]);
+            let add = self.along_add(k, grow, &mut s.motion);
+            let m = norm * splat(o, ALONG_K) + splat(o, add);
             let x = (splat(o, self.lanes.radius_up[k]) + m) * splat(o, WIDEN);
             s.along[k] = (x * x).store();
             s.along_at[k] = s.batch;
@@ -1192,9 +1204,14 @@ impl SphereGeom {
         let along = ALONG
             && along
             && !kept
-            && s.motion.grow == Some(grow.to_bits())
+            && s.motion.ready
             && s.motion.speed.len() + 1 == self.bodies.len()
-            && s.motion.add.len() == self.centre.len();
+            && s.motion.add_at.len() == self.centre.len();
+        if along && s.motion.grow != grow.to_bits() {
+            // Other margins than the terms kept were worked out with: work them out again.
+            s.motion.grow = grow.to_bits();
+            s.motion.add_at.fill(0);
+        }
         // Certainly in contact: at most this (rounded down), see the module documentation.
         let contact = |r: f64| contact_thr(r, grow);
         if !self.pose_lanes(o, qs, dof, s) {
@@ -1252,7 +1269,7 @@ impl SphereGeom {
                                 return Lanes8 { free: 0, hit, pairs_free: 0 };
                             }
                             if along {
-                                mk &= d2.le_mask_v(self.along_thr(o, l, k, s));
+                                mk &= d2.le_mask_v(self.along_thr(o, l, k, grow, s));
                             }
                         }
                         live &= !mk;
@@ -1914,17 +1931,15 @@ mod tests {
             let dir: Vec<f64> =
                 (0..dof).map(|_| if rng.below(5) == 0 { 0.0 } else { rng.range(-scale, scale) }).collect();
             let step: Vec<f64> = dir.iter().map(|d| d.abs()).collect();
-            let link_m = vec![0.05; geom.links.len()];
-            let pair_m = vec![0.1; geom.self_pairs.len()];
-            geom.set_lane_motion(&obstacles, (&link_m, &pair_m), (&step, &dir), &mut s);
+            geom.set_lane_motion((&step, &dir), &mut s);
             let grow = geom.allowance(&obstacles, 0.05, 0.1).expect("finite");
-            assert_eq!(s.motion.grow, Some(grow.to_bits()), "trial {trial}: terms held");
+            assert!(s.motion.ready, "trial {trial}: terms held");
             let qs: Vec<f64> = (0..LANES).flat_map(|_| robot.random_configuration(&mut rng)).collect();
             assert!(geom.pose_lanes(Base, RowsIn(&qs), dof, &mut s));
             for (l, link) in geom.links.iter().enumerate() {
                 geom.pose_lane_link(Base, l, &mut s);
                 for k in link.first..link.end {
-                    let t = geom.along_thr(Base, l, k, &mut s).store().0;
+                    let t = geom.along_thr(Base, l, k, grow, &mut s).store().0;
                     for (i, q) in qs.chunks(dof).enumerate() {
                         // The margin the threshold stands for, without the distance test's
                         // allowance (the threshold is rounded up: a hair more).
