@@ -647,6 +647,14 @@ struct Span {
 /// each row of `travel` (links, then self pairs) times `half`, `step` := each joint's change
 /// `steps` times `half`; a relative 1e-9 and (margins) an absolute 1e-12 more than the bound,
 /// against rounding.
+/// The largest travel of a link (the first `slots` rows of `travel`) and of a self pair (the
+/// rest), each 0 when there is none (a plain comparison: travels are finite).
+fn travel_max(travel: &[f64], slots: usize) -> (f64, f64) {
+    let (links, pairs) = travel.split_at(slots.min(travel.len()));
+    let max = |v: &[f64]| v.iter().fold(0.0, |m: f64, &t| if t > m { t } else { m });
+    (max(links), max(pairs))
+}
+
 fn span_margins(half: f64, travel: &[f64], steps: &[f64], margins: &mut Vec<f64>, step: &mut Vec<f64>) {
     let scale = half * (1.0 + 1e-9);
     margins.clear();
@@ -1893,8 +1901,8 @@ impl CollisionModel {
     ) -> Option<Vec<(f64, f64, bool)>> {
         let solids32 = self.solids32.as_ref()?;
         let SegmentForTests { fast, delta, steps, travel } = self.segment_for_tests(qa, qb)?;
-        let most = travel.iter().copied().fold(0.0, f64::max);
-        let pieces = first_pieces(most);
+        let most = travel_max(&travel, self.geom.links.len());
+        let pieces = first_pieces(most.0.max(most.1));
         let (mut margins, mut step, mut dir, mut spans) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
         let first = (&travel[..], &steps[..], most, pieces);
         let (batches, hit) = self.first_level_in_lanes(
@@ -1994,7 +2002,8 @@ impl CollisionModel {
         // then how far each self-collision pair can close in on itself.
         g.travel_into(&steps, &mut travel);
         let slots = g.links.len();
-        let most = travel.iter().copied().fold(0.0, f64::max);
+        let most_each = travel_max(&travel, slots);
+        let most = most_each.0.max(most_each.1);
         q.clear();
         q.resize(dof, 0.0);
         spans.clear();
@@ -2004,7 +2013,7 @@ impl CollisionModel {
         if listed && let (Some(fast), Some(solids32)) = (&self.fast, &self.solids32) {
             // The batches cut their own pieces (finer), or leave these to the loop below.
             let bufs = (&mut margins, &mut step, &mut dir);
-            let first = (&travel[..], &steps[..], most, pieces);
+            let first = (&travel[..], &steps[..], most_each, pieces);
             let (batches, hit) = self.first_level_in_lanes(fast, solids32, qa, &delta, first, &mut spans, bufs, s);
             checks += batches;
             if hit {
@@ -2094,7 +2103,7 @@ impl CollisionModel {
         solids32: &Solids32,
         qa: &[f64],
         delta: &[f64],
-        (travel, steps, most, first): (&[f64], &[f64], f64, usize),
+        (travel, steps, (most_link, most_pair), first): (&[f64], &[f64], (f64, f64), usize),
         spans: &mut Vec<Span>,
         (margins, step, dir): (&mut Vec<f64>, &mut Vec<f64>, &mut Vec<f64>),
         s: &mut CollisionScratch,
@@ -2103,6 +2112,7 @@ impl CollisionModel {
         let (dof, slots) = (g.dof, g.links.len());
         // Finer pieces than the double-precision first level (`first` pieces): a batch costs
         // about one check.
+        let most = most_link.max(most_pair);
         let mut pieces = first;
         while pieces < LANES_MAX_PIECES && most * 0.5 / pieces as f64 > LANES_START_MARGIN {
             pieces *= 2;
