@@ -643,10 +643,6 @@ struct Span {
     pairs_free: bool,
 }
 
-/// The inflation of a sub-interval of half-length `half` (a share of the segment): `margins` :=
-/// each row of `travel` (links, then self pairs) times `half`, `step` := each joint's change
-/// `steps` times `half`; a relative 1e-9 and (margins) an absolute 1e-12 more than the bound,
-/// against rounding.
 /// The largest travel of a link (the first `slots` rows of `travel`) and of a self pair (the
 /// rest), each 0 when there is none (a plain comparison: travels are finite).
 fn travel_max(travel: &[f64], slots: usize) -> (f64, f64) {
@@ -655,6 +651,10 @@ fn travel_max(travel: &[f64], slots: usize) -> (f64, f64) {
     (max(links), max(pairs))
 }
 
+/// The inflation of a sub-interval of half-length `half` (a share of the segment): `margins` :=
+/// each row of `travel` (links, then self pairs) times `half`, `step` := each joint's change
+/// `steps` times `half`; a relative 1e-9 and (margins) an absolute 1e-12 more than the bound,
+/// against rounding.
 fn span_margins(half: f64, travel: &[f64], steps: &[f64], margins: &mut Vec<f64>, step: &mut Vec<f64>) {
     let scale = half * (1.0 + 1e-9);
     margins.clear();
@@ -2144,7 +2144,7 @@ impl CollisionModel {
             // Piece `i`'s midpoint is `(2i + 1) / 2 pieces` of the way (exact: `(i + 0.5)
             // width` for a power-of-two width, the value `ConfigSpace::step_into` is given),
             // written into the lanes from the segment (rows built first and turned cost
-            // about 700 instructions a batch more).
+            // about 300 instructions a batch more).
             let points =
                 SegmentIn { a: qa, delta, n: 2 * pieces as u32, ids: lane_piece.map(|i| 2 * i as u32 + 1), end: None };
             from += lanes::LANES;

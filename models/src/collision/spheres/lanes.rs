@@ -333,8 +333,8 @@ pub(crate) struct LaneMargins<'a> {
 /// get no motion terms (their joint's frame is not stored).
 #[derive(Debug, Clone, Default)]
 pub(crate) struct LaneMotion {
-    /// Terms are held (for the motion numbered `seg`).
-    ready: bool,
+    /// Terms are held (for the motion numbered `seg`), of the robot program with this number.
+    ready: Option<ProgramId>,
     /// The motion's number, counted from 1; a sphere's `A` is worked out in the first batch
     /// that needs it, and kept for the motion's other batches.
     seg: u32,
@@ -551,7 +551,7 @@ impl LaneScratch {
             link_g: Vec::new(),
             grown: Grown { key: None, grow: 0.0, margin: 0.0, group: Vec::new(), group_pair: Vec::new() },
             motion: LaneMotion {
-                ready: false,
+                ready: None,
                 seg: 0,
                 grow: 0,
                 speed: Vec::new(),
@@ -1014,7 +1014,7 @@ impl SphereGeom {
     /// 5% of the planning instructions on the public MotionBenchMaker UR5 problems).
     pub(crate) fn set_lane_motion(&self, (step, dir): (&[f64], &[f64]), s: &mut LaneScratch) {
         let mo = &mut s.motion;
-        mo.ready = false;
+        mo.ready = None;
         mo.seg = mo.seg.wrapping_add(1);
         if mo.seg == 0 || mo.add_at.len() != self.centre.len() {
             mo.add_at.clear();
@@ -1032,8 +1032,9 @@ impl SphereGeom {
                 _ => return,
             }
         }
-        mo.ready = self.second_factors(step, &mut mo.factor, &mut mo.above)
+        let held = self.second_factors(step, &mut mo.factor, &mut mo.above)
             && mo.factor.iter().chain(&mo.above).all(|v| v.is_finite());
+        mo.ready = held.then_some(self.lanes.id);
     }
 
     /// Sphere `k`'s `A` (see [`LaneMotion`]) with the allowance `grow`, kept for the motion;
@@ -1204,7 +1205,7 @@ impl SphereGeom {
         let along = ALONG
             && along
             && !kept
-            && s.motion.ready
+            && s.motion.ready == Some(lanes.id)
             && s.motion.speed.len() + 1 == self.bodies.len()
             && s.motion.add_at.len() == self.centre.len();
         if along && s.motion.grow != grow.to_bits() {
@@ -1269,7 +1270,10 @@ impl SphereGeom {
                                 return Lanes8 { free: 0, hit, pairs_free: 0 };
                             }
                             if along {
-                                mk &= d2.le_mask_v(self.along_thr(o, l, k, grow, s));
+                                // A threshold that is not a number (a motion too large for
+                                // `f32`) settles nothing.
+                                let t = self.along_thr(o, l, k, grow, s);
+                                mk &= d2.le_mask_v(t) | !t.le_mask(f32::INFINITY);
                             }
                         }
                         live &= !mk;
@@ -1933,7 +1937,7 @@ mod tests {
             let step: Vec<f64> = dir.iter().map(|d| d.abs()).collect();
             geom.set_lane_motion((&step, &dir), &mut s);
             let grow = geom.allowance(&obstacles, 0.05, 0.1).expect("finite");
-            assert!(s.motion.ready, "trial {trial}: terms held");
+            assert_eq!(s.motion.ready, Some(geom.lanes.id), "trial {trial}: terms held");
             let qs: Vec<f64> = (0..LANES).flat_map(|_| robot.random_configuration(&mut rng)).collect();
             assert!(geom.pose_lanes(Base, RowsIn(&qs), dof, &mut s));
             for (l, link) in geom.links.iter().enumerate() {
