@@ -258,21 +258,11 @@ impl SphereGeom {
         above.resize(n, 0.0);
         for b in 1..n {
             let body = &self.bodies[b];
-            let d = match body.value {
-                Value::Dof(i) => match step.get(i) {
-                    Some(&d) => d,
-                    None => return false,
-                },
-                Value::Mimic(i, mult, _) => match step.get(i) {
-                    Some(&d) => d * mult.abs(),
-                    None => return false,
-                },
-                Value::Zero => 0.0,
-            };
             // Bodies come after their parents (as posing needs).
-            if body.parent >= b {
+            if !Self::reads_within(body.value, step) || body.parent >= b {
                 return false;
             }
+            let d = Self::joint_step(body.value, step);
             let a = above[body.parent];
             factor[b] = d * (a + 0.5 * d);
             above[b] = a + d;
@@ -295,11 +285,16 @@ impl SphereGeom {
     /// Body `b`'s joint change, with its sign, when the DOFs change by `dir` (`None` when `dir`
     /// holds no value for its DOF).
     pub(super) fn body_dir(&self, b: usize, dir: &[f64]) -> Option<f64> {
-        Some(match self.bodies.get(b)?.value {
-            Value::Dof(i) => *dir.get(i)?,
-            Value::Mimic(i, mult, _) => dir.get(i)? * mult,
-            Value::Zero => 0.0,
-        })
+        let value = self.bodies.get(b)?.value;
+        Self::reads_within(value, dir).then(|| Self::joint_dir(value, dir))
+    }
+
+    /// `values` holds the DOF joint `value` reads (if any).
+    fn reads_within(value: Value, values: &[f64]) -> bool {
+        match value {
+            Value::Dof(i) | Value::Mimic(i, _, _) => i < values.len(),
+            Value::Zero => true,
+        }
     }
 
     /// A bound on [`Self::margin`] against the world for every sphere of link `l`, from the

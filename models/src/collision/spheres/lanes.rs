@@ -331,7 +331,7 @@ pub(crate) struct LaneMargins<'a> {
 /// most a factor `(1 - u)²` of `n̂ K` and `(1 - u)` of `A`, which `K` and `2^-20` cover. The
 /// threshold is then formed as [`thr`]'s. Robots with a body posed after its joint (`post`)
 /// get no motion terms (their joint's frame is not stored).
-#[derive(Debug, Clone, Default)]
+#[derive(Debug, Clone)]
 pub(crate) struct LaneMotion {
     /// Terms are held (for the motion numbered `seg`), of the robot program with this number.
     ready: Option<ProgramId>,
@@ -349,6 +349,17 @@ pub(crate) struct LaneMotion {
     /// Per sphere, `A` above, for the motion `add_at`.
     add: Vec<f32>,
     add_at: Vec<u32>,
+}
+
+impl LaneMotion {
+    /// A new number: every sphere's `A` kept is worked out again when next needed.
+    fn renumber(&mut self) {
+        self.seg = self.seg.wrapping_add(1);
+        if self.seg == 0 {
+            self.add_at.fill(0);
+            self.seg = 1;
+        }
+    }
 }
 
 /// `K` of [`LaneMotion`].
@@ -1015,13 +1026,12 @@ impl SphereGeom {
     pub(crate) fn set_lane_motion(&self, (step, dir): (&[f64], &[f64]), s: &mut LaneScratch) {
         let mo = &mut s.motion;
         mo.ready = None;
-        mo.seg = mo.seg.wrapping_add(1);
-        if mo.seg == 0 || mo.add_at.len() != self.centre.len() {
+        if mo.add_at.len() != self.centre.len() {
             mo.add_at.clear();
             mo.add_at.resize(self.centre.len(), 0);
             mo.add.resize(self.centre.len(), 0.0);
-            mo.seg = 1;
         }
+        mo.renumber();
         if !self.lanes.twist_err.is_finite() {
             return;
         }
@@ -1211,7 +1221,7 @@ impl SphereGeom {
         if along && s.motion.grow != grow.to_bits() {
             // Other margins than the terms kept were worked out with: work them out again.
             s.motion.grow = grow.to_bits();
-            s.motion.add_at.fill(0);
+            s.motion.renumber();
         }
         // Certainly in contact: at most this (rounded down), see the module documentation.
         let contact = |r: f64| contact_thr(r, grow);
