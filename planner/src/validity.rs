@@ -177,6 +177,52 @@ pub(crate) fn check_start<V: StateValidity>(model: &V, start: &[f64]) -> Result<
     Ok(())
 }
 
+/// Certificates given in one planning run, by their segments' ends (exact values): the ends
+/// one after another in `ends`, entry `i`'s at `i * 2 * dof`. Segments whose ends are not
+/// both `dof` long are not kept.
+struct CertMemo {
+    dof: usize,
+    /// Per entry: a hash of its ends' bits, and its answer.
+    keys: Vec<(u64, bool)>,
+    ends: Vec<f64>,
+}
+
+impl CertMemo {
+    /// At most this many entries: a planning run certifies some tens of segments, and a
+    /// lookup scans the hashes.
+    const CAPACITY: usize = 256;
+
+    fn key(&self, a: &[f64], b: &[f64]) -> u64 {
+        // FNV-1a over the bits, one value at a time (a lookup costs less than a tenth of
+        // one batch of the certificate).
+        a.iter().chain(b).fold(0xcbf2_9ce4_8422_2325_u64, |h, x| (h ^ x.to_bits()).wrapping_mul(0x0000_0100_0000_01b3))
+    }
+
+    fn new(dof: usize) -> Self {
+        CertMemo { dof, keys: Vec::new(), ends: Vec::new() }
+    }
+
+    fn get(&self, key: u64, a: &[f64], b: &[f64]) -> Option<bool> {
+        if a.len() != self.dof || b.len() != self.dof {
+            return None;
+        }
+        let n = 2 * self.dof;
+        self.keys.iter().enumerate().find_map(|(i, &(k, free))| {
+            let ends = self.ends.get(i * n..(i + 1) * n)?;
+            (k == key && ends[..a.len()] == *a && ends[a.len()..] == *b).then_some(free)
+        })
+    }
+
+    fn put(&mut self, key: u64, a: &[f64], b: &[f64], free: bool) {
+        if self.keys.len() >= Self::CAPACITY || a.len() != self.dof || b.len() != self.dof {
+            return;
+        }
+        self.keys.push((key, free));
+        self.ends.extend_from_slice(a);
+        self.ends.extend_from_slice(b);
+    }
+}
+
 /// Counted validity queries against one collision model at one resolution.
 pub(crate) struct Validity<'m, V: StateValidity> {
     pub model: &'m V,
@@ -196,6 +242,10 @@ pub(crate) struct Validity<'m, V: StateValidity> {
     /// `lower - 1e-9` and `upper + 1e-9`, the same numbers); `None` for a robot with actuators,
     /// whose strokes need the whole test.
     end_bounds: Option<Vec<(f64, f64)>>,
+    /// Certificates already given in this run (see [`Self::segment_free`]).
+    memo: CertMemo,
+    /// Segments answered from `memo` (not counted in `edges_checked`).
+    pub edges_recalled: usize,
 }
 
 impl<'m, V: StateValidity> Validity<'m, V> {
@@ -220,6 +270,8 @@ impl<'m, V: StateValidity> Validity<'m, V> {
                     .map(|&j| (joints[j].limits.lower - 1e-9, joints[j].limits.upper + 1e-9))
                     .collect()
             }),
+            memo: CertMemo::new(robot.dof()),
+            edges_recalled: 0,
         }
     }
 
@@ -269,13 +321,25 @@ impl<'m, V: StateValidity> Validity<'m, V> {
     /// The straight C-space segment `a`-`b` (short way on continuous joints) is collision-free
     /// at `resolution` (largest joint step between checked points). The end points are taken as
     /// already checked.
+    ///
+    /// With certificates, a segment asked for again (the same ends, bit for bit, in the same
+    /// order) gets the answer it got before without a new certificate: lazy RRT-Connect's
+    /// greedy pass tries the start-goal segment the direct check has refused, and tries again,
+    /// after a blocked edge is cut, the segments it certified or refused on the path before.
     pub fn segment_free(&mut self, a: &[f64], b: &[f64]) -> bool {
-        self.edges_checked += 1;
         if let Some(tolerance) = self.certify {
+            let key = self.memo.key(a, b);
+            if let Some(free) = self.memo.get(key, a, b) {
+                self.edges_recalled += 1;
+                return free;
+            }
+            self.edges_checked += 1;
             let (free, checks) = self.model.certify_motion(a, b, tolerance, false, &mut self.scratch);
             self.collision_checks += u64::from(checks);
+            self.memo.put(key, a, b, free);
             return free;
         }
+        self.edges_checked += 1;
         self.sampled(a, b, self.resolution)
     }
 
@@ -442,6 +506,53 @@ mod tests {
             kinds.push(robot.actuators().is_empty());
         }
         assert_eq!(kinds, [true, true, false], "two arms without actuators, one with");
+    }
+
+    /// A certified segment asked for again gets the answer of its certificate without a new
+    /// one; a segment with other ends (reversed, or one value a bit apart) gets its own. The
+    /// answers are the model's, free and refused segments both occur, and the counts add up.
+    #[test]
+    fn segments_asked_again_get_their_certificates_answer() {
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/tests/fixtures");
+        let mut robot = embodied_models::urdf::load_urdf(&dir.join("ur5_spherized.urdf"), Some(&dir.join("ur5.srdf")))
+            .expect("UR5 fixture loads");
+        embodied_models::collision::disable_always_colliding(&mut robot, 2000, 0x5eed);
+        let mut env = Environment::new();
+        env.add(Obstacle::new("wall", Isometry3::translation(0.4, 0.0, 0.3), Shape::cuboid(0.15, 0.4, 0.3)));
+        let model = CollisionModel::new(&robot, env);
+        let mut validity = Validity::new(&model, 0.05).with_edge_check(EdgeCheck::Certified { tolerance: 1e-3 });
+        let mut rng = Rng::new(11);
+        let mut segments = Vec::new();
+        while segments.len() < 40 {
+            let (a, b) = (robot.random_configuration(&mut rng), robot.random_configuration(&mut rng));
+            if !model.collides(&a) && !model.collides(&b) {
+                segments.push((a, b));
+            }
+        }
+        let answers: Vec<bool> = segments.iter().map(|(a, b)| validity.segment_free(a, b)).collect();
+        let (checked, checks) = (validity.edges_checked, validity.collision_checks);
+        assert_eq!((checked, validity.edges_recalled), (segments.len(), 0));
+        let free = answers.iter().filter(|&&f| f).count();
+        assert!(free > 3 && free < segments.len() - 3, "{free} of {} free", segments.len());
+        for ((a, b), &answer) in segments.iter().zip(&answers) {
+            assert_eq!(answer, model.motion_is_certified_free(a, b, 1e-3));
+            assert_eq!(validity.segment_free(a, b), answer);
+        }
+        assert_eq!((validity.edges_checked, validity.collision_checks), (checked, checks), "a certificate again");
+        assert_eq!(validity.edges_recalled, segments.len());
+        // Other ends: a new certificate each.
+        for (a, b) in &segments {
+            let mut moved = b.clone();
+            moved[0] = f64::from_bits(moved[0].to_bits() ^ 1);
+            assert_eq!(validity.segment_free(b, a), model.motion_is_certified_free(b, a, 1e-3));
+            assert_eq!(validity.segment_free(a, &moved), model.motion_is_certified_free(a, &moved, 1e-3));
+        }
+        assert_eq!(validity.edges_checked, 3 * segments.len());
+        assert_eq!(validity.edges_recalled, segments.len());
+        // Wrong lengths are refused and not kept.
+        assert!(!validity.segment_free(&segments[0].0[1..], &segments[0].1[1..]));
+        assert!(!validity.segment_free(&segments[0].0[1..], &segments[0].1[1..]));
+        assert_eq!(validity.edges_recalled, segments.len());
     }
 
     /// The end goes into the same batched query as the inner points: the answer is the
