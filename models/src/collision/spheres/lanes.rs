@@ -832,8 +832,11 @@ fn local<O: Ops>(o: O, rt: &[f32; 9], t: &[f32; 3], yaw: bool, p: &P<O>) -> P<O>
         let (c0, c1, c3, c4) = (splat(o, rt[0]), splat(o, rt[1]), splat(o, rt[3]), splat(o, rt[4]));
         return [c0 * x + c1 * y, c3 * x + c4 * y, z];
     }
-    let row = |r: usize| splat(o, rt[3 * r]) * x + splat(o, rt[3 * r + 1]) * y + splat(o, rt[3 * r + 2]) * z;
-    [row(0), row(1), row(2)]
+    // Written out (as a closure it was sometimes left a call in the batch's loop).
+    let (r0, r1, r2) = (splat(o, rt[0]), splat(o, rt[1]), splat(o, rt[2]));
+    let (r3, r4, r5) = (splat(o, rt[3]), splat(o, rt[4]), splat(o, rt[5]));
+    let (r6, r7, r8) = (splat(o, rt[6]), splat(o, rt[7]), splat(o, rt[8]));
+    [r0 * x + r1 * y + r2 * z, r3 * x + r4 * y + r5 * z, r6 * x + r7 * y + r8 * z]
 }
 
 #[inline(always)]
