@@ -209,7 +209,8 @@ impl CertMemo {
         let n = 2 * self.dof;
         self.keys.iter().enumerate().find_map(|(i, &(k, free))| {
             let ends = self.ends.get(i * n..(i + 1) * n)?;
-            (k == key && ends[..a.len()] == *a && ends[a.len()..] == *b).then_some(free)
+            let same = ends.iter().zip(a.iter().chain(b)).all(|(x, y)| x.to_bits() == y.to_bits());
+            (k == key && same).then_some(free)
         })
     }
 
@@ -508,15 +509,21 @@ mod tests {
         assert_eq!(kinds, [true, true, false], "two arms without actuators, one with");
     }
 
+    /// The spherized UR5 fixture, without the self pairs that touch in every configuration.
+    fn ur5_without_touching_pairs() -> Robot {
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/tests/fixtures");
+        let mut ur5 = embodied_models::urdf::load_urdf(&dir.join("ur5_spherized.urdf"), Some(&dir.join("ur5.srdf")))
+            .expect("UR5 fixture loads");
+        embodied_models::collision::disable_always_colliding(&mut ur5, 2000, 0x5eed);
+        ur5
+    }
+
     /// A certified segment asked for again gets the answer of its certificate without a new
     /// one; a segment with other ends (reversed, or one value a bit apart) gets its own. The
     /// answers are the model's, free and refused segments both occur, and the counts add up.
     #[test]
     fn segments_asked_again_get_their_certificates_answer() {
-        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/tests/fixtures");
-        let mut robot = embodied_models::urdf::load_urdf(&dir.join("ur5_spherized.urdf"), Some(&dir.join("ur5.srdf")))
-            .expect("UR5 fixture loads");
-        embodied_models::collision::disable_always_colliding(&mut robot, 2000, 0x5eed);
+        let robot = ur5_without_touching_pairs();
         let mut env = Environment::new();
         env.add(Obstacle::new("wall", Isometry3::translation(0.4, 0.0, 0.3), Shape::cuboid(0.15, 0.4, 0.3)));
         let model = CollisionModel::new(&robot, env);
@@ -562,10 +569,7 @@ mod tests {
     fn a_probe_with_its_end_answers_as_its_points_do() {
         // The spherized UR5 (its probes in vector lanes) and a built-in arm of boxes and
         // cylinders (one by one).
-        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/tests/fixtures");
-        let mut ur5 = embodied_models::urdf::load_urdf(&dir.join("ur5_spherized.urdf"), Some(&dir.join("ur5.srdf")))
-            .expect("UR5 fixture loads");
-        embodied_models::collision::disable_always_colliding(&mut ur5, 2000, 0x5eed);
+        let ur5 = ur5_without_touching_pairs();
         let irp6 = builtin("irp6-postument").expect("robot");
         let boxes = [
             (ur5, true, [([0.4, 0.0, 0.3], [0.15, 0.4, 0.3]), ([-0.2, 0.4, 0.4], [0.1, 0.1, 0.4])]),
