@@ -329,6 +329,10 @@ enum BenchCommand {
         /// RRT-Connect's largest step (rad).
         #[arg(long)]
         rrt_range: Option<f64>,
+        /// The share of RRT-Connect's samples drawn near a node of the tree about to grow, in
+        /// [0, 1] (default 0.5; 0: every sample over the whole joint box).
+        #[arg(long)]
+        rrt_local_bias: Option<f64>,
         /// RRT-Connect without dynamic domain (Yershova et al. 2005; on by default).
         #[arg(long)]
         no_dynamic_domain: bool,
@@ -780,6 +784,7 @@ fn run(cli: Cli) -> Result<(), AppError> {
             shortcut_min_gain,
             threads,
             rrt_range,
+            rrt_local_bias,
             no_dynamic_domain,
             no_balance,
             sampler,
@@ -802,6 +807,12 @@ fn run(cli: Cli) -> Result<(), AppError> {
                     return Err(AppError::Usage(format!("--rrt-range must be a positive number, got {r}")));
                 }
                 args.rrt_range = r;
+            }
+            if let Some(p) = rrt_local_bias {
+                if !(0.0..=1.0).contains(&p) {
+                    return Err(AppError::Usage(format!("--rrt-local-bias must be a share in [0, 1], got {p}")));
+                }
+                args.rrt_local_bias = p;
             }
             if let Some(r) = resolution {
                 args.resolution = r;

@@ -166,6 +166,7 @@ pub fn ompl_log(report: &MbmReport, family: &str, index: u32, machine: &Machine,
         format!("balance = {}", flag(s.balance)),
         format!("dynamic_domain = {}", flag(s.dynamic_domain)),
         format!("edge_check = {edges}"),
+        format!("local_bias = {}", s.rrt_local_bias),
         format!("range = {}", s.rrt_range),
         format!(
             "sampler = {}",

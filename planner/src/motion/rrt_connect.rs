@@ -485,6 +485,8 @@ pub(crate) fn plan<V: StateValidity>(
     let mut start_is_a = true;
     // This attempt's samples (a restart begins again at zero; see `MotionSettings::rrt_restarts`).
     let first_sample = stats.samples;
+    let local_bias = if settings.rrt_local_bias.is_finite() { settings.rrt_local_bias.clamp(0.0, 1.0) } else { 0.0 };
+    let local_span = if settings.rrt_local_span.is_finite() { settings.rrt_local_span.max(0.0) } else { 0.0 };
     loop {
         if stats.samples - first_sample >= settings.max_samples {
             return Outcome::Infeasible;
@@ -493,8 +495,13 @@ pub(crate) fn plan<V: StateValidity>(
             return Outcome::OutOfTime { best: None, cause: budget.cause() };
         }
         stats.samples += 1;
-        draw.next_into(robot, rng, &mut sample);
         let (a, b) = if start_is_a { (&mut from_start, &mut from_goal) } else { (&mut from_goal, &mut from_start) };
+        // Near a node of the tree about to grow, or over the whole box.
+        let near_node = (local_bias > 0.0 && rng.uniform() < local_bias).then(|| rng.below(a.len()));
+        match near_node {
+            Some(k) if a.alive[k] => draw.near_into(robot, rng, a.node(k), local_span, &mut sample),
+            _ => draw.next_into(robot, rng, &mut sample),
+        }
         let mut new = None;
         // Dynamic domain: a sample outside the nearest node's radius is not extended towards.
         let near = if settings.rrt_dynamic_domain {

@@ -128,11 +128,14 @@ pub(crate) struct Draw {
     offset: Vec<f64>,
     /// (lower, width) of every degree of freedom.
     boxes: Vec<(f64, f64)>,
+    /// Per degree of freedom, whether its joint has limits (a continuous joint has none).
+    bounded: Vec<bool>,
 }
 
 impl Draw {
     /// A stream for `robot`; the Halton offset is drawn from `rng`.
     pub fn new(sampler: Sampler, robot: &Robot, rng: &mut Rng) -> Self {
+        let bounded: Vec<bool> = (0..robot.dof()).map(|i| robot.dof_joint(i).limits.is_bounded()).collect();
         let boxes: Vec<(f64, f64)> = (0..robot.dof())
             .map(|i| {
                 let l = robot.dof_joint(i).limits;
@@ -150,7 +153,30 @@ impl Draw {
                 (0..robot.dof()).map(|_| rng.uniform()).collect(),
             ),
         };
-        Self { sampler, halton, offset, boxes }
+        Self { sampler, halton, offset, boxes, bounded }
+    }
+
+    /// A sample near `node`: each joint uniform within `span` times its sampling width of the
+    /// node's value (clamped to a bounded joint's limits; a continuous joint's value is left to
+    /// wrap). On a robot with actuator strokes, redrawn until the strokes hold, in a box halved
+    /// every four draws (16 in all), then a sample of [`Self::next_into`] instead.
+    pub fn near_into(&mut self, robot: &Robot, rng: &mut Rng, node: &[f64], span: f64, q: &mut [f64]) {
+        if node.len() != q.len() || q.len() != self.boxes.len() {
+            return self.next_into(robot, rng, q);
+        }
+        for k in 0..16 {
+            let span = span / f64::from(1u32 << (k / 4));
+            let mut local = rng.clone();
+            for (((v, &x), &(lower, width)), &bounded) in q.iter_mut().zip(node).zip(&self.boxes).zip(&self.bounded) {
+                let y = x + (2.0 * local.uniform() - 1.0) * span * width;
+                *v = if bounded { y.clamp(lower, lower + width) } else { y };
+            }
+            *rng = local;
+            if robot.actuators().iter().all(|a| a.stroke_excess(q) <= 0.0) {
+                return;
+            }
+        }
+        self.next_into(robot, rng, q);
     }
 
     /// The next configuration into `q`.
@@ -259,6 +285,76 @@ mod tests {
                     qa.iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
                     qb.iter().map(|v| v.to_bits()).collect::<Vec<_>>()
                 );
+            }
+        }
+    }
+
+    /// Samples near a node stay within the span of each joint's width around it: clamped into
+    /// the limits of bounded joints (and reaching them from a node at a limit), left unclamped
+    /// on continuous ones (Polycrank), with actuator strokes held (the IRp-6), and spread over
+    /// the box (both halves of every joint's interval are drawn).
+    #[test]
+    fn near_draws_stay_around_their_node() {
+        for robot in [
+            embodied_models::builtin::polycrank(),
+            embodied_models::builtin::rnt(),
+            embodied_models::builtin::irp6_postument(),
+            embodied_models::builtin::irp6_on_track(),
+        ] {
+            let robot = robot.expect("built-in robot");
+            let mut rng = Rng::new(4);
+            let mut draw = Draw::new(Sampler::Uniform, &robot, &mut rng);
+            let n = robot.dof();
+            let mut node = vec![0.0; n];
+            let mut q = vec![0.0; n];
+            for round in 0..50 {
+                robot.random_configuration_into(&mut rng, &mut node);
+                // Every tenth node at its joints' lower limits.
+                if round % 10 == 0 {
+                    for (i, v) in node.iter_mut().enumerate() {
+                        let l = robot.dof_joint(i).limits;
+                        if l.is_bounded() {
+                            *v = l.lower;
+                        }
+                    }
+                }
+                // A node the planner holds is a valid configuration: its strokes hold.
+                if robot.actuators().iter().any(|a| a.stroke_excess(&node) > 0.0) {
+                    continue;
+                }
+                let (mut below, mut above) = (vec![false; n], vec![false; n]);
+                for _ in 0..200 {
+                    draw.near_into(&robot, &mut rng, &node, 0.25, &mut q);
+                    for i in 0..n {
+                        let (lower, width) = draw.boxes[i];
+                        let off = q[i] - node[i];
+                        assert!(off.abs() <= 0.25 * width * (1.0 + 1e-12), "{}: joint {i} moved {off}", robot.name());
+                        if draw.bounded[i] {
+                            assert!(
+                                q[i] >= lower && q[i] <= lower + width,
+                                "{}: joint {i} out of limits",
+                                robot.name()
+                            );
+                        }
+                        below[i] |= off < 0.0;
+                        above[i] |= off > 0.0;
+                    }
+                    assert!(robot.actuators().iter().all(|a| a.stroke_excess(&q) <= 0.0), "{}: a stroke", robot.name());
+                }
+                for i in 0..n {
+                    let at_lower = draw.bounded[i] && node[i] <= draw.boxes[i].0;
+                    assert!(above[i] && (below[i] || at_lower), "{}: joint {i} drawn on one side only", robot.name());
+                }
+            }
+            let wraps = (0..n).any(|i| !draw.bounded[i]);
+            if wraps {
+                // A continuous joint near +-pi goes past it.
+                let node = vec![3.1; n];
+                let past = (0..200).any(|_| {
+                    draw.near_into(&robot, &mut rng, &node, 0.25, &mut q);
+                    (0..n).any(|i| !draw.bounded[i] && q[i] > std::f64::consts::PI)
+                });
+                assert!(past, "{}: a continuous joint was clamped", robot.name());
             }
         }
     }
