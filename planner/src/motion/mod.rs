@@ -242,14 +242,13 @@ pub struct MotionSettings {
     /// picked uniformly, each joint within [`Self::rrt_local_span`] of its sampling width of
     /// the node's value); the others are drawn by [`Self::sampler`] over the whole joint box. A
     /// tree inside a narrow region (the arm reaching into a cage) grows where it is instead of
-    /// towards samples its dynamic domain mostly turns down. Measured with a half-width of 2
-    /// rad on the UR5 (`bench mbm`, one core, collision checks per problem): on 100 generated
-    /// cage problems (three seeds) 0.5 (the default) 14,826 -> 6,188 checks, p50 0.93 -> 0.46
-    /// ms, p95 5.5 -> 1.3 ms, within 1 ms 53% -> 90%; on the 296 public problems 329 -> 289
-    /// checks, median path length 6.28 -> 6.00 rad; on generated bookshelf_tall, bookshelf_thin
-    /// and table_under_pick 606 -> 647 (one hard table_under_pick problem takes 8,000 to
-    /// 110,000 samples either way). Shares 0.1-0.7 and half-widths of 0.5-3 rad measured (see
-    /// `docs/benchmarks.md`); 0 draws every sample over the whole box.
+    /// towards samples its dynamic domain mostly turns down. On the UR5 (`bench mbm`, one core,
+    /// three seeds, collision checks a problem, 0 -> 0.5): 100 generated cage problems 14,826
+    /// -> 5,424 (per problem 0.51 of the time; within 1 ms 57% -> 86%); the 296 public ones
+    /// 336 -> 302 (median path 6.27 -> 6.10 rad); generated bookshelf_tall 579 -> 422,
+    /// bookshelf_thin 502 -> 430, table_under_pick 798 -> 1,630 (one problem that takes
+    /// thousands to a hundred thousand samples either way). Shares of 0.1-0.7 and boxes of
+    /// 0.5-3 rad are compared in `docs/benchmarks.md`; 0 draws every sample over the whole box.
     pub rrt_local_bias: f64,
     /// RRT-Connect: the half-width of [`Self::rrt_local_bias`]'s samples around their node, as
     /// a share of each joint's sampling width (1/π: 2 rad for a joint of one turn).
