@@ -53,6 +53,12 @@ fn exit_status_0_success_1_not_succeeded_2_bad_input() {
         assert_eq!(code, 2, "{err}");
         assert!(err.contains("--shortcut-min-gain must be zero or a positive number"), "{err}");
     }
+    for share in ["--rrt-local-bias=1.5", "--rrt-local-bias=-0.1", "--rrt-local-bias=nan"] {
+        let args = ["bench", "mbm", "--urdf", "u.urdf", "--srdf", "u.srdf", "--problems", "none", share];
+        let (code, _, err) = embodied(&args);
+        assert_eq!(code, 2, "{err}");
+        assert!(err.contains("--rrt-local-bias must be a share in [0, 1]"), "{err}");
+    }
     // The statuses are documented in --help.
     let (code, out, _) = embodied(&["--help"]);
     assert_eq!(code, 0);

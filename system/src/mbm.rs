@@ -931,11 +931,16 @@ pub fn render_table(report: &MbmReport) -> String {
         EdgeCheck::Sampled => format!("edges sampled at {} rad", report.settings.resolution),
     };
     let mut out = format!(
-        "MotionBenchMaker: deadline {} ms, seed {}, {edges}, paths re-checked at {} rad, {} ({} thread{}){}{}\n",
+        "MotionBenchMaker: deadline {} ms, seed {}, {edges}, paths re-checked at {} rad, {}{} ({} thread{}){}{}\n",
         report.settings.deadline_ms,
         report.settings.seed,
         report.settings.verify_resolution,
         report.settings.algorithm,
+        if report.settings.algorithm == PlannerKind::RrtConnect {
+            format!(" with {} of its samples near the growing tree", report.settings.rrt_local_bias)
+        } else {
+            String::new()
+        },
         report.settings.threads,
         if report.settings.threads == 1 { "" } else { "s" },
         if report.settings.runs > 1 { format!(", {} runs per problem", report.settings.runs) } else { String::new() },
