@@ -333,6 +333,10 @@ enum BenchCommand {
         /// [0, 1] (default 0.5; 0: every sample over the whole joint box).
         #[arg(long)]
         rrt_local_bias: Option<f64>,
+        /// The half-width of those samples' box around their node, as a share of each joint's
+        /// sampling width, above 0 (default 1/pi: 2 rad for a joint of one turn).
+        #[arg(long)]
+        rrt_local_span: Option<f64>,
         /// RRT-Connect without dynamic domain (Yershova et al. 2005; on by default).
         #[arg(long)]
         no_dynamic_domain: bool,
@@ -785,6 +789,7 @@ fn run(cli: Cli) -> Result<(), AppError> {
             threads,
             rrt_range,
             rrt_local_bias,
+            rrt_local_span,
             no_dynamic_domain,
             no_balance,
             sampler,
@@ -813,6 +818,12 @@ fn run(cli: Cli) -> Result<(), AppError> {
                     return Err(AppError::Usage(format!("--rrt-local-bias must be a share in [0, 1], got {p}")));
                 }
                 args.rrt_local_bias = p;
+            }
+            if let Some(w) = rrt_local_span {
+                if !(w.is_finite() && w > 0.0) {
+                    return Err(AppError::Usage(format!("--rrt-local-span must be a positive share, got {w}")));
+                }
+                args.rrt_local_span = w;
             }
             if let Some(r) = resolution {
                 args.resolution = r;

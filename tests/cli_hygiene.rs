@@ -59,6 +59,12 @@ fn exit_status_0_success_1_not_succeeded_2_bad_input() {
         assert_eq!(code, 2, "{err}");
         assert!(err.contains("--rrt-local-bias must be a share in [0, 1]"), "{err}");
     }
+    for span in ["--rrt-local-span=0", "--rrt-local-span=-1", "--rrt-local-span=inf"] {
+        let args = ["bench", "mbm", "--urdf", "u.urdf", "--srdf", "u.srdf", "--problems", "none", span];
+        let (code, _, err) = embodied(&args);
+        assert_eq!(code, 2, "{err}");
+        assert!(err.contains("--rrt-local-span must be a positive share"), "{err}");
+    }
     // The statuses are documented in --help.
     let (code, out, _) = embodied(&["--help"]);
     assert_eq!(code, 0);

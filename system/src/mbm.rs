@@ -73,6 +73,9 @@ pub struct MbmArgs {
     /// The share of RRT-Connect's samples drawn near a node of the tree about to grow (the
     /// planner's default: 0.5; see `MotionSettings::rrt_local_bias`).
     pub rrt_local_bias: f64,
+    /// The half-width of those samples' box around their node, as a share of each joint's
+    /// sampling width (the planner's default: 1/π, 2 rad for a joint of one turn).
+    pub rrt_local_span: f64,
     /// Planners racing per problem (1: one planner on one thread; 2: two differently seeded
     /// planners, the second joining on the rayon pool after 1 ms; first path wins).
     pub threads: usize,
@@ -112,6 +115,7 @@ impl MbmArgs {
             balance: MotionSettings::default().rrt_balance,
             sampler: MotionSettings::default().sampler,
             rrt_local_bias: MotionSettings::default().rrt_local_bias,
+            rrt_local_span: MotionSettings::default().rrt_local_span,
             threads: 1,
             families: None,
             limit: None,
@@ -252,6 +256,10 @@ pub struct MbmSettings {
     /// reports written before it existed: read as 0, every sample over the whole box).
     #[serde(default)]
     pub rrt_local_bias: f64,
+    /// The half-width of their box around the node, as a share of each joint's sampling width
+    /// (absent in reports written before it existed: read as 0).
+    #[serde(default)]
+    pub rrt_local_span: f64,
     /// Planners racing per problem.
     pub threads: usize,
     /// Plans per problem (run `r` with base seed `seed + r`).
@@ -604,6 +612,7 @@ fn run_problem(args: &MbmArgs, loaded: &Loaded, p: &ProblemFiles, run: u32) -> R
         rrt_balance: args.balance,
         sampler: args.sampler,
         rrt_local_bias: args.rrt_local_bias,
+        rrt_local_span: args.rrt_local_span,
         racers: args.threads.max(1),
         ..MotionSettings::default()
     };
@@ -758,6 +767,7 @@ fn settings_of(args: &MbmArgs, loaded: &Loaded) -> MbmSettings {
         balance: args.balance,
         sampler: args.sampler,
         rrt_local_bias: args.rrt_local_bias,
+        rrt_local_span: args.rrt_local_span,
         threads: args.threads.max(1),
         runs: args.runs,
         limit: args.limit,
@@ -937,7 +947,10 @@ pub fn render_table(report: &MbmReport) -> String {
         report.settings.verify_resolution,
         report.settings.algorithm,
         if report.settings.algorithm == PlannerKind::RrtConnect {
-            format!(" with {} of its samples near the growing tree", report.settings.rrt_local_bias)
+            format!(
+                " with {} of its samples near the growing tree (within {:.3} of each joint's width)",
+                report.settings.rrt_local_bias, report.settings.rrt_local_span
+            )
         } else {
             String::new()
         },
