@@ -47,23 +47,20 @@ fn exit_status_0_success_1_not_succeeded_2_bad_input() {
     assert_eq!(code, 2, "{err}");
     let (code, _, _) = embodied(&["run", "--duration", "-1"]);
     assert_eq!(code, 2);
-    for gain in ["--shortcut-min-gain=-0.1", "--shortcut-min-gain=nan"] {
-        let args = ["bench", "mbm", "--urdf", "u.urdf", "--srdf", "u.srdf", "--problems", "none", gain];
+    for (flag, says) in [
+        ("--shortcut-min-gain=-0.1", "--shortcut-min-gain must be zero or a positive number"),
+        ("--shortcut-min-gain=nan", "--shortcut-min-gain must be zero or a positive number"),
+        ("--rrt-local-bias=1.5", "--rrt-local-bias must be a share in [0, 1]"),
+        ("--rrt-local-bias=-0.1", "--rrt-local-bias must be a share in [0, 1]"),
+        ("--rrt-local-bias=nan", "--rrt-local-bias must be a share in [0, 1]"),
+        ("--rrt-local-span=0", "--rrt-local-span must be a positive share"),
+        ("--rrt-local-span=-1", "--rrt-local-span must be a positive share"),
+        ("--rrt-local-span=inf", "--rrt-local-span must be a positive share"),
+    ] {
+        let args = ["bench", "mbm", "--urdf", "u.urdf", "--srdf", "u.srdf", "--problems", "none", flag];
         let (code, _, err) = embodied(&args);
-        assert_eq!(code, 2, "{err}");
-        assert!(err.contains("--shortcut-min-gain must be zero or a positive number"), "{err}");
-    }
-    for share in ["--rrt-local-bias=1.5", "--rrt-local-bias=-0.1", "--rrt-local-bias=nan"] {
-        let args = ["bench", "mbm", "--urdf", "u.urdf", "--srdf", "u.srdf", "--problems", "none", share];
-        let (code, _, err) = embodied(&args);
-        assert_eq!(code, 2, "{err}");
-        assert!(err.contains("--rrt-local-bias must be a share in [0, 1]"), "{err}");
-    }
-    for span in ["--rrt-local-span=0", "--rrt-local-span=-1", "--rrt-local-span=inf"] {
-        let args = ["bench", "mbm", "--urdf", "u.urdf", "--srdf", "u.srdf", "--problems", "none", span];
-        let (code, _, err) = embodied(&args);
-        assert_eq!(code, 2, "{err}");
-        assert!(err.contains("--rrt-local-span must be a positive share"), "{err}");
+        assert_eq!(code, 2, "{flag}: {err}");
+        assert!(err.contains(says), "{flag}: {err}");
     }
     // The statuses are documented in --help.
     let (code, out, _) = embodied(&["--help"]);

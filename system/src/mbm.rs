@@ -946,7 +946,7 @@ pub fn render_table(report: &MbmReport) -> String {
         report.settings.seed,
         report.settings.verify_resolution,
         report.settings.algorithm,
-        if report.settings.algorithm == PlannerKind::RrtConnect {
+        if report.settings.algorithm == PlannerKind::RrtConnect && report.settings.rrt_local_bias > 0.0 {
             format!(
                 " with {} of its samples near the growing tree (within {:.3} of each joint's width)",
                 report.settings.rrt_local_bias, report.settings.rrt_local_span

@@ -1370,7 +1370,7 @@ impl SphereGeom {
                 // only those that reach it against the inner links. On the MotionBenchMaker
                 // UR5 the forearm's nine spheres and the upper arm's five meet the ten small
                 // links past the wrist this way once, not once per link: a free batch 16,220 ->
-                // 14,519 instructions. Pieces of one motion keep the order below (their lanes
+                // 14,558 instructions. Pieces of one motion keep the order below (their lanes
                 // rarely bring those links close; this order cost their planning 0.2-1%).
                 let gi = load(o, &s.group_c[gp.inner]);
                 let r_in = lanes.group_r_up[gp.inner];
@@ -1409,9 +1409,12 @@ impl SphereGeom {
                             continue;
                         }
                         for i in la.first..la.end {
-                            let ci = load(o, &s.centre[i]);
                             let ri = close & s.reach[i];
-                            if ri == 0 || ri & within(dist2(&ci, &cb), thr(lanes.radius_up[i], rb, pg)) == 0 {
+                            if ri == 0 {
+                                continue;
+                            }
+                            let ci = load(o, &s.centre[i]);
+                            if ri & within(dist2(&ci, &cb), thr(lanes.radius_up[i], rb, pg)) == 0 {
                                 continue;
                             }
                             self.pose_lane_link(o, b, s);
