@@ -739,8 +739,10 @@ pub struct CollisionScratch {
     q: Vec<f64>,
     intervals: Vec<(u32, u32)>,
     spans: Vec<Span>,
-    /// The spans a level of single-precision batches leaves.
-    spans_left: Vec<Span>,
+    /// The pieces the single-precision batches leave (index, self pairs free), and those of
+    /// the first level while the second runs.
+    lanes_left: Vec<(u32, bool)>,
+    lanes_parents: Vec<(u32, bool)>,
     steps: Vec<f64>,
     /// The joint steps of the segment a certificate checks (signed).
     delta: Vec<f64>,
@@ -777,7 +779,8 @@ impl CollisionScratch {
             q: Vec::new(),
             intervals: Vec::new(),
             spans: Vec::new(),
-            spans_left: Vec::new(),
+            lanes_left: Vec::new(),
+            lanes_parents: Vec::new(),
             steps: Vec::new(),
             delta: Vec::new(),
             step: Vec::new(),
@@ -867,14 +870,15 @@ pub const CERTIFY_START_MARGIN: f64 = 0.3;
 pub const CERTIFY_START_LEVELS: u32 = 4;
 
 /// A certificate on the sphere path checks its first pieces in single-precision batches of
-/// eight (see `CollisionModel::first_level_in_lanes`), cut finer than the double-precision first
+/// eight (see `CollisionModel::batched_levels`), cut finer than the double-precision first
 /// level ([`CERTIFY_START_MARGIN`]): until no link travels more than this many metres in half a
 /// piece, or into [`LANES_MAX_PIECES`]. A batch costs about four double-precision checks and
 /// proves most pieces this small free; the rest go on to the double-precision checks with their
 /// tighter per-sphere margins. Over the first 30 MotionBenchMaker UR5 problems of each family,
 /// planning instructions (double-precision only: 191.5 M): 0.02 m 206.6 M, 0.04 m 189.9 M,
 /// 0.08 m 180.7 M, 0.15 m 187.6 M, 0.3 m 218.0 M; a second or third level of batches over what
-/// the first leaves (halved) 182.8 M and 186.5 M.
+/// the first leaves (halved) 182.8 M and 186.5 M then. Today further levels that fill their
+/// batches pay (see [`LANES_LEVELS`]).
 const LANES_START_MARGIN: f64 = 0.08;
 
 /// See [`LANES_START_MARGIN`].
@@ -899,6 +903,14 @@ const _: () = assert!(1 << CERTIFY_START_LEVELS <= LANES_MAX_PIECES && LANES_MAX
 
 /// Fewer pieces than this are left to the double-precision checks.
 const LANES_MIN_PIECES: usize = 2;
+
+/// Levels of single-precision batches in a certificate before the double-precision checks
+/// take what is left: the first cuts the segment into equal pieces, each further one cuts each
+/// piece left into as many parts as fill one batch (at least halves). Over the first 30
+/// MotionBenchMaker UR5 problems of each public family, planning instructions with 1 level
+/// 66.02 M, 2: 64.39 M, 3: 63.98 M, 4: 64.11 M (the same 90 paths); 40 generated cage problems
+/// 184.2 M -> 183.2 M with 3.
+const LANES_LEVELS: u32 = 3;
 
 /// Most checks one certificate may spend before it gives up and answers "not free" (sound: a
 /// planner only loses a segment it could not prove). A segment that grazes an obstacle over a
@@ -1058,7 +1070,8 @@ impl CollisionModel {
         s.inflation.reserve(rows);
         s.margins.reserve(rows);
         s.spans.reserve(4 * LANES_MAX_PIECES);
-        s.spans_left.reserve(LANES_MAX_PIECES);
+        s.lanes_left.reserve(LANES_MAX_PIECES);
+        s.lanes_parents.reserve(LANES_MAX_PIECES);
         s.spheres.items.reserve(1024);
         s.spheres.batch_q.reserve(lanes::LANES * dof);
         s
@@ -1888,15 +1901,16 @@ impl CollisionModel {
         Some(SegmentForTests { fast, delta, steps, travel })
     }
 
-    /// The pieces the certificate's single-precision first level leaves of `qa`-`qb` to the
-    /// double-precision checks, each with whether its self pairs were found free: `(t0, t1,
-    /// pairs free)`; `None` when the segment's first level runs no batch, or a batch finds a
+    /// The pieces the certificate's first `levels` levels of single-precision batches leave of
+    /// `qa`-`qb` to the double-precision checks, each with whether its self pairs were found
+    /// free: `(t0, t1, pairs free)`; `None` when the segment runs no batch, or a batch finds a
     /// contact.
     #[cfg(test)]
-    pub(crate) fn first_level_left(
+    pub(crate) fn batches_left(
         &self,
         qa: &[f64],
         qb: &[f64],
+        levels: u32,
         s: &mut CollisionScratch,
     ) -> Option<Vec<(f64, f64, bool)>> {
         let solids32 = self.solids32.as_ref()?;
@@ -1905,12 +1919,13 @@ impl CollisionModel {
         let pieces = first_pieces(most.0.max(most.1));
         let (mut margins, mut step, mut dir, mut spans) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
         let first = (&travel[..], &steps[..], most, pieces);
-        let (batches, hit) = self.first_level_in_lanes(
+        let (batches, hit) = self.batched_levels(
             fast,
             solids32,
             qa,
             &delta,
             first,
+            levels,
             &mut spans,
             (&mut margins, &mut step, &mut dir),
             s,
@@ -2014,7 +2029,8 @@ impl CollisionModel {
             // The batches cut their own pieces (finer), or leave these to the loop below.
             let bufs = (&mut margins, &mut step, &mut dir);
             let first = (&travel[..], &steps[..], most_each, pieces);
-            let (batches, hit) = self.first_level_in_lanes(fast, solids32, qa, &delta, first, &mut spans, bufs, s);
+            let (batches, hit) =
+                self.batched_levels(fast, solids32, qa, &delta, first, LANES_LEVELS, &mut spans, bufs, s);
             checks += batches;
             if hit {
                 // A piece's midpoint is in contact: nothing left to check.
@@ -2091,25 +2107,26 @@ impl CollisionModel {
         (free, checks)
     }
 
-    /// The first level of a certificate on the sphere path, [`lanes::LANES`] pieces at a time in
-    /// single precision (see `spheres::lanes` in the source): the pieces proven free there are
-    /// taken out of `spans` (all of the first level, of equal length), the rest left to the
-    /// double-precision checks. Returns the number of batches (each counted as one check: it
-    /// costs about one).
+    /// The first `levels` levels of a certificate on the sphere path, [`lanes::LANES`] pieces
+    /// at a time in single precision (see `spheres::lanes` in the source): `spans` := the
+    /// pieces none of them proved free, for the double-precision checks (each level cuts the
+    /// previous one's pieces left, see [`LANES_LEVELS`]). Returns the number of batches (each
+    /// counted as one check: it costs about one) and whether one found a contact (then `spans`
+    /// is empty).
     #[allow(clippy::too_many_arguments)]
-    fn first_level_in_lanes(
+    fn batched_levels(
         &self,
         fast: &SphereGeom,
         solids32: &Solids32,
         qa: &[f64],
         delta: &[f64],
         (travel, steps, (most_link, most_pair), first): (&[f64], &[f64], (f64, f64), usize),
+        levels: u32,
         spans: &mut Vec<Span>,
         (margins, step, dir): (&mut Vec<f64>, &mut Vec<f64>, &mut Vec<f64>),
         s: &mut CollisionScratch,
     ) -> (u32, bool) {
-        let g = &*self.geom;
-        let (dof, slots) = (g.dof, g.links.len());
+        let dof = self.geom.dof;
         // Finer pieces than the double-precision first level (`first` pieces): a batch costs
         // about one check.
         let most = most_link.max(most_pair);
@@ -2121,33 +2138,110 @@ impl CollisionModel {
             bit_reversed_pieces(spans, first);
             return (0, false);
         }
+        let mut left = std::mem::take(&mut s.lanes_left);
+        left.clear();
+        let first_ids = (1..=pieces).map(|k| (piece_in_order(k, pieces) as u32, false));
+        let (mut batches, mut hit) = self.pieces_in_lanes(
+            fast,
+            solids32,
+            qa,
+            delta,
+            (travel, steps),
+            pieces,
+            first_ids,
+            &mut left,
+            (&mut *margins, &mut *step, &mut *dir),
+            s,
+        );
+        // The pieces left, cut again and batched once more: each into `cut` parts, as many as
+        // fill the lanes of one batch (at least halves). Their margins shrink in proportion, so
+        // most come out free; a batch costs about what the double-precision check of one piece
+        // and its halves cost.
+        let mut at = pieces;
+        let mut done = 1;
+        while !hit && !left.is_empty() && done < levels {
+            // A power of two: `LANES` (8) over 1, 2, 3 or 4 pieces, or 2.
+            let cut = (lanes::LANES / left.len()).max(2);
+            // The level's pieces move to the spare buffer; `left` takes the next level's.
+            let mut parents = std::mem::take(&mut s.lanes_parents);
+            std::mem::swap(&mut parents, &mut left);
+            left.clear();
+            let next = parents.iter().flat_map(|&(i, pairs)| (0..cut as u32).map(move |j| (i * cut as u32 + j, pairs)));
+            at *= cut;
+            let bufs = (&mut *margins, &mut *step, &mut *dir);
+            let (b, h) = self.pieces_in_lanes(fast, solids32, qa, delta, (travel, steps), at, next, &mut left, bufs, s);
+            batches += b;
+            hit = h;
+            done += 1;
+            parents.clear();
+            s.lanes_parents = parents;
+        }
+        spans.clear();
+        if !hit {
+            let width = 1.0 / at as f64;
+            spans.extend(left.iter().map(|&(i, pairs_free)| Span {
+                t0: i as f64 * width,
+                t1: (i + 1) as f64 * width,
+                within: None,
+                pairs_free,
+            }));
+        }
+        s.lanes_left = left;
+        (batches, hit)
+    }
+
+    /// One level of the certificate's single-precision batches: the pieces `ids` of `qa`-`qb`
+    /// cut into `pieces` equal pieces (a power of two), [`lanes::LANES`] at a time, each lane
+    /// at its piece's midpoint and grown by the piece's margins. Pushes onto `left` each piece
+    /// not proven free, with whether its self pairs are free (given with the piece, or found
+    /// here). Returns the batches run and whether one found a contact (then it stopped).
+    #[allow(clippy::too_many_arguments)]
+    fn pieces_in_lanes(
+        &self,
+        fast: &SphereGeom,
+        solids32: &Solids32,
+        qa: &[f64],
+        delta: &[f64],
+        (travel, steps): (&[f64], &[f64]),
+        pieces: usize,
+        mut ids: impl Iterator<Item = (u32, bool)>,
+        left: &mut Vec<(u32, bool)>,
+        (margins, step, dir): (&mut Vec<f64>, &mut Vec<f64>, &mut Vec<f64>),
+        s: &mut CollisionScratch,
+    ) -> (u32, bool) {
+        let g = &*self.geom;
+        let (dof, slots) = (g.dof, g.links.len());
         // Their margins (as the double-precision loop computes them).
         span_margins(0.5 / pieces as f64, travel, steps, margins, step);
         // Every piece is a straight motion of one length: spheres near with their link's margin
         // are tested again with their own along it.
         span_dir(0.5 / pieces as f64, delta, dir);
         fast.set_lane_motion((step, dir), &mut s.spheres.lanes);
-        let mut left = std::mem::take(&mut s.spans_left);
-        left.clear();
         let mut batches = 0;
-        let mut hit = false;
-        // The pieces in `bit_reversed_pieces`'s order, eight at a time, each lane at its
-        // piece's midpoint; only those the batch leaves become spans.
-        let width = 1.0 / pieces as f64;
-        let mut lane_piece = [0usize; lanes::LANES];
-        let mut from = 1;
-        while from <= pieces {
-            let n = lanes::LANES.min(pieces + 1 - from);
-            for (k, i) in lane_piece.iter_mut().enumerate() {
-                *i = piece_in_order(from + k.min(n - 1), pieces);
+        let mut lane = [(0u32, false); lanes::LANES];
+        loop {
+            let mut n = 0;
+            for slot in lane.iter_mut() {
+                match ids.next() {
+                    Some(id) => {
+                        *slot = id;
+                        n += 1;
+                    }
+                    None => break,
+                }
+            }
+            if n == 0 {
+                return (batches, false);
+            }
+            // Lanes past the last piece repeat it.
+            for k in n..lanes::LANES {
+                lane[k] = lane[n - 1];
             }
             // Piece `i`'s midpoint is `(2i + 1) / 2 pieces` of the way (exact: `(i + 0.5)
             // width` for a power-of-two width, the value `ConfigSpace::step_into` is given),
             // written into the lanes from the segment (rows built first and turned cost
             // about 300 instructions a batch more).
-            let points =
-                SegmentIn { a: qa, delta, n: 2 * pieces as u32, ids: lane_piece.map(|i| 2 * i as u32 + 1), end: None };
-            from += lanes::LANES;
+            let points = SegmentIn { a: qa, delta, n: 2 * pieces as u32, ids: lane.map(|(i, _)| 2 * i + 1), end: None };
             let grow = LaneMargins {
                 link: &margins[..slots],
                 pair: &margins[slots..],
@@ -2159,20 +2253,14 @@ impl CollisionModel {
             let answer = fast.free_lanes(LaneInput::Segment(points), dof, solids32, grow, &mut s.spheres.lanes);
             batches += 1;
             if answer.hit & ((1u32 << n) - 1) != 0 {
-                hit = true;
-                break;
+                return (batches, true);
             }
-            for (k, &i) in lane_piece[..n].iter().enumerate() {
+            for (k, &(i, pairs)) in lane[..n].iter().enumerate() {
                 if answer.free & (1 << k) == 0 {
-                    let pairs_free = answer.pairs_free & (1 << k) != 0;
-                    left.push(Span { t0: i as f64 * width, t1: (i + 1) as f64 * width, within: None, pairs_free });
+                    left.push((i, pairs || answer.pairs_free & (1 << k) != 0));
                 }
             }
         }
-        spans.clear();
-        spans.extend_from_slice(&left);
-        s.spans_left = left;
-        (batches, hit)
     }
 
     /// The robot's shapes posed in the world at `q`, as obstacles for another agent's model.

@@ -640,7 +640,7 @@ fn what_a_listing_query_certifies_around_the_midpoint_is_free() {
     }
 }
 
-/// The pieces a certificate's single-precision batches leave to double precision with their
+/// The pieces a certificate's single-precision batches (all their levels) leave to double precision with their
 /// self pairs found free (whose checks then skip the self pairs) have no self pair near in the
 /// double-precision query of the piece and no self contact anywhere, sampled every 1e-3 rad
 /// (or m); and both kinds of piece occur: on the UR5 (as
@@ -664,9 +664,13 @@ fn pieces_left_with_their_self_pairs_free_have_no_self_contact() {
         let (mut freed, mut kept) = (0, 0);
         let mut q = vec![0.0; robot.dof()];
         let zero = vec![0.0; robot.dof()];
-        for _ in 0..500 {
+        // Until enough pieces of each kind were seen (the batches' levels leave few).
+        for _ in 0..4000 {
+            if freed >= 40 && (which < 2 || kept >= 40) {
+                break;
+            }
             let (qa, qb) = free_ends(robot, &model, &mut rng, 0.05, 1.0);
-            let Some(left) = model.first_level_left(&qa, &qb, &mut s) else { continue };
+            let Some(left) = model.batches_left(&qa, &qb, super::super::super::LANES_LEVELS, &mut s) else { continue };
             for (t0, t1, pairs_free) in left {
                 if !pairs_free {
                     kept += 1;
@@ -698,4 +702,45 @@ fn pieces_left_with_their_self_pairs_free_have_no_self_contact() {
         eprintln!("{}: {freed} pieces left with their self pairs free, {kept} without", robot.name());
         assert!(freed > 10 && (which < 2 || kept > 10), "{}: {freed} with pairs free, {kept} without", robot.name());
     }
+}
+
+/// Every level of batches only narrows what the one before left: on the UR5 in clutter, each
+/// piece [`LANES_LEVELS`](super::super::super::LANES_LEVELS) levels leave lies inside a piece
+/// the first level alone leaves, with the same self-pair verdict or a freer one, and the
+/// further levels prove most of the first level's pieces free.
+#[test]
+fn further_levels_of_batches_only_narrow_what_is_left() {
+    let robot = ur5();
+    let mut env = clutter(80);
+    for o in table_pick().obstacles() {
+        env.add(o.clone());
+    }
+    let model = CollisionModel::new(&robot, env);
+    let mut s = model.scratch();
+    let mut rng = Rng::new(41);
+    let levels = super::super::super::LANES_LEVELS;
+    assert!(levels > 1);
+    let (mut first_len, mut all_len, mut segments) = (0.0, 0.0, 0);
+    for _ in 0..600 {
+        let (qa, qb) = free_ends(&robot, &model, &mut rng, 0.05, 1.0);
+        let (Some(one), Some(all)) =
+            (model.batches_left(&qa, &qb, 1, &mut s), model.batches_left(&qa, &qb, levels, &mut s))
+        else {
+            continue;
+        };
+        segments += 1;
+        for &(t0, t1, pairs) in &all {
+            assert!(t0 < t1, "an empty piece [{t0}, {t1}]");
+            let parent = one.iter().find(|&&(a, b, _)| a <= t0 && t1 <= b);
+            let Some(&(_, _, parent_pairs)) = parent else {
+                panic!("piece [{t0}, {t1}] left by {levels} levels lies in no piece the first leaves: {one:?}");
+            };
+            assert!(pairs || !parent_pairs, "piece [{t0}, {t1}] lost its parent's free self pairs");
+        }
+        first_len += one.iter().map(|p| p.1 - p.0).sum::<f64>();
+        all_len += all.iter().map(|p| p.1 - p.0).sum::<f64>();
+    }
+    eprintln!("{segments} segments: the first level leaves {first_len:.3} of them, {levels} levels {all_len:.3}");
+    assert!(segments > 100 && first_len > 0.0, "{segments} segments, {first_len} left by the first level");
+    assert!(all_len < 0.5 * first_len, "{levels} levels leave {all_len}, one level {first_len}");
 }
