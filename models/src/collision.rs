@@ -2149,7 +2149,7 @@ impl CollisionModel {
             qa,
             delta,
             (travel, steps),
-            pieces,
+            (pieces, levels == 1),
             first_ids,
             &mut left,
             (&mut *margins, &mut *step, &mut *dir),
@@ -2171,7 +2171,18 @@ impl CollisionModel {
             let next = parents.iter().flat_map(|&(i, pairs)| (0..cut as u32).map(move |j| (i * cut as u32 + j, pairs)));
             at *= cut;
             let bufs = (&mut *margins, &mut *step, &mut *dir);
-            let (b, h) = self.pieces_in_lanes(fast, solids32, qa, delta, (travel, steps), at, next, &mut left, bufs, s);
+            let (b, h) = self.pieces_in_lanes(
+                fast,
+                solids32,
+                qa,
+                delta,
+                (travel, steps),
+                (at, done + 1 == levels),
+                next,
+                &mut left,
+                bufs,
+                s,
+            );
             batches += b;
             hit = h;
             done += 1;
@@ -2195,8 +2206,9 @@ impl CollisionModel {
     /// One level of the certificate's single-precision batches: the pieces `ids` of `qa`-`qb`
     /// cut into `pieces` equal pieces (a power of two), [`lanes::LANES`] at a time, each lane
     /// at its piece's midpoint and grown by the piece's margins. Pushes onto `left` each piece
-    /// not proven free, with whether its self pairs are free (given with the piece, or found
-    /// here). Returns the batches run and whether one found a contact (then it stopped).
+    /// not proven free, with whether its self pairs are free (given with the piece, or, on the
+    /// `last` level, found here). Returns the batches run and whether one found a contact
+    /// (then it stopped).
     #[allow(clippy::too_many_arguments)]
     fn pieces_in_lanes(
         &self,
@@ -2205,7 +2217,7 @@ impl CollisionModel {
         qa: &[f64],
         delta: &[f64],
         (travel, steps): (&[f64], &[f64]),
-        pieces: usize,
+        (pieces, last): (usize, bool),
         mut ids: impl Iterator<Item = (u32, bool)>,
         left: &mut Vec<(u32, bool)>,
         (margins, step, dir): (&mut Vec<f64>, &mut Vec<f64>, &mut Vec<f64>),
@@ -2249,7 +2261,10 @@ impl CollisionModel {
                 pair: &margins[slots..],
                 uniform: None,
                 step: Some(step),
-                pairs_of_near: true,
+                // Self pairs free only matter to the double-precision checks, which take the
+                // last level's pieces (earlier levels' go on to the next: public 90 planning
+                // instructions 61.59 M -> 61.42 M, 40 cage problems -0.1%, the same paths).
+                pairs_of_near: last,
                 along: true,
             };
             let answer = fast.free_lanes(LaneInput::Segment(points), dof, solids32, grow, &mut s.spheres.lanes);
