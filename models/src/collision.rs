@@ -739,8 +739,8 @@ pub struct CollisionScratch {
     q: Vec<f64>,
     intervals: Vec<(u32, u32)>,
     spans: Vec<Span>,
-    /// The pieces the single-precision batches leave (index, self pairs free), and those of
-    /// the first level while the second runs.
+    /// The pieces a level of single-precision batches leaves (index at the level's cut, self
+    /// pairs free), and those of the level before while the next runs.
     lanes_left: Vec<(u32, bool)>,
     lanes_parents: Vec<(u32, bool)>,
     steps: Vec<f64>,
@@ -2156,10 +2156,10 @@ impl CollisionModel {
             (&mut *margins, &mut *step, &mut *dir),
             s,
         );
-        // The pieces left, cut again and batched once more: each into `cut` parts, as many as
-        // fill the lanes of one batch (at least halves). Their margins shrink in proportion, so
-        // most come out free; a batch costs about what the double-precision check of one piece
-        // and its halves cost.
+        // Level by level, the pieces left are cut again and batched: each into `cut` parts, as
+        // many as fill the lanes of one batch (at least halves). Their margins shrink in
+        // proportion, so most come out free; a batch costs less time than the double-precision
+        // checks of one piece and its halves.
         let mut at = pieces;
         let mut done = 1;
         while !hit && !left.is_empty() && done < levels {
