@@ -82,7 +82,7 @@ impl crate::Robot {
                     rng.range(-std::f64::consts::PI, std::f64::consts::PI)
                 };
             }
-            if self.actuators().iter().all(|a| a.stroke_excess(q) <= 0.0) {
+            if self.strokes_hold(q) {
                 return;
             }
         }

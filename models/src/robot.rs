@@ -543,6 +543,12 @@ impl Robot {
             && self.actuators.iter().all(|a| a.stroke_excess(q) <= 1e-9)
     }
 
+    /// Whether every actuator's stroke holds at `q` exactly (no tolerance: the test a sampler
+    /// redraws on; true for a robot without actuators).
+    pub fn strokes_hold(&self, q: &[f64]) -> bool {
+        self.actuators.iter().all(|a| a.stroke_excess(q) <= 0.0)
+    }
+
     /// The linear actuators that drive joints through triangles (empty for a robot whose
     /// joints are driven directly).
     pub fn actuators(&self) -> &[ScrewTriangle] {

@@ -166,13 +166,14 @@ impl Draw {
         }
         for k in 0..16 {
             let span = span / f64::from(1u32 << (k / 4));
+            // A local copy of the generator for the loop, as in `next_into`.
             let mut local = rng.clone();
             for (((v, &x), &(lower, width)), &bounded) in q.iter_mut().zip(node).zip(&self.boxes).zip(&self.bounded) {
                 let y = x + (2.0 * local.uniform() - 1.0) * span * width;
                 *v = if bounded { y.clamp(lower, lower + width) } else { y };
             }
             *rng = local;
-            if robot.actuators().iter().all(|a| a.stroke_excess(q) <= 0.0) {
+            if robot.strokes_hold(q) {
                 return;
             }
         }
@@ -319,7 +320,7 @@ mod tests {
                     }
                 }
                 // A node the planner holds is a valid configuration: its strokes hold.
-                if robot.actuators().iter().any(|a| a.stroke_excess(&node) > 0.0) {
+                if !robot.strokes_hold(&node) {
                     continue;
                 }
                 let (mut below, mut above) = (vec![false; n], vec![false; n]);
@@ -339,7 +340,7 @@ mod tests {
                         below[i] |= off < 0.0;
                         above[i] |= off > 0.0;
                     }
-                    assert!(robot.actuators().iter().all(|a| a.stroke_excess(&q) <= 0.0), "{}: a stroke", robot.name());
+                    assert!(robot.strokes_hold(&q), "{}: a stroke", robot.name());
                 }
                 for i in 0..n {
                     let at_lower = draw.bounded[i] && node[i] <= draw.boxes[i].0;
