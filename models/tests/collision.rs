@@ -215,15 +215,23 @@ proptest! {
             prop_assert!((fast.distance - d).abs() < 1e-9, "{} vs {}: {} against exact {d}", a.kind(), b.kind(), fast.distance);
         }
         let tol = if reference.distance < 0.0 { 1e-4 + 1e-2 * reference.distance.abs() } else if exact.is_some() { 1e-4 } else { 1e-5 };
-        if reference.distance < -1e-4 && matches!((&a, &b), (Shape::Capsule { .. } | Shape::Sphere { .. }, Shape::Capsule { .. } | Shape::Sphere { .. })) {
-            // Between spheres and capsules the closed form is exact: at least as deep as EPA's.
+        let round = |s: &Shape| matches!(s, Shape::Capsule { .. } | Shape::Sphere { .. });
+        let boxed = |s: &Shape| matches!(s, Shape::Cuboid { .. });
+        // Between spheres and capsules, and a sphere or capsule against a box, the depth is in
+        // closed form, exact: at least as deep as EPA's, which is no reference for it (EPA
+        // came out 20% short on two capsules 0.53 m deep and at a quarter of the depth on a
+        // thin capsule across a thin box, seen).
+        let closed_depth = round(&a) && (round(&b) || boxed(&b)) || boxed(&a) && round(&b);
+        if reference.distance < -1e-4 && closed_depth {
             prop_assert!(fast.distance <= reference.distance + 1e-6, "analytic {} shallower than parry {}", fast.distance, reference.distance);
         }
         if reference.distance > 0.0 {
             prop_assert!(fast.distance <= reference.distance + 1e-9, "analytic {} > parry {}", fast.distance, reference.distance);
         }
-        prop_assert!((fast.distance - reference.distance).abs() < tol,
-            "{} vs {}: analytic {} parry {}", a.kind(), b.kind(), fast.distance, reference.distance);
+        if !(reference.distance < -1e-4 && closed_depth) {
+            prop_assert!((fast.distance - reference.distance).abs() < tol,
+                "{} vs {}: analytic {} parry {}", a.kind(), b.kind(), fast.distance, reference.distance);
+        }
         if fast.distance > 1e-6 {
             // witness points: on the right shapes and as far apart as the distance says
             prop_assert!(((fast.point_b - fast.point_a).norm() - fast.distance).abs() < 1e-9);
@@ -690,4 +698,22 @@ fn a_moved_obstacle_is_found_through_the_grid() {
     assert!(model.collides(&home), "the ball at the flange is not found");
     assert!(model.set_obstacle_pose("o1", at(9.0, 9.0, 9.0)));
     assert!(!model.collides(&home), "the ball moved away is still found");
+}
+
+/// A capsule whose core crosses a box is as deep as the core's shortest way out plus its
+/// radius: straight through a slab, sideways out (1 m); lying flat inside it, out through the
+/// nearer face (0.08 m); both orders of the pair.
+#[test]
+fn a_capsule_through_a_box_is_as_deep_as_its_shortest_way_out() {
+    let slab = Shape::cuboid(1.0, 1.0, 0.1);
+    let at = Isometry3::translation(0.3, -0.2, 0.5);
+    for (a, b, depth) in [([0.0, 0.0, -1.0], [0.0, 0.0, 1.0], 1.0), ([-0.5, 0.0, 0.02], [0.5, 0.0, 0.02], 0.08)] {
+        let capsule = Shape::Capsule { a: Point3::from(a), b: Point3::from(b), radius: 0.01 };
+        let forward = shape_separation(&capsule, &at, &slab, &at);
+        let back = shape_separation(&slab, &at, &capsule, &at);
+        for s in [forward, back] {
+            assert!((s.distance + depth + 0.01).abs() < 1e-12, "{} against {depth}", s.distance);
+            assert!(((s.point_b - s.point_a).norm() - (depth + 0.01)).abs() < 1e-12);
+        }
+    }
 }
