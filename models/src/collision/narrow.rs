@@ -478,7 +478,8 @@ fn rounded_segment(p: &Point3<f64>, q: &Point3<f64>, r: f64, other: &View) -> Se
 /// Minkowski difference: a box axis or the segment crossed with one (the separating-axis test),
 /// and its length is the smallest overlap of their projections on those axes. (Parry's contact
 /// query between the segment and the box, an EPA estimate on a flat Minkowski difference, put
-/// a thin capsule across a thin box 0.019 m deep where this finds 0.076, seen.)
+/// a thin capsule's core across a thin box 0.019 m deep where the whole capsule's EPA, itself
+/// an underestimate, found 0.076 m, seen.)
 fn segment_in_box(p: &Point3<f64>, d: &Vector3<f64>, r: f64, iso: &Isometry3<f64>, half: &Vector3<f64>) -> Separation {
     let q = p + d;
     // (depth, push direction, deepest end); the box's own axes always give one.
