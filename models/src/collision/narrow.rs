@@ -427,7 +427,8 @@ pub(crate) fn separation(a: &View, b: &View) -> Separation {
 /// such as parry's capsule, whose witness points can sit 1e-5 m inside the capsule (seen against
 /// a box). The distance between a Minkowski sum and a convex shape is the distance from its
 /// core less the radius, overlaps included, as long as the core stays outside the shape; when
-/// the segment itself enters the other shape, parry's contact depth for the segment, less `r`.
+/// the segment itself enters the other shape, its depth in a box in closed form
+/// ([`segment_in_box`]), elsewhere parry's contact depth for the segment, less `r`.
 fn rounded_segment(p: &Point3<f64>, q: &Point3<f64>, r: f64, other: &View) -> Separation {
     if let View::Cylinder { iso, r: rc, hh } = *other
         && let Some(s) = segment_cylinder(p, q, r, iso, rc, hh)
