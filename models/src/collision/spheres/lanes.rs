@@ -557,7 +557,6 @@ pub(crate) struct LaneScratch {
     /// `posed`).
     omega: Vec<[F8; 3]>,
     nu: Vec<[F8; 3]>,
-    twisted: u32,
     /// Per sphere, its threshold with its margin along the motion, in the batch `along_at`.
     along: Vec<F8>,
     along_at: Vec<u32>,
@@ -596,7 +595,6 @@ impl LaneScratch {
             },
             omega: Vec::new(),
             nu: Vec::new(),
-            twisted: 0,
             along: Vec::new(),
             along_at: Vec::new(),
             isa: Isa::Best,
@@ -623,12 +621,67 @@ impl LaneScratch {
         self.link_posed.resize(links, 0);
         self.omega.resize(bodies, [F8::ZERO; 3]);
         self.nu.resize(bodies, [F8::ZERO; 3]);
-        self.twisted = 0;
         self.along.resize(centres, F8::ZERO);
         self.along_at.clear();
         self.along_at.resize(centres, 0);
         self.batch = 1;
         self.shape = shape;
+    }
+}
+
+/// A batch's view of its working memory ([`LaneScratch`]): each buffer as a slice of its own,
+/// taken once per batch. Reached through `&mut LaneScratch`, every buffer's pointer and length
+/// were loaded again after stores into another buffer, in every loop of the kernel.
+struct Work<'a> {
+    batch: u32,
+    rot: &'a mut [[F8; 9]],
+    pos: &'a mut [[F8; 3]],
+    sin: &'a mut [F8],
+    cos: &'a mut [F8],
+    cols: &'a [[f64; LANES]],
+    group_c: &'a mut [[F8; 3]],
+    link_c: &'a mut [[F8; 3]],
+    link_posed: &'a mut [u32],
+    centre: &'a mut [[F8; 3]],
+    posed: &'a mut [u32],
+    reach: &'a mut [u32],
+    link_g: &'a [f32],
+    grown: &'a Grown,
+    motion: &'a mut LaneMotion,
+    omega: &'a mut [[F8; 3]],
+    nu: &'a mut [[F8; 3]],
+    /// The batch whose twists `omega` and `nu` hold (none yet: batches count from 1).
+    twisted: u32,
+    along: &'a mut [F8],
+    along_at: &'a mut [u32],
+}
+
+impl LaneScratch {
+    /// The buffers of the batch now numbered, as [`Work`].
+    #[inline(always)]
+    fn work(&mut self) -> Work<'_> {
+        Work {
+            batch: self.batch,
+            rot: &mut self.rot,
+            pos: &mut self.pos,
+            sin: &mut self.sin,
+            cos: &mut self.cos,
+            cols: &self.cols,
+            group_c: &mut self.group_c,
+            link_c: &mut self.link_c,
+            link_posed: &mut self.link_posed,
+            centre: &mut self.centre,
+            posed: &mut self.posed,
+            reach: &mut self.reach,
+            link_g: &self.link_g,
+            grown: &self.grown,
+            motion: &mut self.motion,
+            omega: &mut self.omega,
+            nu: &mut self.nu,
+            twisted: 0,
+            along: &mut self.along,
+            along_at: &mut self.along_at,
+        }
     }
 }
 
@@ -1097,7 +1150,7 @@ impl SphereGeom {
 
     /// Every body's twist in every lane (see [`LaneMotion`]), from the frames posed.
     #[inline(always)]
-    fn pose_twists<O: Ops>(&self, o: O, s: &mut LaneScratch) {
+    fn pose_twists<O: Ops>(&self, o: O, s: &mut Work<'_>) {
         s.omega[0] = [F8::ZERO; 3];
         s.nu[0] = [F8::ZERO; 3];
         for (k, b) in self.lanes.bodies.iter().enumerate() {
@@ -1129,7 +1182,7 @@ impl SphereGeom {
     /// Sphere `k`'s (of link `l`, posed) threshold against an obstacle with its own margin
     /// along the motion, once per batch (see [`LaneMotion`]).
     #[inline(always)]
-    fn along_thr<O: Ops>(&self, o: O, l: usize, k: usize, grow: f64, s: &mut LaneScratch) -> F<O> {
+    fn along_thr<O: Ops>(&self, o: O, l: usize, k: usize, grow: f64, s: &mut Work<'_>) -> F<O> {
         if s.along_at[k] != s.batch {
             if s.twisted != s.batch {
                 self.pose_twists(o, s);
@@ -1143,7 +1196,7 @@ impl SphereGeom {
                 n[2] + (w[0] * p[1] - w[1] * p[0]),
             ];
             let norm = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
-            let add = self.along_add(k, grow, &mut s.motion);
+            let add = self.along_add(k, grow, s.motion);
             let m = norm * splat(o, ALONG_K) + splat(o, add);
             let x = (splat(o, self.lanes.radius_up[k]) + m) * splat(o, WIDEN);
             s.along[k] = (x * x).store();
@@ -1260,9 +1313,8 @@ impl SphereGeom {
         }
         // Certainly in contact: at most this (rounded down), see the module documentation.
         let contact = |r: f64| contact_thr(r, grow);
-        if !self.pose_lanes(o, qs, dof, s) {
-            return none;
-        }
+        let Some(mut w) = self.pose_lanes(o, qs, dof, s) else { return none };
+        let s = &mut w;
         let mut live: u32 = (1 << LANES) - 1;
         // Against obstacles: group, link, sphere; the groups farthest down the chain first
         // (they meet obstacles most often, so a contact ends the batch sooner). The order may
@@ -1354,9 +1406,9 @@ impl SphereGeom {
             // The lanes whose cells the table does not prove free, then whose spheres come near.
             if let (Some(Some(table)), Some(step)) = (self.tables.get(k), step) {
                 near &= !if point_cells {
-                    table.proves_lanes(&s.cols, near)
+                    table.proves_lanes(s.cols, near)
                 } else {
-                    table.proves_box_lanes(&s.cols, step, near)
+                    table.proves_box_lanes(s.cols, step, near)
                 };
                 if near == 0 {
                     continue;
@@ -1468,10 +1520,10 @@ impl SphereGeom {
         Lanes8 { free: live, hit: 0, pairs_free: if pairs_of_near { all & !pairs_near } else { 0 } }
     }
 
-    /// Bodies of the configurations `qs`; `false` when a joint value is not finite or a
-    /// prismatic travel exceeds [`PRISMATIC_BOUND`].
+    /// Bodies of the configurations `qs`, in the batch's working memory; `None` when a joint
+    /// value is not finite or a prismatic travel exceeds [`PRISMATIC_BOUND`].
     #[inline(always)]
-    fn pose_lanes<O: Ops, S: Source>(&self, o: O, qs: S, dof: usize, s: &mut LaneScratch) -> bool {
+    fn pose_lanes<'s, O: Ops, S: Source>(&self, o: O, qs: S, dof: usize, s: &'s mut LaneScratch) -> Option<Work<'s>> {
         let lanes = &self.lanes;
         let n = self.bodies.len();
         // Sized once per model shape: seven `resize` calls a batch cost about 300 instructions.
@@ -1480,13 +1532,15 @@ impl SphereGeom {
         if s.shape != shape || s.batch == 0 {
             s.fit(shape);
         }
-        s.rot[0] = lanes.base_r.map(|v| F8([v; LANES]));
-        s.pos[0] = lanes.base_t.map(|v| F8([v; LANES]));
         // Each joint's values in the lanes, one row per joint.
         let ready = qs.columns(dof, &mut s.cols);
         if !ready {
-            return false;
+            return None;
         }
+        let mut w = s.work();
+        let s = &mut w;
+        s.rot[0] = lanes.base_r.map(|v| F8([v; LANES]));
+        s.pos[0] = lanes.base_t.map(|v| F8([v; LANES]));
         // First every joint's sine and cosine (a prismatic joint's travel in `sin`): they depend
         // neither on one another nor on the frames, so their long chains of dependent operations
         // can overlap; the frames below only read them. (Computed body by body between the
@@ -1499,7 +1553,7 @@ impl SphereGeom {
             // `fold` with `&`, not `all`: no branch per lane.
             let finite = v.iter().fold(true, |f, v| f & (v.abs() < SIN_COS_RANGE));
             if !finite || (b.prismatic && v.iter().any(|x| x.abs() > PRISMATIC_BOUND)) {
-                return false;
+                return None;
             }
             if b.prismatic {
                 s.sin[k] = F8(v.map(|x| x as f32));
@@ -1611,12 +1665,12 @@ impl SphereGeom {
             store(&out_p, &mut s.pos[k + 1]);
             last = Some((k + 1, out_r, out_p));
         }
-        true
+        Some(w)
     }
 
     /// World centre of link `l`'s bounding sphere per lane, once per batch.
     #[inline(always)]
-    fn lane_link_centre<O: Ops>(&self, o: O, l: usize, s: &mut LaneScratch) -> P<O> {
+    fn lane_link_centre<O: Ops>(&self, o: O, l: usize, s: &mut Work<'_>) -> P<O> {
         if s.link_posed[l] != s.batch {
             s.link_posed[l] = s.batch;
             let b = self.links[l].body;
@@ -1639,7 +1693,7 @@ impl SphereGeom {
         mask: u32,
         pg: f32,
         grow: f64,
-        s: &LaneScratch,
+        s: &Work<'_>,
     ) -> Result<u32, u32> {
         let lanes = &self.lanes;
         let lb = &self.links[b];
@@ -1660,7 +1714,7 @@ impl SphereGeom {
 
     /// World centres of link `l`'s spheres per lane, once per batch.
     #[inline(always)]
-    fn pose_lane_link<O: Ops>(&self, o: O, l: usize, s: &mut LaneScratch) {
+    fn pose_lane_link<O: Ops>(&self, o: O, l: usize, s: &mut Work<'_>) {
         if s.posed[l] == s.batch {
             return;
         }
@@ -1895,9 +1949,9 @@ mod tests {
                 s.posed.fill(0);
                 s.link_posed.fill(0);
             }
-            assert!(geom.pose_lanes(Base, RowsIn(&qs), dof, &mut s));
+            let mut w = geom.pose_lanes(Base, RowsIn(&qs), dof, &mut s).expect("posed");
             for l in 0..geom.links.len() {
-                geom.pose_lane_link(Base, l, &mut s);
+                geom.pose_lane_link(Base, l, &mut w);
             }
             for (i, q) in qs.chunks(dof).enumerate() {
                 geom.pose(q, &mut f);
@@ -1905,7 +1959,7 @@ mod tests {
                     let b = geom.links.iter().find(|l| (l.first..l.end).contains(&k)).expect("a link").body;
                     let exact = f.rot[b] * c + f.pos[b];
                     for d in 0..3 {
-                        let e = (f64::from(s.centre[k][d].0[i]) - exact[d]).abs();
+                        let e = (f64::from(w.centre[k][d].0[i]) - exact[d]).abs();
                         assert!(e <= bound, "sphere {k}, coordinate {d}, lane {i}: off by {e:e} (bound {bound:e})");
                         worst = worst.max(e);
                     }
@@ -2140,11 +2194,11 @@ mod tests {
             let grow = geom.allowance(&obstacles, 0.05, 0.1).expect("finite");
             assert_eq!(s.motion.ready, Some(geom.lanes.id), "trial {trial}: terms held");
             let qs: Vec<f64> = (0..LANES).flat_map(|_| robot.random_configuration(&mut rng)).collect();
-            assert!(geom.pose_lanes(Base, RowsIn(&qs), dof, &mut s));
+            let mut w = geom.pose_lanes(Base, RowsIn(&qs), dof, &mut s).expect("posed");
             for (l, link) in geom.links.iter().enumerate() {
-                geom.pose_lane_link(Base, l, &mut s);
+                geom.pose_lane_link(Base, l, &mut w);
                 for k in link.first..link.end {
-                    let t = geom.along_thr(Base, l, k, grow, &mut s).store().0;
+                    let t = geom.along_thr(Base, l, k, grow, &mut w).store().0;
                     for (i, q) in qs.chunks(dof).enumerate() {
                         // The margin the threshold stands for, without the distance test's
                         // allowance (the threshold is rounded up: a hair more).
