@@ -323,7 +323,7 @@ enum BenchCommand {
         #[arg(long)]
         shortcut_min_gain: Option<f64>,
         /// Planners racing per problem (1: one planner; 2: two differently seeded planners, the
-        /// second joining on the rayon pool after 1 ms; the first path wins and stops the other).
+        /// second on a thread of its own; the first path wins and stops the other).
         #[arg(long, default_value_t = 1)]
         threads: usize,
         /// RRT-Connect's largest step (rad).

@@ -191,6 +191,8 @@ pub(crate) struct Budget<'d> {
     /// Called once, at the first clock read at least this long after the start (a race of
     /// planners hands its other racers to the thread pool then: see [`Self::with_hand_over`]).
     hand_over: Option<(&'d dyn Fn(), Duration)>,
+    /// The hand-over waits (see [`Self::hold_hand_over`]).
+    hand_over_held: bool,
     /// The deadline's expansion and check budgets (`u64::MAX`: none).
     max_work: u64,
     max_checks: u64,
@@ -210,6 +212,7 @@ impl<'d> Budget<'d> {
             started: Instant::now(),
             stopped: None,
             hand_over: None,
+            hand_over_held: false,
             max_work: deadline.max_expansions.unwrap_or(u64::MAX),
             max_checks: deadline.max_checks.unwrap_or(u64::MAX),
         }
@@ -220,6 +223,13 @@ impl<'d> Budget<'d> {
     pub fn with_hand_over(mut self, f: &'d dyn Fn(), after: Duration) -> Self {
         self.hand_over = Some((f, after));
         self
+    }
+
+    /// Hold the hand-over (`true`) while this racer certifies or shortens a path it found, or
+    /// let it happen again (`false`, at the first clock read past its time): another racer would
+    /// start its search from nothing, and handing it over costs this one the waking of a thread.
+    pub fn hold_hand_over(&mut self, hold: bool) {
+        self.hand_over_held = hold;
     }
 
     /// Count `units` of work, `checks` being the collision checks made so far; true when
@@ -249,6 +259,7 @@ impl<'d> Budget<'d> {
             self.checks_at_clock = self.checks;
         }
         if read_clock
+            && !self.hand_over_held
             && let Some((f, after)) = self.hand_over
             && self.started.elapsed() >= after
         {
@@ -357,5 +368,17 @@ mod tests {
             assert!(!budget.spend(1, 0));
         }
         assert_eq!(calls.get(), 1, "not before its time");
+        // Held, it waits past its time; let go, it happens at the next clock read.
+        let mut budget = Budget::new(&deadline).with_hand_over(&count, Duration::ZERO);
+        budget.hold_hand_over(true);
+        for _ in 0..100 {
+            assert!(!budget.spend(1, 0));
+        }
+        assert_eq!(calls.get(), 1, "held");
+        budget.hold_hand_over(false);
+        for _ in 0..8 {
+            assert!(!budget.spend(1, 0));
+        }
+        assert_eq!(calls.get(), 2, "let go");
     }
 }

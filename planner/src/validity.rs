@@ -116,10 +116,22 @@ pub trait StateValidity: Sync {
         let _ = q;
         None
     }
+
+    /// This validity when it is a plain [`CollisionModel`] (`None` by default, and for any
+    /// validity that adds to one): a race of planners then hands its other racers a clone of
+    /// the model they own, and returns without waiting for them (see
+    /// [`crate::motion::MotionSettings::racers`]).
+    fn collision_model(&self) -> Option<&CollisionModel> {
+        None
+    }
 }
 
 impl StateValidity for CollisionModel {
     type Scratch = CollisionScratch;
+
+    fn collision_model(&self) -> Option<&CollisionModel> {
+        Some(self)
+    }
 
     fn robot(&self) -> &Robot {
         CollisionModel::robot(self)

@@ -10,7 +10,7 @@ use embodied_planner::PlanError;
 use embodied_planner::deadline::{Deadline, Interrupt};
 use embodied_planner::motion::{
     CERTIFY_TOLERANCE, Goal, LazyPrm, MotionSettings, Outcome, PlannerKind, RrtConnect, Sampler, StateValidity,
-    plan_motion, plan_with_kind,
+    plan_motion, plan_motion_with, plan_with_kind,
 };
 use embodied_planner::roadmap::Roadmap;
 use embodied_planner::trajectory::time_parameterize;
@@ -343,6 +343,35 @@ fn a_stuck_rrt_connect_starts_again() {
     let none = MotionSettings { max_samples: 1, rrt_restarts: 3, ..base };
     let err = plan_motion(&model, &start, &goal, &none).expect_err("one sample an attempt");
     assert!(matches!(err, PlanError::NoPath { samples: 4 }), "{err:?}");
+}
+
+/// A race whose racer 0 finds no path waits for the others: with a sample budget that one seed
+/// cannot meet and the next can, the race of two answers with the second racer's path (that
+/// seed's own plan). A validity wrapping a model races within the call, with the same answers;
+/// a plain model hands its racers a clone they own.
+#[test]
+fn a_race_answers_with_another_racer_when_the_first_finds_no_path() {
+    let (model, start, goal_q) = irp6_around_box();
+    let goal = Goal::Configuration(goal_q.clone());
+    let wrapped = OneByOne(model.clone());
+    assert!(model.collision_model().is_some() && wrapped.collision_model().is_none());
+    let base = MotionSettings { rrt_restarts: 0, max_samples: 12, ..settings(PlannerKind::RrtConnect) };
+    let alone = |seed: u64| plan_motion(&model, &start, &goal, &MotionSettings { seed, ..base.clone() });
+    let seed = (0..200u64)
+        .find(|&s| alone(s).is_err() && alone(s + 1).is_ok())
+        .expect("a seed that fails its budget followed by one that meets it");
+    let second = alone(seed + 1).expect("meets the budget");
+    let race = MotionSettings { seed, racers: 2, ..base.clone() };
+    let plan = plan_motion(&model, &start, &goal, &race).expect("the second racer's path");
+    assert_eq!(plan.path, second.path, "seed {seed}");
+    assert_plan_ok(&model, &start, &goal_q, &plan.path);
+    let scoped = plan_motion_with(&wrapped, &start, &goal, &race).expect("the second racer's path");
+    assert_eq!(scoped.path, second.path, "seed {seed}, within the call");
+    // Every racer out of samples: racer 0's error.
+    let none = MotionSettings { max_samples: 1, racers: 3, ..base };
+    for err in [plan_motion(&model, &start, &goal, &none), plan_motion_with(&wrapped, &start, &goal, &none)] {
+        assert!(matches!(err, Err(PlanError::NoPath { samples: 1 })), "{err:?}");
+    }
 }
 
 #[test]

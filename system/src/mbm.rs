@@ -77,7 +77,7 @@ pub struct MbmArgs {
     /// sampling width (the planner's default: 1/π, 2 rad for a joint of one turn).
     pub rrt_local_span: f64,
     /// Planners racing per problem (1: one planner on one thread; 2: two differently seeded
-    /// planners, the second joining on the rayon pool after 1 ms; first path wins).
+    /// planners, the second on a thread of its own; first path wins).
     pub threads: usize,
     /// Only these families (all when `None`).
     pub families: Option<Vec<String>>,

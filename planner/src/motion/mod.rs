@@ -7,11 +7,16 @@
 //! segment checks use the robot's [`embodied_models::ConfigSpace`], so continuous joints take
 //! the short way round (Polycrank going from 3.0 to -3.0 rad moves 0.28 rad, across +-pi).
 
+mod racers;
 pub(crate) mod rrt_connect;
 pub mod sampler;
 pub(crate) mod shortcut;
 
 pub use sampler::Sampler;
+
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Duration;
 
 use embodied_models::collision::CollisionModel;
 use embodied_models::{IkOptions, Rng, Robot};
@@ -254,9 +259,14 @@ pub struct MotionSettings {
     /// a share of each joint's sampling width (1/π: 2 rad for a joint of one turn).
     pub rrt_local_span: f64,
     /// Planners racing (1: no race): racer `k` plans with the seed `seed + k`; racer 0 (the
-    /// single planner) on the calling thread at once, the others on the rayon pool after a head
-    /// start of 1 ms. The first path found stops the others through their deadline's race
-    /// flag. Every racer's path is certified as a lone planner's is.
+    /// single planner) on the calling thread, the others handed to threads of their own once
+    /// the straight segment is found blocked (not while racer 0 certifies a path it found). The
+    /// first path found stops the others through their deadline's race flag; racer 0's path is
+    /// returned without waiting for the others. Every racer's path is certified as a lone
+    /// planner's is. The racer threads look for work for 50 ms after their last racer before
+    /// they sleep (yielding their core meanwhile), so that handing a racer over needs no
+    /// system call. A validity other than a plain [`CollisionModel`] races within the call, on
+    /// the rayon pool, after a head start of 1 ms.
     pub racers: usize,
     /// Samples after which the planner gives up with [`PlanError::NoPath`] (RRT-Connect: per
     /// attempt, see [`Self::rrt_restarts`]): planning ends even without a deadline.
@@ -325,18 +335,31 @@ pub fn plan_motion_with<V: StateValidity>(
     settings: &MotionSettings,
 ) -> Result<MotionPlan, PlanError> {
     if settings.racers > 1 {
-        return race(model, start, goal, settings);
+        return match model.collision_model() {
+            Some(model) => race_detached(model, start, goal, settings),
+            None => race(model, start, goal, settings),
+        };
     }
     plan_alone(model, start, goal, settings, Stages::All, None)
 }
 
-/// How long racer 0 of [`MotionSettings::racers`] plans alone before the others are handed to
-/// the thread pool. Most MotionBenchMaker UR5 searches end within it, so they pay nothing for
-/// the race; the tail is where a second seed pays. On the 400 generated narrow-passage
-/// problems (four interleaved runs on the 2-core machine), a head start of 1 ms gave p50
-/// 426-464 µs (one core: 426-624), 300 µs gave 496-719 µs; p95 3.8-4.8 ms either way (one
-/// core: 7.8-11.4 ms).
-const RACE_HEAD_START: std::time::Duration = std::time::Duration::from_micros(1000);
+/// How long racer 0 of a race within the call ([`race`]) plans alone before the others are
+/// handed to the thread pool. Most MotionBenchMaker UR5 searches end within it, so they pay
+/// nothing for the race; the tail is where a second seed pays. On the 400 generated
+/// narrow-passage problems (four interleaved runs on the 2-core machine), a head start of 1 ms
+/// gave p50 426-464 µs (one core: 426-624), 300 µs gave 496-719 µs; p95 3.8-4.8 ms either way
+/// (one core: 7.8-11.4 ms).
+const RACE_HEAD_START: Duration = Duration::from_micros(1000);
+
+/// [`RACE_HEAD_START`] of a race whose racers own what they plan with ([`race_detached`]): none.
+/// Handing a racer over costs racer 0 a clone of the model and a push onto a racer thread's
+/// queue (2.5 µs median, 8 µs at most over the 289 hand-overs of the three generated families
+/// bookshelf_tall, bookshelf_thin and table_under_pick), and racer 0 never waits for it. Two
+/// cores, five interleaved runs against a head start of 1 ms within the call (medians of the
+/// runs): the 100 generated cage problems within 1 ms 80% -> 90%, p50 585 -> 426 µs, p95 2.48 ->
+/// 1.42 ms; the three families above p95 450 -> 364 µs; the 296 public problems p50 119 -> 123
+/// µs, p95 260 -> 260 µs. A head start of 50 µs: cage 86%, public p50 105 µs.
+const DETACHED_HEAD_START: Duration = Duration::ZERO;
 
 /// Which stages of [`plan_alone`] run.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -349,6 +372,116 @@ enum Stages {
     Search,
 }
 
+/// The settings of racer `k` of a race whose flag is `flag` (see [`MotionSettings::racers`]).
+fn racer_settings(settings: &MotionSettings, k: usize, flag: &Arc<AtomicBool>) -> MotionSettings {
+    MotionSettings {
+        seed: settings.seed.wrapping_add(k as u64),
+        deadline: settings.deadline.clone().with_race_flag(Arc::clone(flag)),
+        racers: 1,
+        ..settings.clone()
+    }
+}
+
+/// The answer of a race from its racers' results: the shortest path, or else the first error
+/// (racer 0's when it is first).
+fn race_answer(results: Vec<Result<MotionPlan, PlanError>>) -> Result<MotionPlan, PlanError> {
+    let mut best: Option<MotionPlan> = None;
+    let mut first_error = None;
+    for result in results {
+        match result {
+            Ok(plan) => {
+                if best.as_ref().is_none_or(|b| plan.stats.path_length < b.stats.path_length) {
+                    best = Some(plan);
+                }
+            }
+            Err(e) => {
+                first_error.get_or_insert(e);
+            }
+        }
+    }
+    match (best, first_error) {
+        (Some(plan), _) => Ok(plan),
+        (None, Some(e)) => Err(e),
+        (None, None) => Err(PlanError::NoPath { samples: 0 }),
+    }
+}
+
+/// What a racer on the pool sends back: its result, or the panic it stopped with (raised again
+/// on the caller's thread when it is read).
+type RacerOutcome = std::thread::Result<Result<MotionPlan, PlanError>>;
+
+/// [`race`] for a [`CollisionModel`], whose racers on the racer threads (`racers`) own what
+/// they plan with (a clone of the model, shared among them, and of the start and goal), so
+/// that the caller never waits for them: racer 0's path is returned at once, and racers still
+/// running stop at their next reading of the race flag. They are handed over at once
+/// ([`DETACHED_HEAD_START`]), and not while racer 0 certifies or shortens a path it found.
+/// (Within a scope on the rayon pool, a path of racer 0 waited for every racer it had handed
+/// over to start, see the flag and return, and for this thread to be woken: with a head start
+/// of 150 µs, public MotionBenchMaker p95 339-416 µs against 206-285 µs at 1 ms.)
+fn race_detached(
+    model: &CollisionModel,
+    start: &[f64],
+    goal: &Goal,
+    settings: &MotionSettings,
+) -> Result<MotionPlan, PlanError> {
+    let Some(racers) = racers::Racers::get() else { return race(model, start, goal, settings) };
+    match plan_alone(model, start, goal, settings, Stages::Direct, None) {
+        Err(PlanError::NoPath { .. }) => {}
+        done => return done,
+    }
+    let flag = Arc::new(AtomicBool::new(false));
+    let (sender, receiver) = std::sync::mpsc::channel::<RacerOutcome>();
+    let handed = std::cell::Cell::new(false);
+    let hand_over = || {
+        if handed.replace(true) {
+            return;
+        }
+        let shared = Arc::new((model.clone(), start.to_vec(), goal.clone()));
+        for k in 1..settings.racers {
+            let racer = racer_settings(settings, k, &flag);
+            let (shared, flag, sender) = (Arc::clone(&shared), Arc::clone(&flag), sender.clone());
+            racers.spawn(move || {
+                if flag.load(Ordering::Relaxed) {
+                    return;
+                }
+                let (model, start, goal) = &*shared;
+                let outcome = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+                    plan_alone(model, start, goal, &racer, Stages::Search, None)
+                }));
+                if matches!(outcome, Ok(Ok(_))) {
+                    flag.store(true, Ordering::Relaxed);
+                }
+                // The caller may have gone with racer 0's path: nobody to tell.
+                let _ = sender.send(outcome);
+            });
+        }
+    };
+    let racer = racer_settings(settings, 0, &flag);
+    let first = plan_alone(model, start, goal, &racer, Stages::Search, Some((&hand_over, DETACHED_HEAD_START)));
+    let mut results = Vec::with_capacity(settings.racers);
+    if first.is_ok() {
+        flag.store(true, Ordering::Relaxed);
+        // Paths the others found already compete with racer 0's; none is waited for.
+        results.extend(receiver.try_iter().filter_map(Result::ok));
+        results.insert(0, first);
+        return race_answer(results);
+    }
+    // An error of racer 0 is not the race's answer while another may still find a path: they
+    // are handed over now if they were not yet, and waited for until one finds a path.
+    hand_over();
+    drop(sender);
+    results.push(first);
+    for outcome in receiver.iter().take(settings.racers - 1) {
+        let result = outcome.unwrap_or_else(|panic| std::panic::resume_unwind(panic));
+        let found = result.is_ok();
+        results.push(result);
+        if found {
+            break;
+        }
+    }
+    race_answer(results)
+}
+
 /// [`MotionSettings::racers`] planners on the rayon pool, racer `k` with seed `seed + k`; the
 /// first to find a (certified) path raises the race flag that stops the others. When several
 /// finish, the shortest path wins; when none does, racer 0's error is returned.
@@ -358,22 +491,14 @@ fn race<V: StateValidity>(
     goal: &Goal,
     settings: &MotionSettings,
 ) -> Result<MotionPlan, PlanError> {
-    use std::sync::Arc;
-    use std::sync::atomic::{AtomicBool, Ordering};
-
     // The straight segment first, on this thread: most problems end there and need no race.
     match plan_alone(model, start, goal, settings, Stages::Direct, None) {
         Err(PlanError::NoPath { .. }) => {}
         done => return done,
     }
     let flag = Arc::new(AtomicBool::new(false));
-    let run = |k: usize, hand_over: Option<&dyn Fn()>| {
-        let racer = MotionSettings {
-            seed: settings.seed.wrapping_add(k as u64),
-            deadline: settings.deadline.clone().with_race_flag(Arc::clone(&flag)),
-            racers: 1,
-            ..settings.clone()
-        };
+    let run = |k: usize, hand_over: Option<(&dyn Fn(), Duration)>| {
+        let racer = racer_settings(settings, k, &flag);
         let result = plan_alone(model, start, goal, &racer, Stages::Search, hand_over);
         if result.is_ok() {
             flag.store(true, Ordering::Relaxed);
@@ -414,7 +539,7 @@ fn race<V: StateValidity>(
         // A path of racer 0 raises the flag (in `run`), so racers not yet started never plan;
         // an error of racer 0 is not the race's answer while another may still find a path,
         // so they are handed over then if they were not yet.
-        let first = run(0, Some(&hand_over));
+        let first = run(0, Some((&hand_over, RACE_HEAD_START)));
         if first.is_err() {
             hand_over();
         }
@@ -422,25 +547,7 @@ fn race<V: StateValidity>(
     });
     let mut results = vec![first];
     results.extend(others.into_iter().filter_map(|slot| slot.into_inner().ok().flatten()));
-    let mut best: Option<MotionPlan> = None;
-    let mut first_error = None;
-    for result in results {
-        match result {
-            Ok(plan) => {
-                if best.as_ref().is_none_or(|b| plan.stats.path_length < b.stats.path_length) {
-                    best = Some(plan);
-                }
-            }
-            Err(e) => {
-                first_error.get_or_insert(e);
-            }
-        }
-    }
-    match (best, first_error) {
-        (Some(plan), _) => Ok(plan),
-        (None, Some(e)) => Err(e),
-        (None, None) => Err(PlanError::NoPath { samples: 0 }),
-    }
+    race_answer(results)
 }
 
 fn plan_alone<V: StateValidity>(
@@ -449,7 +556,7 @@ fn plan_alone<V: StateValidity>(
     goal: &Goal,
     settings: &MotionSettings,
     stages: Stages,
-    hand_over: Option<&dyn Fn()>,
+    hand_over: Option<(&dyn Fn(), Duration)>,
 ) -> Result<MotionPlan, PlanError> {
     let robot = model.robot();
     if !(settings.resolution.is_finite() && settings.resolution > 0.0) {
@@ -459,8 +566,8 @@ fn plan_alone<V: StateValidity>(
     }
     check_start(model, start)?;
     let mut budget = Budget::new(&settings.deadline);
-    if let Some(f) = hand_over {
-        budget = budget.with_hand_over(f, RACE_HEAD_START);
+    if let Some((f, after)) = hand_over {
+        budget = budget.with_hand_over(f, after);
     }
     if let EdgeCheck::Certified { tolerance } = settings.edge_check
         && !(tolerance.is_finite() && tolerance > 0.0)

@@ -563,6 +563,9 @@ pub(crate) fn plan<V: StateValidity>(
                                 (false, k) => from_goal.certified[k],
                             })
                             .collect();
+                        // A path to certify: no other racer is handed over meanwhile (held
+                        // again from here on once it is certified, while it is shortened).
+                        budget.hold_hand_over(true);
                         let outcome = certify_path(path, &mut certified, validity, budget, settings.shortcut);
                         for (e, &c) in certified.iter().enumerate() {
                             match edge(e) {
@@ -574,6 +577,7 @@ pub(crate) fn plan<V: StateValidity>(
                             Certified::Path(p) => return Outcome::Solved(p),
                             Certified::OutOfTime => return Outcome::OutOfTime { best: None, cause: budget.cause() },
                             Certified::Blocked(e) => {
+                                budget.hold_hand_over(false);
                                 stats.cut_edges += 1;
                                 match edge(e) {
                                     (true, k) => from_start.cut(k),

@@ -1,0 +1,146 @@
+//! The threads that run the racers a race of planners hands over (see
+//! [`super::MotionSettings::racers`]), kept for the process.
+//!
+//! A thread with nothing to do looks for work for [`LOOK`] before it sleeps, so a racer handed
+//! over meanwhile starts with no system call on the caller's side. Waking a sleeping thread
+//! (rayon's pool, a condition variable) cost the handing racer 35 µs on average on the 2-core
+//! machine of the MotionBenchMaker runs, up to 220 µs, out of its own planning time.
+
+use std::collections::VecDeque;
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::sync::{Condvar, Mutex, MutexGuard, OnceLock, PoisonError};
+use std::time::{Duration, Instant};
+
+/// How long a racer thread with nothing to do looks for work before it sleeps. `bench mbm
+/// --threads 2` builds each problem's model between races: with 2 ms most hand-overs found the
+/// thread asleep (38 µs on average over the three generated families bookshelf_tall,
+/// bookshelf_thin and table_under_pick); with 50 ms, 2.5 µs median, 8 µs at most.
+const LOOK: Duration = Duration::from_millis(50);
+
+type Job = Box<dyn FnOnce() + Send>;
+
+/// One racer thread's queue.
+struct Worker {
+    state: Mutex<State>,
+    wake: Condvar,
+    /// Jobs wait in the queue (read without the lock while looking for work).
+    pending: AtomicBool,
+}
+
+struct State {
+    jobs: VecDeque<Job>,
+    /// The thread sleeps on `wake`: a new job must notify it.
+    asleep: bool,
+}
+
+/// The process's racer threads.
+pub(super) struct Racers {
+    workers: Vec<&'static Worker>,
+    /// The worker of the next job (round robin).
+    next: AtomicUsize,
+}
+
+impl Worker {
+    fn lock(&self) -> MutexGuard<'_, State> {
+        // A job never panics through here (racers catch their panics); a poisoned queue is
+        // still a queue.
+        self.state.lock().unwrap_or_else(PoisonError::into_inner)
+    }
+
+    /// The thread's loop: look for work for [`LOOK`], then sleep until some comes.
+    fn run(&self) {
+        loop {
+            let until = Instant::now() + LOOK;
+            // Yielding, not spinning: a thread that needs this core gets it.
+            while !self.pending.load(Ordering::Acquire) && Instant::now() < until {
+                std::thread::yield_now();
+            }
+            let mut state = self.lock();
+            while state.jobs.is_empty() {
+                state.asleep = true;
+                state = self.wake.wait(state).unwrap_or_else(PoisonError::into_inner);
+            }
+            state.asleep = false;
+            let job = state.jobs.pop_front();
+            self.pending.store(!state.jobs.is_empty(), Ordering::Release);
+            drop(state);
+            if let Some(job) = job {
+                job();
+            }
+        }
+    }
+}
+
+impl Racers {
+    /// The racer threads, one fewer than the machine's cores (at least one), started at the
+    /// first call; `None` when no thread could be started.
+    pub(super) fn get() -> Option<&'static Racers> {
+        static RACERS: OnceLock<Option<Racers>> = OnceLock::new();
+        RACERS
+            .get_or_init(|| {
+                let cores = std::thread::available_parallelism().map_or(2, std::num::NonZeroUsize::get);
+                let mut workers = Vec::new();
+                for k in 0..cores.saturating_sub(1).max(1) {
+                    let worker: &'static Worker = Box::leak(Box::new(Worker {
+                        state: Mutex::new(State { jobs: VecDeque::new(), asleep: false }),
+                        wake: Condvar::new(),
+                        pending: AtomicBool::new(false),
+                    }));
+                    let started = std::thread::Builder::new().name(format!("racer-{k}")).spawn(move || worker.run());
+                    if started.is_ok() {
+                        workers.push(worker);
+                    }
+                }
+                (!workers.is_empty()).then(|| Racers { workers, next: AtomicUsize::new(0) })
+            })
+            .as_ref()
+    }
+
+    /// Run `job` on a racer thread (in turn); a thread that is looking for work takes it with
+    /// no system call here.
+    pub(super) fn spawn(&self, job: impl FnOnce() + Send + 'static) {
+        let k = self.next.fetch_add(1, Ordering::Relaxed) % self.workers.len();
+        let worker = self.workers[k];
+        let mut state = worker.lock();
+        state.jobs.push_back(Box::new(job));
+        worker.pending.store(true, Ordering::Release);
+        if state.asleep {
+            worker.wake.notify_one();
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::sync::mpsc;
+
+    use super::*;
+
+    /// Every job runs once, on a racer thread, whether the thread was looking for work or
+    /// asleep when it came.
+    #[test]
+    fn every_job_runs_once_on_a_racer_thread() {
+        let racers = Racers::get().expect("racer threads");
+        let (sender, receiver) = mpsc::channel();
+        for round in 0..3 {
+            for k in 0..20 {
+                let sender = sender.clone();
+                racers.spawn(move || {
+                    let name = std::thread::current().name().map(str::to_owned);
+                    let _ = sender.send((round * 20 + k, name));
+                });
+            }
+            if round == 1 {
+                // Long enough for the threads to fall asleep.
+                std::thread::sleep(LOOK * 3);
+            }
+        }
+        let mut seen = vec![0; 60];
+        for _ in 0..60 {
+            let (k, name) = receiver.recv_timeout(Duration::from_secs(10)).expect("every job runs");
+            seen[k] += 1;
+            assert!(name.is_some_and(|n| n.starts_with("racer-")), "job {k} on another thread");
+        }
+        assert!(seen.iter().all(|&n| n == 1), "{seen:?}");
+    }
+}
