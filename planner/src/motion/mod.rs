@@ -406,8 +406,8 @@ fn race_answer(results: Vec<Result<MotionPlan, PlanError>>) -> Result<MotionPlan
     }
 }
 
-/// What a racer on the pool sends back: its result, or the panic it stopped with (raised again
-/// on the caller's thread when it is read).
+/// What a racer on a racer thread sends back: its result, or the panic it stopped with (raised
+/// again on the caller's thread when it is read).
 type RacerOutcome = std::thread::Result<Result<MotionPlan, PlanError>>;
 
 /// [`race`] for a [`CollisionModel`], whose racers on the racer threads (`racers`) own what
@@ -462,8 +462,10 @@ fn race_detached(
     if first.is_ok() {
         flag.store(true, Ordering::Relaxed);
         // Paths the others found already compete with racer 0's; none is waited for.
-        results.extend(receiver.try_iter().filter_map(Result::ok));
-        results.insert(0, first);
+        results.push(first);
+        for outcome in receiver.try_iter() {
+            results.push(outcome.unwrap_or_else(|panic| std::panic::resume_unwind(panic)));
+        }
         return race_answer(results);
     }
     // An error of racer 0 is not the race's answer while another may still find a path: they
