@@ -953,13 +953,23 @@ enum Hit {
 }
 
 /// A robot and its environment, prepared for fast collision queries. Cheap to clone (the robot
-/// geometry is shared); `Send + Sync`.
+/// geometry and the prepared environment are shared, the latter until a clone changes it);
+/// `Send + Sync`.
 #[derive(Debug, Clone)]
 pub struct CollisionModel {
     robot: Arc<Robot>,
     geom: Arc<RobotGeom>,
     /// The sphere fast path, when every shape of the robot is a sphere (and it is not switched off).
     fast: Option<Arc<SphereGeom>>,
+    /// The environment and what is prepared from it, shared by clones until one of them changes
+    /// it: a clone of the model is a few reference counts (a race of planners hands one to each
+    /// racer; cloning the environment's parts took 2.8 µs on a MotionBenchMaker scene).
+    scene: Arc<Scene>,
+}
+
+/// A [`CollisionModel`]'s environment and what is prepared from it.
+#[derive(Debug, Clone)]
+struct Scene {
     env: Environment,
     obstacles: Vec<ObstacleGeom>,
     solids: Vec<Solid>,
@@ -988,8 +998,8 @@ impl CollisionModel {
         let fast = SphereGeom::new(&geom, prove_cells).map(Arc::new);
         let obstacles: Vec<ObstacleGeom> = env.obstacles().iter().map(ObstacleGeom::new).collect();
         let solids = obstacles.iter().map(|o| Solid::new(&o.world)).collect();
-        let mut model =
-            Self { robot: Arc::new(robot.clone()), geom, fast, env, obstacles, solids, solids32: None, grid: None };
+        let scene = Arc::new(Scene { env, obstacles, solids, solids32: None, grid: None });
+        let mut model = Self { robot: Arc::new(robot.clone()), geom, fast, scene };
         model.grid_obstacles();
         model
     }
@@ -998,16 +1008,19 @@ impl CollisionModel {
     /// Cells are about as wide as a typical link's bounding sphere, so a link's box overlaps a
     /// few cells.
     fn grid_obstacles(&mut self) {
-        self.solids32 = self.fast.as_ref().and_then(|_| Solids32::new(&self.solids)).map(Arc::new);
-        self.grid = None;
-        if self.obstacles.len() < GRID_MIN_OBSTACLES || self.fast.is_some() {
+        let fast = self.fast.is_some();
+        let geom = Arc::clone(&self.geom);
+        let scene = Arc::make_mut(&mut self.scene);
+        scene.solids32 = if fast { Solids32::new(&scene.solids).map(Arc::new) } else { None };
+        scene.grid = None;
+        if scene.obstacles.len() < GRID_MIN_OBSTACLES || fast {
             return;
         }
-        let mut widths: Vec<f64> = self.geom.links.iter().map(|l| 2.0 * l.r).filter(|w| w.is_finite()).collect();
+        let mut widths: Vec<f64> = geom.links.iter().map(|l| 2.0 * l.r).filter(|w| w.is_finite()).collect();
         widths.sort_by(f64::total_cmp);
         let cell = widths.get(widths.len() / 2).copied().unwrap_or(0.5).clamp(0.05, 1.0);
-        let boxes: Vec<(Point3<f64>, Point3<f64>)> = self.obstacles.iter().map(|o| (o.lo, o.hi)).collect();
-        self.grid = grid::ObstacleGrid::new(&boxes, cell);
+        let boxes: Vec<(Point3<f64>, Point3<f64>)> = scene.obstacles.iter().map(|o| (o.lo, o.hi)).collect();
+        scene.grid = grid::ObstacleGrid::new(&boxes, cell);
     }
     /// Whether queries take the sphere fast path (every shape of the robot is a sphere).
     pub fn uses_sphere_path(&self) -> bool {
@@ -1024,7 +1037,7 @@ impl CollisionModel {
     /// overlaps the robot's box tested against every link), for tests and benchmarks that
     /// compare the two.
     pub fn without_obstacle_grid(mut self) -> Self {
-        self.grid = None;
+        Arc::make_mut(&mut self.scene).grid = None;
         self
     }
     /// The robot this model checks.
@@ -1033,21 +1046,24 @@ impl CollisionModel {
     }
     /// The obstacles this model checks against.
     pub fn environment(&self) -> &Environment {
-        &self.env
+        &self.scene.env
     }
     /// Replace the environment (rebuilds the obstacle broad phase).
     pub fn set_environment(&mut self, env: Environment) {
-        self.obstacles = env.obstacles().iter().map(ObstacleGeom::new).collect();
-        self.solids = self.obstacles.iter().map(|o| Solid::new(&o.world)).collect();
-        self.env = env;
+        let obstacles: Vec<ObstacleGeom> = env.obstacles().iter().map(ObstacleGeom::new).collect();
+        let solids = obstacles.iter().map(|o| Solid::new(&o.world)).collect();
+        self.scene = Arc::new(Scene { env, obstacles, solids, solids32: None, grid: None });
         self.grid_obstacles();
     }
     /// Move the obstacle(s) of this name, updating the broad phase; `false` if there is none.
     pub fn set_obstacle_pose(&mut self, name: &str, pose: Isometry3<f64>) -> bool {
-        if !self.env.set_pose(name, pose) {
+        if !self.scene.env.obstacles().iter().any(|o| o.name == name) {
             return false;
         }
-        for ((o, g), solid) in self.env.obstacles().iter().zip(self.obstacles.iter_mut()).zip(self.solids.iter_mut()) {
+        let scene = Arc::make_mut(&mut self.scene);
+        scene.env.set_pose(name, pose);
+        for ((o, g), solid) in scene.env.obstacles().iter().zip(scene.obstacles.iter_mut()).zip(scene.solids.iter_mut())
+        {
             if o.name == name {
                 *g = ObstacleGeom::new(o);
                 *solid = Solid::new(&g.world);
@@ -1104,7 +1120,9 @@ impl CollisionModel {
             return true;
         }
         match &self.fast {
-            Some(fast) => fast.check(q, &self.obstacles, &self.solids, None, &mut scratch.spheres) == Check::Hit,
+            Some(fast) => {
+                fast.check(q, &self.scene.obstacles, &self.scene.solids, None, &mut scratch.spheres) == Check::Hit
+            }
             None => self.find_hit(q, scratch).is_some(),
         }
     }
@@ -1173,7 +1191,7 @@ impl CollisionModel {
     /// (the sphere path among balls, boxes and cylinders only; see `spheres::lanes` in the
     /// source).
     pub fn certifies_in_batches(&self) -> bool {
-        self.solids32.is_some()
+        self.scene.solids32.is_some()
     }
 
     /// One to [`BATCH_LANES`] configurations (`qs`, one after another) checked together in
@@ -1217,7 +1235,7 @@ impl CollisionModel {
         s: &mut CollisionScratch,
     ) -> Option<BatchSettled> {
         let dof = self.geom.dof;
-        let (Some(fast), Some(solids32)) = (&self.fast, &self.solids32) else { return None };
+        let (Some(fast), Some(solids32)) = (&self.fast, &self.scene.solids32) else { return None };
         if !(margin.is_finite() && margin >= 0.0) || n == 0 || n > lanes::LANES {
             return None;
         }
@@ -1289,7 +1307,7 @@ impl CollisionModel {
         s: &mut CollisionScratch,
     ) -> bool {
         let used = (1u32 << count) - 1;
-        let (Some(fast), Some(solids32), true) = (&self.fast, &self.solids32, count >= SETTLE_MIN) else {
+        let (Some(fast), Some(solids32), true) = (&self.fast, &self.scene.solids32, count >= SETTLE_MIN) else {
             return self.probe_one_by_one(probe, ids, used, s);
         };
         let &Probe { a, end, delta, n } = probe;
@@ -1352,7 +1370,7 @@ impl CollisionModel {
         let dof = self.geom.dof;
         let n = qs.len() / dof;
         match &self.fast {
-            Some(fast) if fast.batch_supported(&self.solids, dof) && qs.iter().all(|v| v.is_finite()) => {
+            Some(fast) if fast.batch_supported(&self.scene.solids, dof) && qs.iter().all(|v| v.is_finite()) => {
                 // Unused lanes repeat the first configuration (and are masked off).
                 let mut buf = std::mem::take(&mut s.spheres.batch_q);
                 buf.clear();
@@ -1361,8 +1379,14 @@ impl CollisionModel {
                     buf.extend_from_slice(&qs[..dof]);
                 }
                 let active = (1u32 << n) - 1;
-                let hit =
-                    fast.check_batch::<ANY>(&buf, dof, active, &self.obstacles, &self.solids, &mut s.spheres.batch);
+                let hit = fast.check_batch::<ANY>(
+                    &buf,
+                    dof,
+                    active,
+                    &self.scene.obstacles,
+                    &self.scene.solids,
+                    &mut s.spheres.batch,
+                );
                 s.spheres.batch_q = buf;
                 hit
             }
@@ -1404,7 +1428,7 @@ impl CollisionModel {
     /// Exact or inflated query, by either path.
     fn check(&self, q: &[f64], inflation: Option<Inflation<'_>>, s: &mut CollisionScratch) -> Check {
         match &self.fast {
-            Some(fast) => fast.check(q, &self.obstacles, &self.solids, inflation, &mut s.spheres),
+            Some(fast) => fast.check(q, &self.scene.obstacles, &self.scene.solids, inflation, &mut s.spheres),
             None => match self.scan_grown(q, inflation, s) {
                 Err(_) => Check::Hit,
                 Ok(true) => Check::Near,
@@ -1437,7 +1461,7 @@ impl CollisionModel {
         Body::Link { link, name: self.robot.links()[link].name.clone() }
     }
     fn obstacle_body(&self, index: usize) -> Body {
-        Body::Obstacle { index, name: self.env.obstacles()[index].name.clone() }
+        Body::Obstacle { index, name: self.scene.env.obstacles()[index].name.clone() }
     }
 
     /// Forward kinematics of the bodies that carry shapes, and the links' world bounding spheres.
@@ -1587,10 +1611,10 @@ impl CollisionModel {
         let g = &*self.geom;
         let grow = |slot: usize| if GROW { inflation.map_or(0.0, |e| e.link[slot]) } else { 0.0 };
         let mut near = false;
-        if let Some(grid) = &self.grid {
+        if let Some(grid) = &self.scene.grid {
             // Many obstacles: each link against those listed in the cells its box overlaps.
             let mut visited = std::mem::take(&mut s.visited);
-            visited.resize(self.obstacles.len(), 0);
+            visited.resize(self.scene.obstacles.len(), 0);
             let mut hit = None;
             for (slot, l) in g.links.iter().enumerate() {
                 s.visit = s.visit.wrapping_add(1);
@@ -1602,13 +1626,13 @@ impl CollisionModel {
                 let e = grow(slot);
                 let r = Vector3::repeat(l.r + e);
                 let (lo, hi) = (s.link_c[slot] - r, s.link_c[slot] + r);
-                grid.near(&lo, &hi, self.obstacles.len(), |oi| {
+                grid.near(&lo, &hi, self.scene.obstacles.len(), |oi| {
                     let seen = &mut visited[oi as usize];
                     if *seen == visit {
                         return true;
                     }
                     *seen = visit;
-                    match self.link_hits_obstacle::<GROW>(slot, &self.obstacles[oi as usize], e, s) {
+                    match self.link_hits_obstacle::<GROW>(slot, &self.scene.obstacles[oi as usize], e, s) {
                         Err(()) => {
                             hit = Some(Hit::Env { slot, obstacle: oi as usize });
                             false
@@ -1627,7 +1651,7 @@ impl CollisionModel {
             if let Some(h) = hit {
                 return Err(h);
             }
-        } else if !self.obstacles.is_empty() && !g.links.is_empty() {
+        } else if !self.scene.obstacles.is_empty() && !g.links.is_empty() {
             // Obstacles near the robot at all: against the box around every link sphere.
             let mut lo = Point3::from(Vector3::repeat(f64::INFINITY));
             let mut hi = Point3::from(Vector3::repeat(f64::NEG_INFINITY));
@@ -1638,7 +1662,7 @@ impl CollisionModel {
                 hi = hi.sup(&(c + r));
             }
             s.candidates.clear();
-            for (i, o) in self.obstacles.iter().enumerate() {
+            for (i, o) in self.scene.obstacles.iter().enumerate() {
                 if o.lo.x <= hi.x
                     && o.hi.x >= lo.x
                     && o.lo.y <= hi.y
@@ -1651,7 +1675,7 @@ impl CollisionModel {
             }
             for ci in 0..s.candidates.len() {
                 let oi = s.candidates[ci] as usize;
-                let o = &self.obstacles[oi];
+                let o = &self.scene.obstacles[oi];
                 for slot in 0..g.links.len() {
                     match self.link_hits_obstacle::<GROW>(slot, o, grow(slot), s) {
                         Err(()) => return Err(Hit::Env { slot, obstacle: oi }),
@@ -1686,7 +1710,7 @@ impl CollisionModel {
         self.pose_bodies(q, s);
         let mut best = f64::INFINITY;
         let mut best_sep: Option<(Separation, Hit)> = None;
-        for (oi, o) in self.obstacles.iter().enumerate() {
+        for (oi, o) in self.scene.obstacles.iter().enumerate() {
             let ov = o.world.view();
             for (slot, l) in g.links.iter().enumerate() {
                 if dist2_point_aabb(&s.link_c[slot], &o.lo, &o.hi).sqrt() - l.r >= best {
@@ -1916,7 +1940,7 @@ impl CollisionModel {
         levels: u32,
         s: &mut CollisionScratch,
     ) -> Option<Vec<(f64, f64, bool)>> {
-        let solids32 = self.solids32.as_ref()?;
+        let solids32 = self.scene.solids32.as_ref()?;
         let SegmentForTests { fast, delta, steps, travel } = self.segment_for_tests(qa, qb)?;
         let most = travel_max(&travel, self.geom.links.len());
         let pieces = first_pieces(most.0.max(most.1));
@@ -1959,7 +1983,14 @@ impl CollisionModel {
         let mut q = vec![0.0; g.dof];
         ConfigSpace::step_into(qa, &delta, t0 + half, &mut q);
         s.spheres.items.clear();
-        let answer = fast.check_listed(&q, &self.obstacles, &self.solids, inflation, Scope::Everything, &mut s.spheres);
+        let answer = fast.check_listed(
+            &q,
+            &self.scene.obstacles,
+            &self.scene.solids,
+            inflation,
+            Scope::Everything,
+            &mut s.spheres,
+        );
         let rho = if answer == Check::Near { reach_of(half, s.spheres.reach) } else { 0.0 };
         Some((answer, rho))
     }
@@ -2028,7 +2059,7 @@ impl CollisionModel {
         let pieces = first_pieces(most);
         s.spheres.items.clear();
         let mut free = true;
-        if listed && let (Some(fast), Some(solids32)) = (&self.fast, &self.solids32) {
+        if listed && let (Some(fast), Some(solids32)) = (&self.fast, &self.scene.solids32) {
             // The batches cut their own pieces (finer), or leave these to the loop below.
             let bufs = (&mut margins, &mut step, &mut dir);
             let first = (&travel[..], &steps[..], most_each, pieces);
@@ -2074,7 +2105,7 @@ impl CollisionModel {
                         None if pairs_free => Scope::Obstacles,
                         None => Scope::Everything,
                     };
-                    fast.check_listed(&q, &self.obstacles, &self.solids, inflation, scope, &mut s.spheres)
+                    fast.check_listed(&q, &self.scene.obstacles, &self.scene.solids, inflation, scope, &mut s.spheres)
                 }
                 _ => self.check(&q, Some(inflation), s),
             };
