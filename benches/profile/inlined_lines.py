@@ -34,7 +34,11 @@ def self_costs(path):
             return prev + int(tok, 0)
         return int(tok, 0)
 
-    with open(path) as f:
+    try:
+        f = open(path)
+    except OSError as e:
+        sys.exit(f"{path}: cannot read the profile ({e.strerror})")
+    with f:
         for raw in f:
             text = raw.strip()
             if not text:
@@ -57,13 +61,18 @@ def self_costs(path):
 
 def frames(binary, addrs):
     """Inlined frames (function, file:line), innermost first, per address."""
-    out = subprocess.run(
-        ["addr2line", "-i", "-f", "-C", "-a", "-e", binary],
-        input="\n".join(hex(a) for a in addrs),
-        capture_output=True,
-        text=True,
-        check=True,
-    ).stdout.split("\n")
+    try:
+        done = subprocess.run(
+            ["addr2line", "-i", "-f", "-C", "-a", "-e", binary],
+            input="\n".join(hex(a) for a in addrs),
+            capture_output=True,
+            text=True,
+        )
+    except OSError as e:
+        sys.exit(f"addr2line: cannot run it ({e.strerror}); it comes with binutils")
+    if done.returncode != 0:
+        sys.exit(f"{binary}: addr2line failed: {done.stderr.strip()}")
+    out = done.stdout.split("\n")
     result, cur, i = {}, None, 0
     while i < len(out):
         if out[i].startswith("0x"):

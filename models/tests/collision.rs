@@ -401,10 +401,14 @@ fn environment_contact_names_link_and_obstacle() {
     let c = m.first_collision(r.home()).expect("the flange is inside the box");
     assert_eq!(c.b, Body::Obstacle { index: 0, name: "table".into() });
     assert_eq!(format!("{c}"), format!("link `{}` and obstacle `table`", c.a.name()));
-    // moved away, free; the distance report names the pair and its witness points
+    // moved away, free; the distance report names the pair and its witness points. A clone
+    // made before shares the prepared environment and keeps the table where it was.
+    let before = m.clone();
     let mut m = m;
     assert!(m.set_obstacle_pose("table", at(p.x + 1.0, p.y, p.z)));
     assert!(!m.collides(r.home()));
+    assert!(before.collides(r.home()), "the clone's table moved too");
+    assert!(!m.set_obstacle_pose("chair", at(0.0, 0.0, 0.0)), "no obstacle of that name");
     // far away, the nearest pair is the robot's own (0.025 m at home)
     let d = m.distance(r.home());
     assert!(d.a.is_link() && d.b.is_link(), "{d:?}");
