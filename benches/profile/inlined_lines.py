@@ -12,6 +12,9 @@ outermost frame inside it whose name holds INNER).
         --toggle-collect='*plan_motion*' BINARY bench mbm ...
     benches/profile/inlined_lines.py cg.out BINARY free_lanes_in [pose_lanes] [--top 60]
 
+`--event Bcm` credits the conditional branches callgrind's simulator mispredicted instead
+(record with `--branch-sim=yes`).
+
 BINARY must be built with line tables (`CARGO_PROFILE_RELEASE_DEBUG=line-tables-only`).
 """
 import argparse
@@ -21,11 +24,12 @@ import subprocess
 import sys
 
 
-def self_costs(path):
-    """Instructions per address, excluding the inclusive costs of call lines."""
+def self_costs(path, event):
+    """Counts of `event` per address, excluding the inclusive costs of call lines."""
     cost = collections.Counter()
     addr = line = 0
     after_call = False
+    index = None
 
     def value(tok, prev):
         if tok == "*":
@@ -44,14 +48,22 @@ def self_costs(path):
             if not text:
                 continue
             if text[0].isdigit() or text[0] in "+-*":
+                if index is None:
+                    sys.exit(f"{path}: costs before the events line: not a callgrind profile")
                 parts = text.split()
                 addr = value(parts[0], addr)
                 if len(parts) > 2:
                     line = value(parts[1], line)
                 if after_call:
                     after_call = False
-                elif len(parts) >= 3:
-                    cost[addr] += int(parts[-1])
+                elif len(parts) >= 3 and index < len(parts) - 2:
+                    # Trailing zero counts may be left out of a line.
+                    cost[addr] += int(parts[2 + index])
+            elif text.startswith("events:"):
+                names = text.split()[1:]
+                if event not in names:
+                    sys.exit(f"{path}: no event {event} recorded (it has {' '.join(names)})")
+                index = names.index(event)
             elif text.startswith("calls="):
                 after_call = True
             elif re.match(r"^positions:", text) and "instr" not in text:
@@ -95,8 +107,13 @@ def main():
     p.add_argument("function")
     p.add_argument("inner", nargs="?")
     p.add_argument("--top", type=int, default=60)
+    p.add_argument(
+        "--event",
+        default="Ir",
+        help="the count to credit (Ir: instructions; with --branch-sim=yes, Bcm: conditional branches mispredicted)",
+    )
     a = p.parse_args()
-    cost = self_costs(a.profile)
+    cost = self_costs(a.profile, a.event)
     lines = collections.Counter()
     total = 0
     for addr, chain in frames(a.binary, sorted(cost)).items():

@@ -794,8 +794,9 @@ impl CollisionScratch {
 
     /// This working memory's single-precision batches (the motion certificate's first pieces,
     /// [`CollisionModel::settle_batch`]) run on the x86-64 baseline's vector instructions (SSE2)
-    /// even where the CPU has AVX2, which they use by default. The answers are the same, bit
-    /// for bit: for tests and measurements that compare the two.
+    /// even where the CPU has AVX2, which they use by default: for tests and measurements that
+    /// compare the two. Exact queries answer the same; a certificate's batches may settle other
+    /// pieces near a threshold (AVX2 fuses products into sums), so its work may differ.
     pub fn with_baseline_vectors(mut self) -> Self {
         self.spheres.lanes.isa = Isa::Baseline;
         self

@@ -526,7 +526,7 @@ proptest! {
             }
             let mask = model.batch_collisions_with(&qs, &mut s);
             prop_assert_eq!(mask >> lanes, 0);
-            // The baseline vectors (SSE2) answer bit for bit as the best the CPU has.
+            // The baseline vectors (SSE2) give the same exact answer as the best the CPU has.
             prop_assert_eq!(model.batch_collisions_with(&qs, &mut baseline), mask);
             for (i, q) in qs.chunks(dof).enumerate() {
                 let single = model.collides_with(q, &mut s);
@@ -610,10 +610,16 @@ fn certificates_are_sound_under_dense_sampling(env: impl Fn(u64) -> Environment,
                     continue;
                 }
                 tried += 1;
-                // The CPU's widest vector instructions and the baseline's answer alike, with
-                // the same number of checks (the same work, step for step).
+                // The CPU's widest vector instructions and the baseline's: what either
+                // certifies is free (their batches may settle other pieces near a threshold:
+                // AVX2 fuses products into sums, so the work may differ).
                 let answer = model.certify(&qa, &qb, 1e-4, true, &mut s);
-                assert_eq!(model.certify(&qa, &qb, 1e-4, true, &mut baseline), answer, "{which}: {qa:?} -> {qb:?}");
+                if model.certify(&qa, &qb, 1e-4, true, &mut baseline).0 {
+                    assert!(
+                        general.motion_is_free(&qa, &qb, 0.0005),
+                        "{which}: certified on the baseline but collides: {qa:?} -> {qb:?}"
+                    );
+                }
                 if answer.0 {
                     certified += 1;
                     assert!(
@@ -696,7 +702,7 @@ proptest! {
     /// calls free has more than the margin of clearance (the general path's distance), one it
     /// calls colliding collides; on random configurations and on configurations within a hair
     /// of the margin or of contact, on the UR5, an arm with every joint form and a long chain;
-    /// and the baseline's vector instructions answer exactly as the CPU's widest do.
+    /// on the CPU's widest vector instructions and on the baseline's.
     #[test]
     fn single_precision_batches_settle_only_the_truth(
         which in 0usize..3, seed in any::<u64>(), lanes in 1usize..=8, gap_exp in 3i32..13, m in 0usize..3,
@@ -721,8 +727,11 @@ proptest! {
                 qs.extend(q.unwrap_or_else(|| robot.random_configuration(&mut rng)));
             }
             let settled = model.settle_batch(&qs, margin, &mut s).unwrap();
-            // The baseline's instructions give the very same answer as the CPU's widest.
-            prop_assert_eq!(model.settle_batch(&qs, margin, &mut baseline), Some(settled));
+            // The baseline's instructions (which round a product before adding it, where
+            // AVX2 fuses the two) may settle other lanes near a threshold, never the opposite.
+            let base = model.settle_batch(&qs, margin, &mut baseline).unwrap();
+            prop_assert_eq!(base.free & settled.colliding, 0);
+            prop_assert_eq!(base.colliding & settled.free, 0);
             // The planner's probe query (batches, then one by one what they leave) answers as
             // single checks do, over one batch and over more than one.
             let singles = qs.chunks(dof).any(|q| model.collides_with(q, &mut s));
@@ -731,13 +740,17 @@ proptest! {
             prop_assert_eq!(model.any_collides_settled(&twice, &mut baseline), singles);
             prop_assert_eq!((settled.free | settled.colliding) >> lanes, 0);
             prop_assert_eq!(settled.free & settled.colliding, 0);
+            let free = settled.free | base.free;
+            let colliding = settled.colliding | base.colliding;
+            prop_assert_eq!((base.free | base.colliding) >> lanes, 0);
+            prop_assert_eq!(base.free & base.colliding, 0);
             for (i, q) in qs.chunks(dof).enumerate() {
-                if settled.free & (1 << i) != 0 {
+                if free & (1 << i) != 0 {
                     let d = model.distance(q).distance;
                     prop_assert!(d > margin - 1e-9, "lane {} called free with clearance {} < {}: {:?}", i, d, margin, q);
                     prop_assert!(!model.collides_with(q, &mut s));
                 }
-                if settled.colliding & (1 << i) != 0 {
+                if colliding & (1 << i) != 0 {
                     prop_assert!(model.collides_with(q, &mut s), "lane {} called colliding: {:?}", i, q);
                 }
             }

@@ -16,10 +16,14 @@
 //!
 //! # Why single precision stays sound
 //!
-//! Let `u = 2^-24` (the unit roundoff of `f32`, round to nearest; Rust never fuses a multiply
-//! and an add). Joint values are computed in `f64` (as the scalar query does), and their sines
-//! and cosines in `f32` from the scalar kernel's reduced argument, with an error of at most
-//! [`SIN_COS_ERR`] `= 4u` each (proven at [`sin_cos_f32`]).
+//! Let `u = 2^-24` (the unit roundoff of `f32`, round to nearest). A product the kernel adds
+//! to a sum (`mul_add`) is fused into it, with one rounding, where the CPU has FMA3 (with AVX2),
+//! and rounded before the addition on the baseline; elsewhere Rust never fuses. Each bound below
+//! counts, for every term of a sum, the most roundings it goes through either way, so it holds
+//! for both (a term of a sum of `n` products goes through at most `n` roundings). Joint values
+//! are computed in `f64` (as the scalar query does), and their sines and cosines in `f32` from
+//! the scalar kernel's reduced argument, with an error of at most [`SIN_COS_ERR`] `= 4u` each
+//! (proven at [`sin_cos_f32`]).
 //!
 //! *Forward kinematics.* [`Lanes::new`] runs a running error bound through the robot's
 //! program, once per robot, in `f64` (rounded up by a relative 10^-6 at the end). For a dot
@@ -31,7 +35,10 @@
 //! are at most 1 and every row and column is a unit vector (so `X1 ≤ √3` and `XY ≤ 1` for a
 //! row against a column), sines and cosines at most 1 (`|m0 c| + |m1 s| ≤ 1`), a point's
 //! coordinates at most the sum of the translations above it (`|base|` plus each `|pre_t|` and
-//! `|post_t|`, and each prismatic travel up to [`PRISMATIC_BOUND`]). Applied to every body's
+//! `|post_t|`, and each prismatic travel up to [`PRISMATIC_BOUND`]). A point `r t + p` is one
+//! sum of four terms, the origin's coordinate and three products, each of which goes through
+//! at most four roundings: its error is the products' from their factors' errors, plus the
+//! origin's, plus `γ_4` times the sum of the terms' magnitudes. Applied to every body's
 //! rotation and origin and then to every sphere and bounding centre, this gives `e_c`, a bound
 //! on the error of any coordinate of any centre the batch computes, whatever the joint values.
 //!
@@ -711,15 +718,14 @@ fn store<O: Ops, const K: usize>(x: &[F<O>; K], out: &mut [F8; K]) {
     }
 }
 
-/// `rot * c + pos` per lane, as `mul3v(rot, c) + pos`, for a constant `c`.
+/// `rot * c + pos` per lane, for a constant `c`: each coordinate a sum of four terms, the
+/// origin's first, each product fused into the sum of the terms before it (see `point` in
+/// [`Lanes::new`] for its error).
 #[inline(always)]
 fn place<O: Ops>(o: O, rot: &R<O>, pos: &P<O>, c: &[f32; 3]) -> P<O> {
     let [x, y, z] = splat3(o, c);
-    [
-        rot[0] * x + rot[1] * y + rot[2] * z + pos[0],
-        rot[3] * x + rot[4] * y + rot[5] * z + pos[1],
-        rot[6] * x + rot[7] * y + rot[8] * z + pos[2],
-    ]
+    let row = |r: usize| rot[3 * r].mul_add(x, rot[3 * r + 1].mul_add(y, rot[3 * r + 2].mul_add(z, pos[r])));
+    [row(0), row(1), row(2)]
 }
 
 /// [`place`] for a point whose only coordinate not zero is `K`: the products by the zeros are
@@ -729,7 +735,7 @@ fn place<O: Ops>(o: O, rot: &R<O>, pos: &P<O>, c: &[f32; 3]) -> P<O> {
 #[inline(always)]
 fn place_on<O: Ops, const K: usize>(o: O, rot: &R<O>, pos: &P<O>, c: &[f32; 3]) -> P<O> {
     let x = splat(o, c[K]);
-    [rot[K] * x + pos[0], rot[3 + K] * x + pos[1], rot[6 + K] * x + pos[2]]
+    [rot[K].mul_add(x, pos[0]), rot[3 + K].mul_add(x, pos[1]), rot[6 + K].mul_add(x, pos[2])]
 }
 
 /// Column `c` of the rotation `r` (row-major).
@@ -747,7 +753,8 @@ fn column<O: Ops>(r: &R<O>, c: Col) -> [F<O>; 3] {
 fn mul_m<O: Ops>(o: O, rot: &R<O>, m: &[f32; 9]) -> R<O> {
     let e = |k: usize| {
         let (r, c) = (k / 3, k % 3);
-        rot[3 * r] * splat(o, m[c]) + rot[3 * r + 1] * splat(o, m[3 + c]) + rot[3 * r + 2] * splat(o, m[6 + c])
+        rot[3 * r]
+            .mul_add(splat(o, m[c]), rot[3 * r + 1].mul_add(splat(o, m[3 + c]), rot[3 * r + 2] * splat(o, m[6 + c])))
     };
     [e(0), e(1), e(2), e(3), e(4), e(5), e(6), e(7), e(8)]
 }
@@ -874,7 +881,7 @@ fn gap2<O: Ops>(o: O, solid: &Solid32, p: &P<O>) -> F<O> {
         Solid32::Ball { c, r } => {
             let c = splat3(o, c);
             let (dx, dy, dz) = (p[0] - c[0], p[1] - c[1], p[2] - c[2]);
-            let d = (dx * dx + dy * dy + dz * dz).sqrt() - splat(o, *r);
+            let d = dx.mul_add(dx, dy.mul_add(dy, dz * dz)).sqrt() - splat(o, *r);
             let d = d.max(zero);
             d * d
         }
@@ -883,13 +890,13 @@ fn gap2<O: Ops>(o: O, solid: &Solid32, p: &P<O>) -> F<O> {
             let ax = (l[0].abs() - splat(o, half[0])).max(zero);
             let ay = (l[1].abs() - splat(o, half[1])).max(zero);
             let az = (l[2].abs() - splat(o, half[2])).max(zero);
-            ax * ax + ay * ay + az * az
+            ax.mul_add(ax, ay.mul_add(ay, az * az))
         }
         Solid32::Cylinder { rt, t, r, hh, yaw } => {
             let l = local(o, rt, t, *yaw, p);
-            let ar = ((l[0] * l[0] + l[1] * l[1]).sqrt() - splat(o, *r)).max(zero);
+            let ar = (l[0].mul_add(l[0], l[1] * l[1]).sqrt() - splat(o, *r)).max(zero);
             let az = (l[2].abs() - splat(o, *hh)).max(zero);
-            ar * ar + az * az
+            ar.mul_add(ar, az * az)
         }
     }
 }
@@ -909,19 +916,19 @@ fn local<O: Ops>(o: O, rt: &[f32; 9], t: &[f32; 3], yaw: bool, p: &P<O>) -> P<O>
     let (x, y, z) = (p[0] - splat(o, t[0]), p[1] - splat(o, t[1]), p[2] - splat(o, t[2]));
     if yaw {
         let (c0, c1, c3, c4) = (splat(o, rt[0]), splat(o, rt[1]), splat(o, rt[3]), splat(o, rt[4]));
-        return [c0 * x + c1 * y, c3 * x + c4 * y, z];
+        return [c0.mul_add(x, c1 * y), c3.mul_add(x, c4 * y), z];
     }
     // Written out (as a closure it was sometimes left a call in the batch's loop).
     let (r0, r1, r2) = (splat(o, rt[0]), splat(o, rt[1]), splat(o, rt[2]));
     let (r3, r4, r5) = (splat(o, rt[3]), splat(o, rt[4]), splat(o, rt[5]));
     let (r6, r7, r8) = (splat(o, rt[6]), splat(o, rt[7]), splat(o, rt[8]));
-    [r0 * x + r1 * y + r2 * z, r3 * x + r4 * y + r5 * z, r6 * x + r7 * y + r8 * z]
+    [r0.mul_add(x, r1.mul_add(y, r2 * z)), r3.mul_add(x, r4.mul_add(y, r5 * z)), r6.mul_add(x, r7.mul_add(y, r8 * z))]
 }
 
 #[inline(always)]
 fn dist2<O: Ops>(a: &P<O>, b: &P<O>) -> F<O> {
     let (dx, dy, dz) = (a[0] - b[0], a[1] - b[1], a[2] - b[2]);
-    dx * dx + dy * dy + dz * dz
+    dx.mul_add(dx, dy.mul_add(dy, dz * dz))
 }
 
 impl Lanes {
@@ -979,11 +986,14 @@ impl Lanes {
         let t_err = |t: &nalgebra::Vector3<f64>| U * t.amax();
         // A point `r t + p` from a rotation with entry error `e_r`, an origin with error `e_p`
         // and magnitude `m_p`: its coordinates' error.
+        // A coordinate is a sum of four terms, the origin's and three products (see `place`):
+        // the products' error from their factors' (as in `dot_err`), the origin's, and the
+        // rounding of four operations at most on any term (three fused, or three products and
+        // their three sums with the origin's: each term goes through at most four roundings).
         let point = |e_r: f64, e_p: f64, m_p: f64, t: &nalgebra::Vector3<f64>| {
-            let t1 = t.abs().sum();
-            let dot = dot_err(e_r, t_err(t), s3, t1, t.norm(), 3.0);
-            // The last addition of the origin.
-            dot + e_p + gamma(1.0) * (t.norm() + dot + m_p + e_p)
+            let (t1, te) = (t.abs().sum(), t_err(t));
+            let e = e_r * t1 + te * s3 + 3.0 * e_r * te;
+            e + e_p + gamma(4.0) * (t.norm() + e + m_p + e_p)
         };
         er[0] = U;
         ep[0] = t_err(&g.base_t);
@@ -1587,15 +1597,17 @@ impl SphereGeom {
             // products by 1, which leave their factors as they are (the same bits).
             if b.plain {
                 let (sn, cs) = (L::load(o, s.sin[k]), L::load(o, s.cos[k]));
+                // `-sn`, exactly, for the differences as fused sums.
+                let ns = sn * splat(o, -1.0);
                 let out_r = [
-                    pr[0] * cs + pr[1] * sn,
-                    pr[1] * cs - pr[0] * sn,
+                    pr[0].mul_add(cs, pr[1] * sn),
+                    pr[1].mul_add(cs, pr[0] * ns),
                     pr[2],
-                    pr[3] * cs + pr[4] * sn,
-                    pr[4] * cs - pr[3] * sn,
+                    pr[3].mul_add(cs, pr[4] * sn),
+                    pr[4].mul_add(cs, pr[3] * ns),
                     pr[5],
-                    pr[6] * cs + pr[7] * sn,
-                    pr[7] * cs - pr[6] * sn,
+                    pr[6].mul_add(cs, pr[7] * sn),
+                    pr[7].mul_add(cs, pr[6] * ns),
                     pr[8],
                 ];
                 store(&out_r, &mut s.rot[k + 1]);
@@ -1610,7 +1622,8 @@ impl SphereGeom {
             if let (Pre::Perm(perm, sign), false, None) = (&b.pre, b.prismatic, &b.post) {
                 let (sn, cs) = (L::load(o, s.sin[k]), L::load(o, s.cos[k]));
                 let (s0, s1) = (splat(o, sign[0]), splat(o, sign[1]));
-                let (c0, n0, c1, n1) = (cs * s0, sn * s0, cs * s1, sn * s1);
+                // `-s s0` (exactly: the signs are ±1), for the differences as fused sums.
+                let (c0, m0, c1, n1) = (cs * s0, sn * splat(o, -sign[0]), cs * s1, sn * s1);
                 let s2 = splat(o, sign[2]);
                 // The columns picked from the registers (indexing memory by the column made the
                 // compiler copy the parent's frame to the stack), and the product as one array
@@ -1619,14 +1632,14 @@ impl SphereGeom {
                 let [b0, b1, b2] = column(&pr, perm[1]);
                 let [d0, d1, d2] = column(&pr, perm[2]);
                 let out_r = [
-                    a0 * c0 + b0 * n1,
-                    b0 * c1 - a0 * n0,
+                    a0.mul_add(c0, b0 * n1),
+                    b0.mul_add(c1, a0 * m0),
                     d0 * s2,
-                    a1 * c0 + b1 * n1,
-                    b1 * c1 - a1 * n0,
+                    a1.mul_add(c0, b1 * n1),
+                    b1.mul_add(c1, a1 * m0),
                     d1 * s2,
-                    a2 * c0 + b2 * n1,
-                    b2 * c1 - a2 * n0,
+                    a2.mul_add(c0, b2 * n1),
+                    b2.mul_add(c1, a2 * m0),
                     d2 * s2,
                 ];
                 store(&out_r, &mut s.rot[k + 1]);
@@ -1653,10 +1666,11 @@ impl SphereGeom {
                 }
             } else {
                 let (sn, cs) = (L::load(o, s.sin[k]), L::load(o, s.cos[k]));
+                let ns = sn * splat(o, -1.0);
                 for r in 0..3 {
                     let (c0, c1) = (out_r[3 * r], out_r[3 * r + 1]);
-                    out_r[3 * r] = c0 * cs + c1 * sn;
-                    out_r[3 * r + 1] = c1 * cs - c0 * sn;
+                    out_r[3 * r] = c0.mul_add(cs, c1 * sn);
+                    out_r[3 * r + 1] = c1.mul_add(cs, c0 * ns);
                 }
             }
             if let Some((qr, qt)) = &b.post {
@@ -2004,9 +2018,9 @@ mod tests {
     }
 
     /// A segment's points written into the lanes joint by joint are the same points as rows,
-    /// to the bit, and settle exactly what the rows do (free and contact lanes, on both
-    /// instruction sets), with the end over
-    /// lane 0 or not, unused lanes repeating the last point: on an arm with every body form
+    /// to the bit, and settle exactly what the rows do (free and contact lanes; the baseline
+    /// instructions nothing opposite), with the end over lane 0 or not, unused lanes repeating
+    /// the last point: on an arm with every body form
     /// among boxes, balls and cylinders, on random segments.
     #[test]
     fn segment_lanes_settle_what_their_rows_do() {
@@ -2066,7 +2080,11 @@ mod tests {
             let by_segment = model.settle_lanes(input, used, 0.0, &mut s).expect("a batch");
             let by_rows = model.settle_lanes(LaneInput::Rows(&rows), used, 0.0, &mut s).expect("a batch");
             assert_eq!(by_segment, by_rows, "segment {k}");
-            assert_eq!(model.settle_lanes(input, used, 0.0, &mut base), Some(by_rows), "segment {k}");
+            // The baseline (products rounded before their sums, where AVX2 fuses them) may
+            // settle other lanes near a threshold, never the opposite.
+            let on_base = model.settle_lanes(input, used, 0.0, &mut base).expect("a batch");
+            assert_eq!(on_base.free & by_rows.colliding, 0, "segment {k}");
+            assert_eq!(on_base.colliding & by_rows.free, 0, "segment {k}");
             free += by_rows.free.count_ones();
             hit += u32::from(by_rows.colliding != 0);
         }
