@@ -721,6 +721,18 @@ fn piece_in_order(k: usize, pieces: usize) -> usize {
     usize::from(BIT_REVERSED[k % pieces]) >> (LANES_MAX_PIECES.trailing_zeros() - pieces.trailing_zeros())
 }
 
+/// The pieces of a first level of batches of `pieces` pieces (a multiple of [`lanes::LANES`], at
+/// most [`LANES_MAX_PIECES`]) in the order the batches take them: with `m = pieces / 8`, each
+/// batch takes every `m`-th piece from an offset below `m`, so that its lanes spread over the
+/// whole segment; the offsets come in bit-reversed order (for 16 pieces: the odd ones, then the
+/// even ones). A contact anywhere is met in the first batch or soon after.
+fn lane_pieces_in_order(pieces: usize) -> impl Iterator<Item = usize> {
+    // The bit reversals of 1, 2, ..., 8 in three bits (of 8 as 0).
+    const SPREAD: [usize; 8] = [4, 2, 6, 1, 5, 3, 7, 0];
+    let m = pieces / lanes::LANES;
+    SPREAD.into_iter().filter(move |&o| o < m).flat_map(move |o| (0..lanes::LANES).map(move |j| o + m * j))
+}
+
 /// Per-thread working memory of a query (link poses, world shapes, candidate lists). Reuse one
 /// per thread to keep queries allocation-free; it adapts itself to whichever model uses it.
 #[derive(Debug, Clone)]
@@ -872,8 +884,8 @@ pub const CERTIFY_START_LEVELS: u32 = 4;
 
 /// A certificate on the sphere path checks its first pieces in single-precision batches of
 /// eight (see `CollisionModel::batched_levels`), cut finer than the double-precision first
-/// level ([`CERTIFY_START_MARGIN`]): until no link travels more than this many metres in half a
-/// piece, or into [`LANES_MAX_PIECES`]. A batch costs about four double-precision checks and
+/// level ([`CERTIFY_START_MARGIN`]): into as few whole batches of pieces as keep every link's
+/// travel in half a piece within this many metres, or into [`LANES_MAX_PIECES`]. A batch costs about four double-precision checks and
 /// proves most pieces this small free; the rest go on to the double-precision checks with their
 /// tighter per-sphere margins. Over the first 30 MotionBenchMaker UR5 problems of each family,
 /// planning instructions (double-precision only: 191.5 M): 0.02 m 206.6 M, 0.04 m 189.9 M,
@@ -881,8 +893,11 @@ pub const CERTIFY_START_LEVELS: u32 = 4;
 /// the first leaves (halved) 182.8 M and 186.5 M then. Today further levels that fill their
 /// batches pay (see [`LANES_LEVELS`]), and with them (same 90 paths): 0.05 m 67.41 M, 0.08 m
 /// 63.98 M, 0.10 m 62.14 M, 0.12 m 61.59 M, 0.14 m 61.93 M, 0.16 m 62.79 M; 40 generated cage
-/// problems 183.2 M at 0.08 m, 183.1 M at 0.12 m.
-const LANES_START_MARGIN: f64 = 0.12;
+/// problems 183.2 M at 0.08 m, 183.1 M at 0.12 m. With whole batches of pieces instead of powers
+/// of two (public 90, the same paths as 0.12 m in powers of two, 58.02 M): 0.08 m 57.92 M, 0.09 m
+/// 57.17 M, 0.10 m 56.64 M, 0.11 m 56.84 M, 0.12 m 57.19 M, 0.14 m 58.04 M, 0.16 m 58.56 M; 40
+/// generated cage problems 173.80 M at 0.10 m, 174.51 M at 0.12 m (174.09 M before).
+const LANES_START_MARGIN: f64 = 0.10;
 
 /// See [`LANES_START_MARGIN`].
 const LANES_MAX_PIECES: usize = 64;
@@ -903,6 +918,8 @@ const BIT_REVERSED: [u8; LANES_MAX_PIECES] = {
 
 // Every first level (the double-precision one and the batches') has a table entry per piece.
 const _: () = assert!(1 << CERTIFY_START_LEVELS <= LANES_MAX_PIECES && LANES_MAX_PIECES <= 256);
+// A first level of batches has at most eight batches (see `lane_pieces_in_order`).
+const _: () = assert!(LANES_MAX_PIECES.is_multiple_of(lanes::LANES) && LANES_MAX_PIECES <= 8 * lanes::LANES);
 
 /// Fewer pieces than this are left to the double-precision checks.
 const LANES_MIN_PIECES: usize = 2;
@@ -2165,17 +2182,21 @@ impl CollisionModel {
         // Finer pieces than the double-precision first level (`first` pieces): a batch costs
         // about one check.
         let most = most_link.max(most_pair);
-        let mut pieces = first;
-        while pieces < LANES_MAX_PIECES && most * 0.5 / pieces as f64 > LANES_START_MARGIN {
-            pieces *= 2;
-        }
-        if pieces < LANES_MIN_PIECES || dof == 0 {
+        // As few pieces as keep every margin within `LANES_START_MARGIN` (at most
+        // `LANES_MAX_PIECES`, at least `first`), made whole batches: the lanes a smaller count
+        // leaves empty cost the same, and more pieces have smaller margins. (Powers of two, as
+        // before, ran 20 pieces a free certificate on average over the 296 public
+        // MotionBenchMaker UR5 problems, where 14 would do.)
+        let need = (most * 0.5 / LANES_START_MARGIN).ceil().min(LANES_MAX_PIECES as f64);
+        let need = if need >= 1.0 { (need as usize).max(first) } else { first };
+        if need < LANES_MIN_PIECES || dof == 0 {
             bit_reversed_pieces(spans, first);
             return (0, false);
         }
+        let pieces = need.next_multiple_of(lanes::LANES).min(LANES_MAX_PIECES);
         let mut left = std::mem::take(&mut s.lanes_left);
         left.clear();
-        let first_ids = (1..=pieces).map(|k| (piece_in_order(k, pieces) as u32, false));
+        let first_ids = lane_pieces_in_order(pieces).map(|i| (i as u32, false));
         let (mut batches, mut hit) = self.pieces_in_lanes(
             fast,
             solids32,
@@ -2284,8 +2305,9 @@ impl CollisionModel {
             for k in n..lanes::LANES {
                 lane[k] = lane[n - 1];
             }
-            // Piece `i`'s midpoint is `(2i + 1) / 2 pieces` of the way (exact: `(i + 0.5)
-            // width` for a power-of-two width, the value `ConfigSpace::step_into` is given),
+            // Piece `i`'s midpoint is `(2i + 1) / 2 pieces` of the way (exact for a power of
+            // two; otherwise the quotient is rounded, by at most 2^-53, far within the relative
+            // 1e-9 of a half-length, at least 1/128 of the segment, that `span_margins` adds),
             // written into the lanes from the segment (rows built first and turned cost
             // about 300 instructions a batch more).
             let points = SegmentIn { a: qa, delta, n: 2 * pieces as u32, ids: lane.map(|(i, _)| 2 * i + 1), end: None };
@@ -2484,5 +2506,23 @@ mod tests {
             pieces *= 2;
         }
         assert_eq!((1..=4).map(|k| piece_in_order(k, 4)).collect::<Vec<_>>(), [2, 1, 3, 0]);
+    }
+
+    /// A first level of batches takes every piece once, for every count it can have, and each
+    /// batch one piece of each eighth of the segment.
+    #[test]
+    fn each_batch_of_a_first_level_spreads_over_the_segment() {
+        for pieces in (lanes::LANES..=LANES_MAX_PIECES).step_by(lanes::LANES) {
+            let order: Vec<usize> = lane_pieces_in_order(pieces).collect();
+            let mut sorted = order.clone();
+            sorted.sort_unstable();
+            assert_eq!(sorted, (0..pieces).collect::<Vec<_>>(), "{pieces} pieces, each once");
+            let m = pieces / lanes::LANES;
+            for batch in order.chunks(lanes::LANES) {
+                let eighths: Vec<usize> = batch.iter().map(|&i| i / m).collect();
+                assert_eq!(eighths, (0..lanes::LANES).collect::<Vec<_>>(), "{pieces} pieces: {batch:?}");
+            }
+        }
+        assert_eq!(lane_pieces_in_order(16).collect::<Vec<_>>()[..9], [1, 3, 5, 7, 9, 11, 13, 15, 0]);
     }
 }
