@@ -847,3 +847,88 @@ fn tool_pose_goals(
     }
     Ok(solutions)
 }
+
+#[cfg(test)]
+mod tests {
+    use std::cell::Cell;
+
+    use embodied_models::collision::{Environment, Obstacle};
+    use embodied_models::{Shape, builtin};
+
+    use super::*;
+
+    /// A racer's run hands the other racers over only once its search has begun: not while it
+    /// tries the straight segments to ten goals, nine of them blocked (more than enough clock
+    /// reads for a hand-over due at once), and once in a search of many samples.
+    #[test]
+    fn the_hand_over_waits_for_the_search() {
+        let robot = builtin("polycrank").expect("robot");
+        let mut env = Environment::new();
+        env.add(Obstacle::new("post", Isometry3::translation(0.45, 0.1, 0.4), Shape::cuboid(0.06, 0.06, 0.4)));
+        let model = CollisionModel::new(&robot, env);
+        let space = robot.config_space();
+        let settings =
+            MotionSettings { deadline: Deadline::after(Duration::from_secs(60)), ..MotionSettings::default() };
+        let calls = Cell::new(0);
+        let count = || calls.set(calls.get() + 1);
+        let certified = |a: &[f64], b: &[f64]| model.motion_is_certified_free(a, b, 1e-4);
+        let mut rng = Rng::new(11);
+        let mut free_config = || loop {
+            let q = robot.random_configuration(&mut rng);
+            if !model.collides(&q) {
+                return q;
+            }
+        };
+        // Goals the straight segment reaches only at the tenth try (nearest first).
+        let (mut direct, mut searched) = (0, 0);
+        for _ in 0..400 {
+            if direct > 0 && searched > 0 {
+                break;
+            }
+            let start = free_config();
+            let candidates: Vec<Vec<f64>> = (0..60).map(|_| free_config()).collect();
+            let dist = |q: &Vec<f64>| space.distance(&start, q);
+            let far_free =
+                candidates.iter().filter(|g| certified(&start, g)).max_by(|a, b| dist(a).total_cmp(&dist(b)));
+            let Some(far_free) = far_free else { continue };
+            let mut goals: Vec<Vec<f64>> = candidates
+                .iter()
+                .filter(|g| dist(g) < dist(far_free) && !certified(&start, g))
+                .take(9)
+                .cloned()
+                .collect();
+            if direct == 0 && goals.len() == 9 {
+                goals.push(far_free.clone());
+                calls.set(0);
+                let plan = plan_alone(
+                    &model,
+                    &start,
+                    &Goal::AnyOf(goals),
+                    &settings,
+                    Stages::All,
+                    Some((&count, Duration::ZERO)),
+                )
+                .expect("a straight segment");
+                assert_eq!(plan.path.len(), 2, "the straight segment to the tenth goal");
+                assert_eq!(calls.get(), 0, "handed over before the search");
+                direct += 1;
+            } else if searched == 0 && !goals.is_empty() {
+                calls.set(0);
+                let plan = plan_alone(
+                    &model,
+                    &start,
+                    &Goal::Configuration(goals[0].clone()),
+                    &settings,
+                    Stages::All,
+                    Some((&count, Duration::ZERO)),
+                )
+                .expect("a path");
+                if plan.stats.samples >= 16 {
+                    assert_eq!(calls.get(), 1, "handed over once in the search");
+                    searched += 1;
+                }
+            }
+        }
+        assert!(direct > 0 && searched > 0, "problems of both kinds found: {direct} direct, {searched} searched");
+    }
+}
