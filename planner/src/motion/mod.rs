@@ -848,12 +848,21 @@ fn tool_pose_goals(
     Ok(solutions)
 }
 
+/// The Polycrank beside a post, the motion tests' small problem: the robot and its model.
+#[cfg(test)]
+pub(crate) fn polycrank_by_a_post() -> (Robot, CollisionModel) {
+    use embodied_models::collision::{Environment, Obstacle};
+    use embodied_models::{Shape, builtin};
+    let robot = builtin("polycrank").expect("robot");
+    let mut env = Environment::new();
+    env.add(Obstacle::new("post", Isometry3::translation(0.45, 0.1, 0.4), Shape::cuboid(0.06, 0.06, 0.4)));
+    let model = CollisionModel::new(&robot, env);
+    (robot, model)
+}
+
 #[cfg(test)]
 mod tests {
     use std::cell::Cell;
-
-    use embodied_models::collision::{Environment, Obstacle};
-    use embodied_models::{Shape, builtin};
 
     use super::*;
 
@@ -862,10 +871,7 @@ mod tests {
     /// reads for a hand-over due at once), and once in a search of many samples.
     #[test]
     fn the_hand_over_waits_for_the_search() {
-        let robot = builtin("polycrank").expect("robot");
-        let mut env = Environment::new();
-        env.add(Obstacle::new("post", Isometry3::translation(0.45, 0.1, 0.4), Shape::cuboid(0.06, 0.06, 0.4)));
-        let model = CollisionModel::new(&robot, env);
+        let (robot, model) = polycrank_by_a_post();
         let space = robot.config_space();
         let settings =
             MotionSettings { deadline: Deadline::after(Duration::from_secs(60)), ..MotionSettings::default() };

@@ -118,23 +118,16 @@ pub(crate) fn farthest_visible<V: StateValidity>(
 
 #[cfg(test)]
 mod tests {
-    use embodied_models::collision::{CollisionModel, Environment, Obstacle};
-    use embodied_models::nalgebra::Isometry3;
-    use embodied_models::{Shape, builtin};
-
     use super::*;
     use crate::deadline::Deadline;
-    use crate::motion::EdgeCheck;
+    use crate::motion::{EdgeCheck, polycrank_by_a_post};
 
     /// With certified segments the shortcuts check no end point alone: every segment of the
     /// shortened path still certifies (its ends included), the path keeps its ends and gets no
     /// longer, and some shortcut was taken.
     #[test]
     fn certified_shortcuts_keep_every_segment_certified() {
-        let robot = builtin("polycrank").expect("robot");
-        let mut env = Environment::new();
-        env.add(Obstacle::new("post", Isometry3::translation(0.45, 0.1, 0.4), Shape::cuboid(0.06, 0.06, 0.4)));
-        let model = CollisionModel::new(&robot, env);
+        let (robot, model) = polycrank_by_a_post();
         let mut rng = Rng::new(5);
         let (mut taken, mut paths) = (0, 0);
         for _ in 0..10 {
