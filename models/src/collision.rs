@@ -882,21 +882,22 @@ pub const CERTIFY_START_MARGIN: f64 = 0.3;
 /// See [`CERTIFY_START_MARGIN`].
 pub const CERTIFY_START_LEVELS: u32 = 4;
 
-/// A certificate on the sphere path checks its first pieces in single-precision batches of
-/// eight (see `CollisionModel::batched_levels`), cut finer than the double-precision first
-/// level ([`CERTIFY_START_MARGIN`]): into as few whole batches of pieces as keep every link's
-/// travel in half a piece within this many metres, or into [`LANES_MAX_PIECES`]. A batch costs
-/// about four double-precision checks and proves most pieces this small free; the rest go on to
-/// the double-precision checks with their tighter per-sphere margins. Over the first 30 MotionBenchMaker UR5 problems of each family,
-/// planning instructions (double-precision only: 191.5 M): 0.02 m 206.6 M, 0.04 m 189.9 M,
-/// 0.08 m 180.7 M, 0.15 m 187.6 M, 0.3 m 218.0 M; a second or third level of batches over what
-/// the first leaves (halved) 182.8 M and 186.5 M then. Today further levels that fill their
-/// batches pay (see [`LANES_LEVELS`]), and with them (same 90 paths): 0.05 m 67.41 M, 0.08 m
-/// 63.98 M, 0.10 m 62.14 M, 0.12 m 61.59 M, 0.14 m 61.93 M, 0.16 m 62.79 M; 40 generated cage
-/// problems 183.2 M at 0.08 m, 183.1 M at 0.12 m. With whole batches of pieces instead of powers
-/// of two (public 90, the same paths as 0.12 m in powers of two, 58.02 M): 0.08 m 57.92 M, 0.09 m
-/// 57.17 M, 0.10 m 56.64 M, 0.11 m 56.84 M, 0.12 m 57.19 M, 0.14 m 58.04 M, 0.16 m 58.56 M; 40
-/// generated cage problems 173.80 M at 0.10 m, 174.51 M at 0.12 m (174.09 M before).
+/// A certificate on the sphere path checks its first pieces in single-precision batches of eight
+/// (see `CollisionModel::batched_levels`), cut finer than the double-precision first level
+/// ([`CERTIFY_START_MARGIN`]): into as few whole batches of pieces as keep every link's travel in
+/// half a piece within this many metres, or into [`LANES_MAX_PIECES`]. A batch costs about four
+/// double-precision checks and proves most pieces this small free; the rest go on to the
+/// double-precision checks with their tighter per-sphere margins. Over the first 30
+/// MotionBenchMaker UR5 problems of each family, planning instructions (double-precision only:
+/// 191.5 M): 0.02 m 206.6 M, 0.04 m 189.9 M, 0.08 m 180.7 M, 0.15 m 187.6 M, 0.3 m 218.0 M; a
+/// second or third level of batches over what the first leaves (halved) 182.8 M and 186.5 M then.
+/// Today further levels that fill their batches pay (see [`LANES_LEVELS`]), and with them (same 90
+/// paths): 0.05 m 67.41 M, 0.08 m 63.98 M, 0.10 m 62.14 M, 0.12 m 61.59 M, 0.14 m 61.93 M, 0.16 m
+/// 62.79 M; 40 generated cage problems 183.2 M at 0.08 m, 183.1 M at 0.12 m. With whole batches of
+/// pieces instead of powers of two (public 90, the same paths as 0.12 m in powers of two, 58.02 M):
+/// 0.08 m 57.92 M, 0.09 m 57.17 M, 0.10 m 56.64 M, 0.11 m 56.84 M, 0.12 m 57.19 M, 0.14 m 58.04 M,
+/// 0.16 m 58.56 M; 40 generated cage problems 173.80 M at 0.10 m, 174.51 M at 0.12 m (174.09 M
+/// before).
 const LANES_START_MARGIN: f64 = 0.10;
 
 /// See [`LANES_START_MARGIN`].

@@ -225,9 +225,10 @@ impl<'d> Budget<'d> {
         self
     }
 
-    /// Hold the hand-over (`true`) while this racer certifies or shortens a path it found, or
-    /// let it happen again (`false`, at the first clock read past its time): another racer would
-    /// start its search from nothing, and handing it over costs this one the waking of a thread.
+    /// Hold the hand-over (`true`) while this racer tries the straight segment (which may solve
+    /// the problem with no race) or certifies or shortens a path it found, or let it happen
+    /// again (`false`, at the first clock read past its time): another racer would start its
+    /// search from nothing, and handing it over costs this one a clone and a queue push.
     pub fn hold_hand_over(&mut self, hold: bool) {
         self.hand_over_held = hold;
     }

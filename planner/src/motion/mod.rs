@@ -411,8 +411,9 @@ type RacerOutcome = std::thread::Result<Result<MotionPlan, PlanError>>;
 /// [`race`] for a [`CollisionModel`], whose racers on the racer threads (`racers`) own what
 /// they plan with (a clone of the model, shared among them, and of the start and goal), so
 /// that the caller never waits for them: racer 0's path is returned at once, and racers still
-/// running stop at their next reading of the race flag. They are handed over at once
-/// ([`DETACHED_HEAD_START`]), and not while racer 0 certifies or shortens a path it found.
+/// running stop at their next reading of the race flag. They are handed over as soon as racer
+/// 0's search begins ([`DETACHED_HEAD_START`]; not while it tries the straight segment, nor
+/// while it certifies or shortens a path it found).
 /// (Within a scope on the rayon pool, a path of racer 0 waited for every racer it had handed
 /// over to start, see the flag and return, and for this thread to be woken: with a head start
 /// of 150 µs, public MotionBenchMaker p95 339-416 µs against 206-285 µs at 1 ms.)
