@@ -288,8 +288,8 @@ impl Tree {
             kd: (kd && dof > 0).then(|| KdIndex {
                 wraps: (0..dof).map(|i| space.wraps(i)).collect(),
                 any_wrap: (0..dof).any(|i| space.wraps(i)),
-                nodes: Vec::new(),
-                stack: Vec::new(),
+                nodes: Vec::with_capacity(NODES),
+                stack: Vec::with_capacity(NODES),
             }),
         }
     }
@@ -390,13 +390,14 @@ impl Tree {
         }
     }
     /// Root-to-node node indices.
-    fn chain_to(&self, mut i: usize) -> Vec<usize> {
-        let mut out = vec![i];
-        while self.parent[i] != ROOT {
-            i = self.parent[i] as usize;
-            out.push(i);
+    fn chain_to(&self, i: usize) -> Vec<usize> {
+        // Counted first, then written from the end: one allocation of the right size.
+        let up = |i: usize| (self.parent[i] != ROOT).then(|| self.parent[i] as usize);
+        let depth = std::iter::successors(Some(i), |&j| up(j)).count();
+        let mut out = vec![0; depth];
+        for (slot, node) in out.iter_mut().rev().zip(std::iter::successors(Some(i), |&j| up(j))) {
+            *slot = node;
         }
-        out.reverse();
         out
     }
 }
