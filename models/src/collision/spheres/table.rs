@@ -238,6 +238,12 @@ impl SphereGeom {
         }
         let tables = self.prove_tables(pair_lever, dof, MAX_PROOFS);
         if let Ok(mut cache) = PROVEN.lock() {
+            // Another thread may have proven the same robot meanwhile: share its tables, so that
+            // every model of one robot holds the same ones.
+            if let Some((_, theirs)) = cache.iter().find(|(k, _)| *k == key) {
+                self.tables = theirs.clone();
+                return;
+            }
             if cache.len() >= CACHED_ROBOTS {
                 cache.remove(0);
             }
@@ -419,6 +425,36 @@ mod tests {
         });
         let proven = a.tables.iter().flatten().count();
         assert!(proven > 0 && shared.count() == proven, "{proven} tables");
+    }
+
+    /// Models of one robot built at once on several threads share their tables too: a thread
+    /// that finishes proving after another has cached the robot takes the cached tables. (When
+    /// each pushed its own, the models held copies, and `models_of_one_robot_share_their_tables`
+    /// failed whenever another test built the same robot at the same moment.) The base is moved
+    /// so that no other test has cached this robot.
+    #[test]
+    fn models_built_at_once_share_their_tables() {
+        let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures");
+        let mut robot = load_urdf(&dir.join("ur5_spherized.urdf"), Some(&dir.join("ur5.srdf"))).unwrap();
+        disable_always_colliding(&mut robot, 300, 3);
+        robot.set_base(nalgebra::Isometry3::translation(0.125, -0.5, 0.25));
+        let g = RobotGeom::new(&robot);
+        let models: Vec<SphereGeom> = std::thread::scope(|scope| {
+            let built: Vec<_> = (0..4).map(|_| scope.spawn(|| SphereGeom::new(&g, true).unwrap())).collect();
+            built.into_iter().map(|h| h.join().unwrap()).collect()
+        });
+        let later = SphereGeom::new(&g, true).unwrap();
+        let proven = later.tables.iter().flatten().count();
+        assert!(proven > 0);
+        for m in &models {
+            for (x, y) in m.tables.iter().zip(&later.tables) {
+                match (x, y) {
+                    (Some(x), Some(y)) => assert!(std::sync::Arc::ptr_eq(x, y)),
+                    (None, None) => {}
+                    _ => panic!("a table in one model only"),
+                }
+            }
+        }
     }
 
     /// The lanes' box proof answers as the row-by-row one, lane by lane: on tables of one to
