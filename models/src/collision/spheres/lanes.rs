@@ -2020,8 +2020,8 @@ mod tests {
     /// A segment's points written into the lanes joint by joint are the same points as rows,
     /// to the bit, and settle exactly what the rows do (free and contact lanes; the baseline
     /// instructions nothing opposite), with the end over lane 0 or not, unused lanes repeating
-    /// the last point: on an arm with every body form
-    /// among boxes, balls and cylinders, on random segments.
+    /// the last point: on an arm with every body form among boxes, balls and cylinders, on
+    /// random segments.
     #[test]
     fn segment_lanes_settle_what_their_rows_do() {
         use crate::collision::{CollisionModel, Environment, Obstacle};

@@ -8,10 +8,10 @@
 //! rounded to nearest; where a kernel asks for a product added to a sum ([`Ops::mul_add`]),
 //! AVX2's FMA3 rounds once and the baseline twice. So the two may differ in the last bits of a
 //! value, and a kernel's error bounds count the roundings of either (the kernels in `lanes`
-//! settle only what is true either way; the tests run both). Fused: the single-precision
-//! batches of planning 3.0% fewer instructions (public MotionBenchMaker UR5, 90 problems, the
-//! same paths), no change in time measurable on this machine. The double-precision queries of the sphere
-//! path (`SphereGeom::check`) are not dispatched: compiled for AVX2 they took 8% fewer
+//! settle only what is true either way; the tests run both). Fusing took 3.0% of the planning
+//! instructions off (public MotionBenchMaker UR5, 90 problems, the same paths), with no change in
+//! time measurable on this machine. The double-precision queries of the sphere path
+//! (`SphereGeom::check`) are not dispatched: compiled for AVX2 they took 8% fewer
 //! instructions but more time (eight single checks 2.2-2.5 µs against 2.06 µs on the baseline;
 //! `bench mbm` p50 172 against 167 µs, interleaved), on a virtualised Xeon with AVX-512.
 //!
