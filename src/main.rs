@@ -333,6 +333,13 @@ enum BenchCommand {
         /// [0, 1] (default 0.5; 0: every sample over the whole joint box).
         #[arg(long)]
         rrt_local_bias: Option<f64>,
+        /// That share once an attempt has drawn --rrt-late-after samples, in [0, 1] (default
+        /// 0.9: a problem that needs that many is most often a narrow passage).
+        #[arg(long)]
+        rrt_late_local_bias: Option<f64>,
+        /// Samples of an RRT-Connect attempt before --rrt-late-local-bias applies (default 128).
+        #[arg(long)]
+        rrt_late_after: Option<usize>,
         /// The half-width of those samples' box around their node, as a share of each joint's
         /// sampling width, above 0 (default 1/pi: 2 rad for a joint of one turn).
         #[arg(long)]
@@ -789,6 +796,8 @@ fn run(cli: Cli) -> Result<(), AppError> {
             threads,
             rrt_range,
             rrt_local_bias,
+            rrt_late_local_bias,
+            rrt_late_after,
             rrt_local_span,
             no_dynamic_domain,
             no_balance,
@@ -818,6 +827,15 @@ fn run(cli: Cli) -> Result<(), AppError> {
                     return Err(AppError::Usage(format!("--rrt-local-bias must be a share in [0, 1], got {p}")));
                 }
                 args.rrt_local_bias = p;
+            }
+            if let Some(p) = rrt_late_local_bias {
+                if !(0.0..=1.0).contains(&p) {
+                    return Err(AppError::Usage(format!("--rrt-late-local-bias must be a share in [0, 1], got {p}")));
+                }
+                args.rrt_late_local_bias = p;
+            }
+            if let Some(n) = rrt_late_after {
+                args.rrt_late_after = n;
             }
             if let Some(w) = rrt_local_span {
                 if !(w.is_finite() && w > 0.0) {

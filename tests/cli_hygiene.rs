@@ -53,6 +53,8 @@ fn exit_status_0_success_1_not_succeeded_2_bad_input() {
         ("--rrt-local-bias=1.5", "--rrt-local-bias must be a share in [0, 1]"),
         ("--rrt-local-bias=-0.1", "--rrt-local-bias must be a share in [0, 1]"),
         ("--rrt-local-bias=nan", "--rrt-local-bias must be a share in [0, 1]"),
+        ("--rrt-late-local-bias=1.01", "--rrt-late-local-bias must be a share in [0, 1]"),
+        ("--rrt-late-local-bias=nan", "--rrt-late-local-bias must be a share in [0, 1]"),
         ("--rrt-local-span=0", "--rrt-local-span must be a positive share"),
         ("--rrt-local-span=-1", "--rrt-local-span must be a positive share"),
         ("--rrt-local-span=inf", "--rrt-local-span must be a positive share"),

@@ -73,6 +73,11 @@ pub struct MbmArgs {
     /// The share of RRT-Connect's samples drawn near a node of the tree about to grow (the
     /// planner's default: 0.5; see `MotionSettings::rrt_local_bias`).
     pub rrt_local_bias: f64,
+    /// That share once an attempt has drawn `rrt_late_after` samples (the planner's default:
+    /// 0.9 after 128; see `MotionSettings::rrt_late_local_bias`).
+    pub rrt_late_local_bias: f64,
+    /// Samples of an attempt before `rrt_late_local_bias` applies.
+    pub rrt_late_after: usize,
     /// The half-width of those samples' box around their node, as a share of each joint's
     /// sampling width (the planner's default: 1/π, 2 rad for a joint of one turn).
     pub rrt_local_span: f64,
@@ -115,6 +120,8 @@ impl MbmArgs {
             balance: MotionSettings::default().rrt_balance,
             sampler: MotionSettings::default().sampler,
             rrt_local_bias: MotionSettings::default().rrt_local_bias,
+            rrt_late_local_bias: MotionSettings::default().rrt_late_local_bias,
+            rrt_late_after: MotionSettings::default().rrt_late_after,
             rrt_local_span: MotionSettings::default().rrt_local_span,
             threads: 1,
             families: None,
@@ -256,6 +263,13 @@ pub struct MbmSettings {
     /// reports written before it existed: read as 0, every sample over the whole box).
     #[serde(default)]
     pub rrt_local_bias: f64,
+    /// That share from an attempt's `rrt_late_after`-th sample on (absent in reports written
+    /// before it existed: read as 0, and `rrt_late_after` as 0).
+    #[serde(default)]
+    pub rrt_late_local_bias: f64,
+    /// Samples of an attempt before `rrt_late_local_bias` applies.
+    #[serde(default)]
+    pub rrt_late_after: usize,
     /// The half-width of their box around the node, as a share of each joint's sampling width
     /// (absent in reports written before it existed: read as 0).
     #[serde(default)]
@@ -612,6 +626,8 @@ fn run_problem(args: &MbmArgs, loaded: &Loaded, p: &ProblemFiles, run: u32) -> R
         rrt_balance: args.balance,
         sampler: args.sampler,
         rrt_local_bias: args.rrt_local_bias,
+        rrt_late_local_bias: args.rrt_late_local_bias,
+        rrt_late_after: args.rrt_late_after,
         rrt_local_span: args.rrt_local_span,
         racers: args.threads.max(1),
         ..MotionSettings::default()
@@ -767,6 +783,8 @@ fn settings_of(args: &MbmArgs, loaded: &Loaded) -> MbmSettings {
         balance: args.balance,
         sampler: args.sampler,
         rrt_local_bias: args.rrt_local_bias,
+        rrt_late_local_bias: args.rrt_late_local_bias,
+        rrt_late_after: args.rrt_late_after,
         rrt_local_span: args.rrt_local_span,
         threads: args.threads.max(1),
         runs: args.runs,
@@ -948,8 +966,11 @@ pub fn render_table(report: &MbmReport) -> String {
         report.settings.algorithm,
         if report.settings.algorithm == PlannerKind::RrtConnect && report.settings.rrt_local_bias > 0.0 {
             format!(
-                " with {} of its samples near the growing tree (within {:.3} of each joint's width)",
-                report.settings.rrt_local_bias, report.settings.rrt_local_span
+                " with {} of its samples near the growing tree (within {:.3} of each joint's width), {} from sample {} of an attempt",
+                report.settings.rrt_local_bias,
+                report.settings.rrt_local_span,
+                report.settings.rrt_late_local_bias,
+                report.settings.rrt_late_after + 1
             )
         } else {
             String::new()

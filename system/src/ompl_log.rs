@@ -167,6 +167,8 @@ pub fn ompl_log(report: &MbmReport, family: &str, index: u32, machine: &Machine,
         format!("dynamic_domain = {}", flag(s.dynamic_domain)),
         format!("edge_check = {edges}"),
         format!("local_bias = {}", s.rrt_local_bias),
+        format!("late_after = {}", s.rrt_late_after),
+        format!("late_local_bias = {}", s.rrt_late_local_bias),
         format!("local_span = {}", s.rrt_local_span),
         format!("range = {}", s.rrt_range),
         format!(

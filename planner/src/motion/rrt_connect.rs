@@ -486,7 +486,8 @@ pub(crate) fn plan<V: StateValidity>(
     let mut start_is_a = true;
     // This attempt's samples (a restart begins again at zero; see `MotionSettings::rrt_restarts`).
     let first_sample = stats.samples;
-    let local_bias = if settings.rrt_local_bias.is_finite() { settings.rrt_local_bias.clamp(0.0, 1.0) } else { 0.0 };
+    let share = |p: f64| if p.is_finite() { p.clamp(0.0, 1.0) } else { 0.0 };
+    let (early_bias, late_bias) = (share(settings.rrt_local_bias), share(settings.rrt_late_local_bias));
     let local_span = if settings.rrt_local_span.is_finite() { settings.rrt_local_span.max(0.0) } else { 0.0 };
     loop {
         if stats.samples - first_sample >= settings.max_samples {
@@ -497,7 +498,9 @@ pub(crate) fn plan<V: StateValidity>(
         }
         stats.samples += 1;
         let (a, b) = if start_is_a { (&mut from_start, &mut from_goal) } else { (&mut from_goal, &mut from_start) };
-        // Near a node of the tree about to grow, or over the whole box.
+        // Near a node of the tree about to grow, or over the whole box: with the late share once
+        // this attempt has drawn `rrt_late_after` samples.
+        let local_bias = if stats.samples - first_sample > settings.rrt_late_after { late_bias } else { early_bias };
         let near_node = (local_bias > 0.0 && rng.uniform() < local_bias).then(|| rng.below(a.len()));
         match near_node {
             Some(k) if a.alive[k] => draw.near_into(robot, rng, a.node(k), local_span, &mut sample),
