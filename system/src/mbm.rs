@@ -263,12 +263,12 @@ pub struct MbmSettings {
     /// reports written before it existed: read as 0, every sample over the whole box).
     #[serde(default)]
     pub rrt_local_bias: f64,
-    /// That share from an attempt's `rrt_late_after`-th sample on (absent in reports written
-    /// before it existed: read as 0, and `rrt_late_after` as 0).
+    /// That share once an attempt has drawn `rrt_late_after` samples (absent in reports written
+    /// before it existed: read as 0, with `rrt_late_after` read as never).
     #[serde(default)]
     pub rrt_late_local_bias: f64,
-    /// Samples of an attempt before `rrt_late_local_bias` applies.
-    #[serde(default)]
+    /// Samples of an attempt before `rrt_late_local_bias` applies (`usize::MAX`: never).
+    #[serde(default = "never")]
     pub rrt_late_after: usize,
     /// The half-width of their box around the node, as a share of each joint's sampling width
     /// (absent in reports written before it existed: read as 0).
@@ -292,6 +292,12 @@ pub struct MbmSettings {
     /// Self-collision pairs disabled because they are proven never to touch within the joint
     /// limits ([`disable_never_colliding`]: a certificate, not sampling).
     pub never_colliding_disabled: Vec<(String, String)>,
+}
+
+/// `MbmSettings::rrt_late_after` of a report written before it existed: the first share held
+/// throughout.
+fn never() -> usize {
+    usize::MAX
 }
 
 fn one() -> usize {
