@@ -473,3 +473,20 @@ fn bench_mbm_writes_json_lines_to_stdout_and_ompl_logs() {
     assert_eq!(code, 2);
     assert!(stderr.contains("--runs must be at least 1"), "{stderr}");
 }
+
+/// A report written before the late share existed reads as the first share throughout: its
+/// settings lack `rrt_late_local_bias` and `rrt_late_after`, and the table says nothing of a
+/// late share (nor overflows counting its first sample).
+#[test]
+fn a_report_without_the_late_share_reads_as_one_share_throughout() {
+    let dir = TempDir::new("batch-old-report");
+    let mut report = run_to(&mbm_args(), &dir.join("now.jsonl"));
+    assert!(render_table(&report).contains("0.9 from sample 129 of an attempt"), "{}", render_table(&report));
+    let mut old = serde_json::to_value(&report.settings).unwrap();
+    let fields = old.as_object_mut().unwrap();
+    assert!(fields.remove("rrt_late_local_bias").is_some() && fields.remove("rrt_late_after").is_some());
+    report.settings = serde_json::from_value(old).expect("an old report's settings");
+    assert_eq!((report.settings.rrt_late_local_bias, report.settings.rrt_late_after), (0.0, usize::MAX));
+    let table = render_table(&report);
+    assert!(table.contains("near the growing tree") && !table.contains("from sample"), "{table}");
+}

@@ -971,12 +971,13 @@ pub fn render_table(report: &MbmReport) -> String {
         report.settings.verify_resolution,
         report.settings.algorithm,
         if report.settings.algorithm == PlannerKind::RrtConnect && report.settings.rrt_local_bias > 0.0 {
+            let late = match report.settings.rrt_late_after.checked_add(1) {
+                Some(from) => format!(", {} from sample {from} of an attempt", report.settings.rrt_late_local_bias),
+                None => String::new(),
+            };
             format!(
-                " with {} of its samples near the growing tree (within {:.3} of each joint's width), {} from sample {} of an attempt",
-                report.settings.rrt_local_bias,
-                report.settings.rrt_local_span,
-                report.settings.rrt_late_local_bias,
-                report.settings.rrt_late_after + 1
+                " with {} of its samples near the growing tree (within {:.3} of each joint's width){late}",
+                report.settings.rrt_local_bias, report.settings.rrt_local_span
             )
         } else {
             String::new()
