@@ -1,7 +1,8 @@
 //! `bench mbm` on a robot other than the UR5: MotionBenchMaker-style families written here for
 //! the Franka Emika Panda of the corpus (OBJ collision meshes, two finger joints outside the
 //! planning group), one with joint goals and one with hand-pose goals, planned and verified end
-//! to end through the command line.
+//! to end through the command line; and for the spherized Panda VAMP plans with
+//! (`benches/peers/panda`: spheres only, seven joints, the fingers fixed).
 
 mod common;
 
@@ -18,6 +19,11 @@ fn panda_urdf() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/corpus/pybullet_data/franka_panda/panda.urdf")
 }
 
+fn spherized_panda() -> (PathBuf, PathBuf) {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("benches/peers/panda");
+    (dir.join("panda_spherized.urdf"), dir.join("panda.srdf"))
+}
+
 const ARM: [&str; 7] =
     ["panda_joint1", "panda_joint2", "panda_joint3", "panda_joint4", "panda_joint5", "panda_joint6", "panda_joint7"];
 
@@ -29,9 +35,9 @@ const BOXES: [(&str, [f64; 3], [f64; 3]); 2] =
 /// Write `count` problems (scene + request) of a family into `dir`: start and goal drawn at
 /// random within the limits, collision-free among the boxes, the hand on either side of the
 /// post (so most straight lines hit it).
-fn write_family(dir: &Path, count: usize, pose_goals: bool) {
+fn write_family(urdf: &Path, dir: &Path, count: usize, pose_goals: bool) {
     std::fs::create_dir_all(dir).expect("family folder");
-    let robot = load_urdf(&panda_urdf(), None).expect("Panda loads");
+    let robot = load_urdf(urdf, None).expect("Panda loads");
     let mut env = Environment::new();
     for (name, size, at) in BOXES {
         env.add(Obstacle::new(
@@ -98,8 +104,8 @@ fn bench_mbm_plans_and_verifies_a_panda_family() {
     )
     .expect("srdf");
     let problems = dir.join("problems");
-    write_family(&problems.join("table_post_panda"), 6, false);
-    write_family(&problems.join("table_post_pose_panda"), 3, true);
+    write_family(&panda_urdf(), &problems.join("table_post_panda"), 6, false);
+    write_family(&panda_urdf(), &problems.join("table_post_pose_panda"), 3, true);
     let s = |p: &Path| p.to_str().expect("utf-8 path").to_string();
     let (code, stdout, stderr) = embodied(&[
         "bench",
@@ -124,6 +130,47 @@ fn bench_mbm_plans_and_verifies_a_panda_family() {
         assert_eq!(p["verified"], true, "{p}");
     }
     for (family, n) in [(&report["families"][0], 6), (&report["families"][1], 3)] {
+        assert_eq!(
+            (family["solved"].as_u64(), family["verification_failures"].as_u64()),
+            (Some(n), Some(0)),
+            "{family}"
+        );
+    }
+}
+
+/// The spherized Panda of the VAMP comparison plans through the same command: every path of
+/// both families solved and re-checked, in the group's seven joints, and each family's problems
+/// all counted.
+#[test]
+fn bench_mbm_plans_and_verifies_the_spherized_panda() {
+    let dir = TempDir::new("mbm-panda-spheres");
+    let (urdf, srdf) = spherized_panda();
+    let problems = dir.join("problems");
+    write_family(&urdf, &problems.join("table_post_panda"), 8, false);
+    write_family(&urdf, &problems.join("table_post_pose_panda"), 3, true);
+    let s = |p: &Path| p.to_str().expect("utf-8 path").to_string();
+    let (code, stdout, stderr) = embodied(&[
+        "bench",
+        "mbm",
+        "--urdf",
+        &s(&urdf),
+        "--srdf",
+        &s(&srdf),
+        "--problems",
+        &s(&problems),
+        "--deadline-ms",
+        "5000",
+        "--json",
+    ]);
+    assert_eq!(code, 0, "{stdout}{stderr}");
+    let report: serde_json::Value = serde_json::from_str(&stdout).expect("JSON report");
+    let problems = report["problems"].as_array().expect("problems");
+    assert_eq!(problems.len(), 11, "{report}");
+    for p in problems {
+        assert_eq!(p["joint_names"].as_array().map(Vec::len), Some(7), "the group's seven joints: {p}");
+        assert_eq!((&p["solved"], &p["verified"]), (&serde_json::json!(true), &serde_json::json!(true)), "{p}");
+    }
+    for (family, n) in [(&report["families"][0], 8), (&report["families"][1], 3)] {
         assert_eq!(
             (family["solved"].as_u64(), family["verification_failures"].as_u64()),
             (Some(n), Some(0)),
