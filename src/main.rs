@@ -284,6 +284,7 @@ enum Command {
 }
 
 #[derive(Subcommand, Debug)]
+#[allow(clippy::large_enum_variant, reason = "parsed once per process from the command line")]
 enum BenchCommand {
     /// Plan every sceneNNNN.yaml/requestNNNN.yaml pair of each MotionBenchMaker family folder.
     Mbm {
@@ -326,6 +327,10 @@ enum BenchCommand {
         /// second on a thread of its own; the first path wins and stops the other).
         #[arg(long, default_value_t = 1)]
         threads: usize,
+        /// With --threads above 1: how long the racer threads look for work after their last
+        /// racer before they sleep, ms (default 50; 0: at once; at most 10,000).
+        #[arg(long, value_name = "MS")]
+        racer_look_ms: Option<f64>,
         /// RRT-Connect's largest step (rad).
         #[arg(long)]
         rrt_range: Option<f64>,
@@ -794,6 +799,7 @@ fn run(cli: Cli) -> Result<(), AppError> {
             shortcut_attempts,
             shortcut_min_gain,
             threads,
+            racer_look_ms,
             rrt_range,
             rrt_local_bias,
             rrt_late_local_bias,
@@ -809,6 +815,16 @@ fn run(cli: Cli) -> Result<(), AppError> {
         }) => {
             if threads == 0 {
                 return Err(AppError::Usage("--threads must be at least 1".into()));
+            }
+            if let Some(ms) = racer_look_ms {
+                if !(ms.is_finite() && ms >= 0.0) {
+                    return Err(AppError::Usage(format!(
+                        "--racer-look-ms must be a number of ms, at least 0, got {ms}"
+                    )));
+                }
+                // At most 10 s (the planner's cap too), so that no value overflows here.
+                let look = std::time::Duration::from_secs_f64(ms.min(10_000.0) / 1000.0);
+                embodied_planner::motion::set_racer_look(look);
             }
             let mut args = embodied::mbm::MbmArgs::new(urdf, srdf, problems);
             args.algorithm = algorithm;

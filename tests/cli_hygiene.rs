@@ -58,6 +58,9 @@ fn exit_status_0_success_1_not_succeeded_2_bad_input() {
         ("--rrt-local-span=0", "--rrt-local-span must be a positive share"),
         ("--rrt-local-span=-1", "--rrt-local-span must be a positive share"),
         ("--rrt-local-span=inf", "--rrt-local-span must be a positive share"),
+        ("--racer-look-ms=-1", "--racer-look-ms must be a number of ms, at least 0"),
+        ("--racer-look-ms=nan", "--racer-look-ms must be a number of ms, at least 0"),
+        ("--racer-look-ms=inf", "--racer-look-ms must be a number of ms, at least 0"),
     ] {
         let args = ["bench", "mbm", "--urdf", "u.urdf", "--srdf", "u.srdf", "--problems", "none", flag];
         let (code, _, err) = embodied(&args);

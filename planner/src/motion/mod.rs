@@ -12,6 +12,7 @@ pub(crate) mod rrt_connect;
 pub mod sampler;
 pub(crate) mod shortcut;
 
+pub use racers::{DEFAULT_LOOK as DEFAULT_RACER_LOOK, racer_look, set_racer_look};
 pub use sampler::Sampler;
 
 use std::sync::Arc;
@@ -278,9 +279,9 @@ pub struct MotionSettings {
     /// the straight segment is found blocked (not while racer 0 certifies a path it found). The
     /// first path found stops the others through their deadline's race flag; racer 0's path is
     /// returned without waiting for the others. Every racer's path is certified as a lone
-    /// planner's is. The racer threads look for work for 50 ms after their last racer before
-    /// they sleep (yielding their core meanwhile), so that handing a racer over needs no
-    /// system call. A validity other than a plain [`CollisionModel`] races within the call, on
+    /// planner's is. The racer threads look for work a while after their last racer before
+    /// they sleep (yielding their core meanwhile; see [`set_racer_look`]), so that handing a
+    /// racer over needs no system call. A validity other than a plain [`CollisionModel`] races within the call, on
     /// the rayon pool, after a head start of 1 ms.
     pub racers: usize,
     /// Samples after which the planner gives up with [`PlanError::NoPath`] (RRT-Connect: per

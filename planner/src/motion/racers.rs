@@ -1,21 +1,56 @@
 //! The threads that run the racers a race of planners hands over (see
 //! [`super::MotionSettings::racers`]), kept for the process.
 //!
-//! A thread with nothing to do looks for work for [`LOOK`] before it sleeps, so a racer handed
-//! over meanwhile starts with no system call on the caller's side. Waking a sleeping thread
-//! (rayon's pool, a condition variable) cost the handing racer 35 µs on average on the 2-core
-//! machine of the MotionBenchMaker runs, up to 220 µs, out of its own planning time.
+//! A thread with nothing to do looks for work a while before it sleeps, so a racer handed over
+//! meanwhile starts with no system call on the caller's side. Waking a sleeping thread (rayon's
+//! pool, a condition variable) cost the handing racer 35 µs on average on the 2-core machine of
+//! the MotionBenchMaker runs, up to 220 µs, out of its own planning time.
+//!
+//! How long it looks is the process's to choose ([`set_racer_look`], 50 ms by default): a
+//! longer look finds more hand-overs with the thread awake, a shorter one leaves the core
+//! sooner to the rest of the process.
 
 use std::collections::VecDeque;
-use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
 use std::sync::{Condvar, Mutex, MutexGuard, OnceLock, PoisonError};
 use std::time::{Duration, Instant};
 
-/// How long a racer thread with nothing to do looks for work before it sleeps. `bench mbm
-/// --threads 2` builds each problem's model between races: with 2 ms most hand-overs found the
-/// thread asleep (38 µs on average over the three generated families bookshelf_tall,
-/// bookshelf_thin and table_under_pick); with 50 ms, 2.5 µs median, 8 µs at most.
-const LOOK: Duration = Duration::from_millis(50);
+/// How long a racer thread with nothing to do looks for work before it sleeps, unless
+/// [`set_racer_look`] says otherwise. `bench mbm --threads 2` builds each problem's model
+/// between races: with 2 ms most hand-overs found the thread asleep (38 µs on average over the
+/// three generated families bookshelf_tall, bookshelf_thin and table_under_pick); with 50 ms,
+/// 2.5 µs median, 8 µs at most.
+pub const DEFAULT_LOOK: Duration = Duration::from_millis(50);
+
+/// The longest look [`set_racer_look`] sets.
+const LONGEST_LOOK: Duration = Duration::from_secs(10);
+
+/// [`set_racer_look`]'s value in nanoseconds.
+static LOOK_NS: AtomicU64 = AtomicU64::new(DEFAULT_LOOK.as_nanos() as u64);
+
+/// How long the racer threads (see [`super::MotionSettings::racers`]) look for work after their
+/// last racer before they sleep, for the whole process: [`DEFAULT_LOOK`] unless set here (at
+/// most 10 s). Zero: they sleep at once, and every hand-over wakes one (tens of µs out of the
+/// handing planner's time, up to a few hundred). Looking yields the core to any thread that
+/// needs it, but keeps it busy when none does: a process that races now and then spends less
+/// processor time with a short look, and plans a little slower. Two racers on three generated
+/// MotionBenchMaker cage problems, 40 rounds, looks of 50 ms against zero: a round every 100
+/// ms, 2.90-3.01 s against 0.68-0.71 s of processor time over 4.7 s, planning p50 357-388
+/// against 448-464 µs; rounds back to back, 1.13-1.24 against 0.62-0.68 s, p50 324-339 against
+/// 384-433 µs.
+pub fn set_racer_look(look: Duration) {
+    LOOK_NS.store(capped(look).as_nanos() as u64, Ordering::Relaxed);
+}
+
+/// `look`, at most [`LONGEST_LOOK`].
+fn capped(look: Duration) -> Duration {
+    look.min(LONGEST_LOOK)
+}
+
+/// The racer threads' look (see [`set_racer_look`]).
+pub fn racer_look() -> Duration {
+    Duration::from_nanos(LOOK_NS.load(Ordering::Relaxed))
+}
 
 type Job = Box<dyn FnOnce() + Send>;
 
@@ -47,10 +82,10 @@ impl Worker {
         self.state.lock().unwrap_or_else(PoisonError::into_inner)
     }
 
-    /// The thread's loop: look for work for [`LOOK`], then sleep until some comes.
+    /// The thread's loop: look for work (for [`racer_look`]), then sleep until some comes.
     fn run(&self) {
         loop {
-            let until = Instant::now() + LOOK;
+            let until = Instant::now() + racer_look();
             // Yielding, not spinning: a thread that needs this core gets it.
             while !self.pending.load(Ordering::Acquire) && Instant::now() < until {
                 std::thread::yield_now();
@@ -132,7 +167,7 @@ mod tests {
             }
             if round == 1 {
                 // Long enough for the threads to fall asleep.
-                std::thread::sleep(LOOK * 3);
+                std::thread::sleep(DEFAULT_LOOK * 3);
             }
         }
         let mut seen = vec![0; 60];
@@ -142,5 +177,33 @@ mod tests {
             assert!(name.is_some_and(|n| n.starts_with("racer-")), "job {k} on another thread");
         }
         assert!(seen.iter().all(|&n| n == 1), "{seen:?}");
+    }
+
+    /// With no look at all, every job still runs: each hand-over wakes a sleeping thread.
+    #[test]
+    fn jobs_run_when_threads_sleep_at_once() {
+        let racers = Racers::get().expect("racer threads");
+        set_racer_look(Duration::ZERO);
+        let (sender, receiver) = mpsc::channel();
+        for k in 0..10 {
+            let sender = sender.clone();
+            racers.spawn(move || {
+                let _ = sender.send(k);
+            });
+            std::thread::sleep(Duration::from_millis(2));
+        }
+        let mut seen: Vec<i32> = (0..10).filter_map(|_| receiver.recv_timeout(Duration::from_secs(10)).ok()).collect();
+        set_racer_look(DEFAULT_LOOK);
+        seen.sort_unstable();
+        assert_eq!(seen, (0..10).collect::<Vec<_>>());
+    }
+
+    /// The look is capped at 10 s.
+    #[test]
+    fn a_look_is_capped() {
+        assert_eq!(capped(Duration::MAX), LONGEST_LOOK);
+        assert_eq!(capped(Duration::from_secs(3600)), LONGEST_LOOK);
+        assert_eq!(capped(Duration::from_millis(7)), Duration::from_millis(7));
+        assert_eq!(capped(Duration::ZERO), Duration::ZERO);
     }
 }
