@@ -94,6 +94,45 @@ fn write_family(urdf: &Path, dir: &Path, count: usize, pose_goals: bool) {
     }
 }
 
+/// Write a joint-goal family of `joint_goals` problems and a pose-goal family of `pose_goals`
+/// for `urdf`, plan both with `bench mbm`, and check that every problem is solved and its path
+/// re-checked, in the group's seven joints, and that each family counts all its problems.
+fn plans_and_verifies(urdf: &Path, srdf: &Path, dir: &TempDir, joint_goals: usize, pose_goals: usize) {
+    let problems = dir.join("problems");
+    write_family(urdf, &problems.join("table_post_panda"), joint_goals, false);
+    write_family(urdf, &problems.join("table_post_pose_panda"), pose_goals, true);
+    let s = |p: &Path| p.to_str().expect("utf-8 path").to_string();
+    let (code, stdout, stderr) = embodied(&[
+        "bench",
+        "mbm",
+        "--urdf",
+        &s(urdf),
+        "--srdf",
+        &s(srdf),
+        "--problems",
+        &s(&problems),
+        "--deadline-ms",
+        "5000",
+        "--json",
+    ]);
+    assert_eq!(code, 0, "{stdout}{stderr}");
+    let report: serde_json::Value = serde_json::from_str(&stdout).expect("JSON report");
+    let problems = report["problems"].as_array().expect("problems");
+    assert_eq!(problems.len(), joint_goals + pose_goals, "{report}");
+    for p in problems {
+        assert_eq!(p["joint_names"].as_array().map(Vec::len), Some(7), "the group's seven joints: {p}");
+        assert_eq!(p["solved"], true, "{p}");
+        assert_eq!(p["verified"], true, "{p}");
+    }
+    for (family, n) in [(&report["families"][0], joint_goals), (&report["families"][1], pose_goals)] {
+        assert_eq!(
+            (family["solved"].as_u64(), family["verification_failures"].as_u64()),
+            (Some(n as u64), Some(0)),
+            "{family}"
+        );
+    }
+}
+
 #[test]
 fn bench_mbm_plans_and_verifies_a_panda_family() {
     let dir = TempDir::new("mbm-panda");
@@ -103,78 +142,14 @@ fn bench_mbm_plans_and_verifies_a_panda_family() {
         "<robot name=\"panda\"><group name=\"panda_arm\"><chain base_link=\"panda_link0\" tip_link=\"panda_link8\"/></group></robot>",
     )
     .expect("srdf");
-    let problems = dir.join("problems");
-    write_family(&panda_urdf(), &problems.join("table_post_panda"), 6, false);
-    write_family(&panda_urdf(), &problems.join("table_post_pose_panda"), 3, true);
-    let s = |p: &Path| p.to_str().expect("utf-8 path").to_string();
-    let (code, stdout, stderr) = embodied(&[
-        "bench",
-        "mbm",
-        "--urdf",
-        &s(&panda_urdf()),
-        "--srdf",
-        &s(&srdf),
-        "--problems",
-        &s(&problems),
-        "--deadline-ms",
-        "5000",
-        "--json",
-    ]);
-    assert_eq!(code, 0, "{stdout}{stderr}");
-    let report: serde_json::Value = serde_json::from_str(&stdout).expect("JSON report");
-    let problems = report["problems"].as_array().expect("problems");
-    assert_eq!(problems.len(), 9, "{report}");
-    for p in problems {
-        assert_eq!(p["joint_names"].as_array().map(Vec::len), Some(7), "the group's seven joints: {p}");
-        assert_eq!(p["solved"], true, "{p}");
-        assert_eq!(p["verified"], true, "{p}");
-    }
-    for (family, n) in [(&report["families"][0], 6), (&report["families"][1], 3)] {
-        assert_eq!(
-            (family["solved"].as_u64(), family["verification_failures"].as_u64()),
-            (Some(n), Some(0)),
-            "{family}"
-        );
-    }
+    plans_and_verifies(&panda_urdf(), &srdf, &dir, 6, 3);
 }
 
-/// The spherized Panda of the VAMP comparison plans through the same command: every path of
-/// both families solved and re-checked, in the group's seven joints, and each family's problems
-/// all counted.
+/// The spherized Panda of the VAMP comparison (spheres only, the fingers fixed) plans through
+/// the same command, with its own SRDF.
 #[test]
 fn bench_mbm_plans_and_verifies_the_spherized_panda() {
     let dir = TempDir::new("mbm-panda-spheres");
     let (urdf, srdf) = spherized_panda();
-    let problems = dir.join("problems");
-    write_family(&urdf, &problems.join("table_post_panda"), 8, false);
-    write_family(&urdf, &problems.join("table_post_pose_panda"), 3, true);
-    let s = |p: &Path| p.to_str().expect("utf-8 path").to_string();
-    let (code, stdout, stderr) = embodied(&[
-        "bench",
-        "mbm",
-        "--urdf",
-        &s(&urdf),
-        "--srdf",
-        &s(&srdf),
-        "--problems",
-        &s(&problems),
-        "--deadline-ms",
-        "5000",
-        "--json",
-    ]);
-    assert_eq!(code, 0, "{stdout}{stderr}");
-    let report: serde_json::Value = serde_json::from_str(&stdout).expect("JSON report");
-    let problems = report["problems"].as_array().expect("problems");
-    assert_eq!(problems.len(), 11, "{report}");
-    for p in problems {
-        assert_eq!(p["joint_names"].as_array().map(Vec::len), Some(7), "the group's seven joints: {p}");
-        assert_eq!((&p["solved"], &p["verified"]), (&serde_json::json!(true), &serde_json::json!(true)), "{p}");
-    }
-    for (family, n) in [(&report["families"][0], 8), (&report["families"][1], 3)] {
-        assert_eq!(
-            (family["solved"].as_u64(), family["verification_failures"].as_u64()),
-            (Some(n), Some(0)),
-            "{family}"
-        );
-    }
+    plans_and_verifies(&urdf, &srdf, &dir, 8, 3);
 }
