@@ -281,8 +281,8 @@ pub struct MotionSettings {
     /// returned without waiting for the others. Every racer's path is certified as a lone
     /// planner's is. The racer threads look for work a while after their last racer before
     /// they sleep (yielding their core meanwhile; see [`set_racer_look`]), so that handing a
-    /// racer over needs no system call. A validity other than a plain [`CollisionModel`] races within the call, on
-    /// the rayon pool, after a head start of 1 ms.
+    /// racer over needs no system call. A validity other than a plain [`CollisionModel`]
+    /// races within the call, on the rayon pool, after a head start of 1 ms.
     pub racers: usize,
     /// Samples after which the planner gives up with [`PlanError::NoPath`] (RRT-Connect: per
     /// attempt, see [`Self::rrt_restarts`]): planning ends even without a deadline.

@@ -30,7 +30,7 @@ static LOOK_NS: AtomicU64 = AtomicU64::new(DEFAULT_LOOK.as_nanos() as u64);
 
 /// How long the racer threads (see [`super::MotionSettings::racers`]) look for work after their
 /// last racer before they sleep, for the whole process: [`DEFAULT_LOOK`] unless set here (at
-/// most 10 s). Zero: they sleep at once, and every hand-over wakes one (tens of µs out of the
+/// most 10 s; a thread looking already keeps the look it began with). Zero: they sleep at once, and every hand-over wakes one (tens of µs out of the
 /// handing planner's time, up to a few hundred). Looking yields the core to any thread that
 /// needs it, but keeps it busy when none does: a process that races now and then spends less
 /// processor time with a short look, and plans a little slower. Two racers on three generated
