@@ -11,6 +11,9 @@ families, COUNT problems each (default 50), and OUT_DIR/vamp.json (the problem f
                starts in one compartment and ends in another.
   table_panda  a table with a second board 0.55 m above it and three posts on it; the hand goes
                from one side of the posts to the other between the boards.
+  cage_panda   a cage on a table (floor, roof, back and side walls, open at the front, 0.3 m
+               wide, deep and high inside); the hand goes from above the table beside the cage
+               into it.
 
 Starts and goals are drawn uniformly within the joint limits until the hand lies in the wanted
 region and VAMP calls the configuration valid; a pair whose straight motion VAMP finds valid is
@@ -57,6 +60,22 @@ def table(rng):
         boxes.append(((x + rng.uniform(-0.2, 0.2), rng.uniform(-0.5, 0.5), 0.45), (0.04, 0.04, 0.08)))
     regions = [((x - 0.1, side * 0.35, 0.6), (0.12, 0.15, 0.1)) for side in (-1, 1)]
     return boxes, regions
+
+
+def cage(rng):
+    """Boxes and hand regions of a cage open towards the robot, on a table."""
+    x, y = 0.55 + rng.uniform(-0.05, 0.05), rng.uniform(-0.15, 0.15)
+    inner, wall, floor = 0.15, 0.02, 0.3
+    top = floor + 2 * inner
+    boxes = [((x + 0.1, y, floor - 0.02), (0.35, 0.6, 0.02))]  # the table
+    boxes.append(((x, y, floor - wall), (inner + wall, inner + wall, wall)))  # the cage's floor
+    boxes.append(((x, y, top + wall), (inner + wall, inner + wall, wall)))  # its roof
+    boxes.append(((x + inner + wall, y, floor + inner), (wall, inner + wall, inner)))  # its back
+    for side in (-1, 1):
+        boxes.append(((x, y + side * (inner + wall), floor + inner), (inner + wall, wall, inner)))
+    outside = [((x - 0.1, y + side * 0.4, floor + 0.25), (0.1, 0.1, 0.1)) for side in (-1, 1)]
+    inside = ((x + 0.02, y, floor + inner), (0.06, 0.06, 0.06))
+    return boxes, outside + [inside]
 
 
 def environment(boxes):
@@ -116,12 +135,16 @@ def main():
     count = int(sys.argv[2]) if len(sys.argv) > 2 else 50
     rng = np.random.default_rng(int(sys.argv[3]) if len(sys.argv) > 3 else 7)
     problems = {}
-    for family, scene in (("shelf_panda", shelf), ("table_panda", table)):
+    for family, scene in (("shelf_panda", shelf), ("table_panda", table), ("cage_panda", cage)):
         rows = []
         while len(rows) < count:
             boxes, regions = scene(rng)
             env = environment(boxes)
-            a, b = rng.choice(len(regions), 2, replace=False)
+            if family == "cage_panda":
+                # From outside into the cage.
+                a, b = rng.integers(0, len(regions) - 1), len(regions) - 1
+            else:
+                a, b = rng.choice(len(regions), 2, replace=False)
             start, goal = draw(rng, env, regions[a]), draw(rng, env, regions[b])
             if start is None or goal is None or vamp.panda.validate_motion(start.tolist(), goal.tolist(), env):
                 continue
