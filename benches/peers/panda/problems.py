@@ -3,7 +3,7 @@
 
   problems.py OUT_DIR [COUNT] [SEED]
 
-Writes OUT_DIR/<family>/sceneNNNN.yaml + requestNNNN.yaml (the layout `bench mbm` reads) for two
+Writes OUT_DIR/<family>/sceneNNNN.yaml + requestNNNN.yaml (the layout `bench mbm` reads) for three
 families, COUNT problems each (default 50), and OUT_DIR/vamp.json (the problem file of
 ../../../../shared/peers/vamp/vamp_run.py):
 
