@@ -30,10 +30,11 @@ static LOOK_NS: AtomicU64 = AtomicU64::new(DEFAULT_LOOK.as_nanos() as u64);
 
 /// How long the racer threads (see [`super::MotionSettings::racers`]) look for work after their
 /// last racer before they sleep, for the whole process: [`DEFAULT_LOOK`] unless set here (at
-/// most 10 s; a thread looking already keeps the look it began with). Zero: they sleep at once, and every hand-over wakes one (tens of µs out of the
-/// handing planner's time, up to a few hundred). Looking yields the core to any thread that
-/// needs it, but keeps it busy when none does: a process that races now and then spends less
-/// processor time with a short look, and plans a little slower. Two racers on three generated
+/// most 10 s; a thread looking already keeps the look it began with). Zero: they sleep at once,
+/// and every hand-over wakes one (tens of µs out of the handing planner's time, up to a few
+/// hundred). Looking yields the core to any thread that needs it, but keeps it busy when none
+/// does: a process that races now and then spends less processor time with a short look, and
+/// plans a little slower. Two racers on three generated
 /// MotionBenchMaker cage problems, 40 rounds, looks of 50 ms against zero: a round every 100
 /// ms, 2.90-3.01 s against 0.68-0.71 s of processor time over 4.7 s, planning p50 357-388
 /// against 448-464 µs; rounds back to back, 1.13-1.24 against 0.62-0.68 s, p50 324-339 against
