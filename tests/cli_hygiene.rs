@@ -61,6 +61,9 @@ fn exit_status_0_success_1_not_succeeded_2_bad_input() {
         ("--racer-look-ms=-1", "--racer-look-ms must be a number of ms, at least 0"),
         ("--racer-look-ms=nan", "--racer-look-ms must be a number of ms, at least 0"),
         ("--racer-look-ms=inf", "--racer-look-ms must be a number of ms, at least 0"),
+        ("--threads=0", "--threads must be `auto` or a count of at least 1, got `0`"),
+        ("--threads=two", "--threads must be `auto` or a count of at least 1, got `two`"),
+        ("--threads=-1", "--threads must be `auto` or a count of at least 1, got `-1`"),
     ] {
         let args = ["bench", "mbm", "--urdf", "u.urdf", "--srdf", "u.srdf", "--problems", "none", flag];
         let (code, _, err) = embodied(&args);
@@ -173,4 +176,38 @@ fn completions_and_a_man_page_come_from_the_command_definitions() {
     assert_eq!(code, 0);
     assert!(out.starts_with(".ie") || out.contains(".TH embodied"), "{}", &out[..out.len().min(200)]);
     assert!(out.contains("Exit status") && out.contains("completions"), "the page lacks the exit statuses or verbs");
+}
+
+/// `bench mbm` races as many planners as the process has cores, at most two, unless told:
+/// the report says how many ran (`taskset -c 1` makes it one, as `compare-mbm` runs it).
+#[test]
+fn bench_mbm_races_one_planner_a_core_up_to_two() {
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    let fixtures = root.join("models/tests/fixtures");
+    let (urdf, srdf, problems) =
+        (fixtures.join("ur5_spherized.urdf"), fixtures.join("ur5.srdf"), root.join("tests/fixtures/mbm/problems"));
+    let base = [
+        "bench",
+        "mbm",
+        "--urdf",
+        urdf.to_str().unwrap(),
+        "--srdf",
+        srdf.to_str().unwrap(),
+        "--problems",
+        problems.to_str().unwrap(),
+        "--limit",
+        "1",
+        "--json",
+    ];
+    let cores = std::thread::available_parallelism().map_or(1, usize::from);
+    for (flag, racers) in [(None, cores.min(2)), (Some("--threads=auto"), cores.min(2)), (Some("--threads=3"), 3)] {
+        let mut args = base.to_vec();
+        args.extend(flag);
+        let (code, out, err) = embodied(&args);
+        assert_eq!(code, 0, "{flag:?}: {err}");
+        let report: serde_json::Value = serde_json::from_str(&out).unwrap();
+        assert_eq!(report["settings"]["threads"], racers, "{flag:?}");
+        let overall = &report["overall"];
+        assert!(overall["valid"].as_u64() >= Some(1) && overall["solved"] == overall["valid"], "{out}");
+    }
 }
