@@ -1,8 +1,10 @@
 //! `bench mbm` on a robot other than the UR5: MotionBenchMaker-style families written here for
 //! the Franka Emika Panda of the corpus (OBJ collision meshes, two finger joints outside the
 //! planning group), one with joint goals and one with hand-pose goals, planned and verified end
-//! to end through the command line; and for the spherized Panda VAMP plans with
-//! (`benches/peers/panda`: spheres only, seven joints, the fingers fixed).
+//! to end through the command line; for the spherized Panda VAMP plans with
+//! (`benches/peers/panda`: spheres only, seven joints, the fingers fixed); and for the spherized
+//! Fetch VAMP plans with (`benches/peers/fetch`: 111 spheres, the group `arm_with_torso` of eight
+//! joints, the first the prismatic torso lift).
 
 mod common;
 
@@ -24,22 +26,71 @@ fn spherized_panda() -> (PathBuf, PathBuf) {
     (dir.join("panda_spherized.urdf"), dir.join("panda.srdf"))
 }
 
-const ARM: [&str; 7] =
-    ["panda_joint1", "panda_joint2", "panda_joint3", "panda_joint4", "panda_joint5", "panda_joint6", "panda_joint7"];
+fn spherized_fetch() -> (PathBuf, PathBuf) {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("benches/peers/fetch");
+    (dir.join("fetch_spherized.urdf"), dir.join("fetch.srdf"))
+}
 
-/// The family's obstacles: a table top under the hand's reach and a post beside the robot,
-/// as (name, full box size, centre).
-const BOXES: [(&str, [f64; 3], [f64; 3]); 2] =
-    [("table", [0.8, 1.2, 0.04], [0.65, 0.0, 0.2]), ("post", [0.1, 0.1, 0.6], [0.45, 0.0, 0.55])];
+/// A robot's planning group and the family's scene for it.
+struct Arm {
+    group: &'static str,
+    /// The group's joints.
+    joints: &'static [&'static str],
+    base: &'static str,
+    hand: &'static str,
+    /// The family's obstacles: a table top under the hand's reach and a post in front of the
+    /// robot, as (name, full box size, centre).
+    boxes: [(&'static str, [f64; 3], [f64; 3]); 2],
+    /// The least forward reach and height of the hand at a start or goal (m).
+    hand_x: f64,
+    hand_z: f64,
+}
+
+const PANDA: Arm = Arm {
+    group: "panda_arm",
+    joints: &[
+        "panda_joint1",
+        "panda_joint2",
+        "panda_joint3",
+        "panda_joint4",
+        "panda_joint5",
+        "panda_joint6",
+        "panda_joint7",
+    ],
+    base: "panda_link0",
+    hand: "panda_hand",
+    boxes: [("table", [0.8, 1.2, 0.04], [0.65, 0.0, 0.2]), ("post", [0.1, 0.1, 0.6], [0.45, 0.0, 0.55])],
+    hand_x: 0.3,
+    hand_z: 0.3,
+};
+
+const FETCH: Arm = Arm {
+    group: "arm_with_torso",
+    joints: &[
+        "torso_lift_joint",
+        "shoulder_pan_joint",
+        "shoulder_lift_joint",
+        "upperarm_roll_joint",
+        "elbow_flex_joint",
+        "forearm_roll_joint",
+        "wrist_flex_joint",
+        "wrist_roll_joint",
+    ],
+    base: "base_link",
+    hand: "gripper_link",
+    boxes: [("table", [0.6, 1.2, 0.04], [0.85, 0.0, 0.7]), ("post", [0.1, 0.1, 0.6], [0.65, 0.0, 1.02])],
+    hand_x: 0.5,
+    hand_z: 0.8,
+};
 
 /// Write `count` problems (scene + request) of a family into `dir`: start and goal drawn at
 /// random within the limits, collision-free among the boxes, the hand on either side of the
 /// post (so most straight lines hit it).
-fn write_family(urdf: &Path, dir: &Path, count: usize, pose_goals: bool) {
+fn write_family(arm: &Arm, urdf: &Path, dir: &Path, count: usize, pose_goals: bool) {
     std::fs::create_dir_all(dir).expect("family folder");
-    let robot = load_urdf(urdf, None).expect("Panda loads");
+    let robot = load_urdf(urdf, None).expect("the robot loads");
     let mut env = Environment::new();
-    for (name, size, at) in BOXES {
+    for (name, size, at) in arm.boxes {
         env.add(Obstacle::new(
             name,
             Isometry3::translation(at[0], at[1], at[2]),
@@ -49,20 +100,21 @@ fn write_family(urdf: &Path, dir: &Path, count: usize, pose_goals: bool) {
     let mut checked = robot.clone();
     embodied_models::collision::disable_always_colliding(&mut checked, 500, 0x5eed);
     let model = CollisionModel::new(&checked, env);
-    let hand = robot.link_index("panda_hand").expect("panda_hand");
+    let hand = robot.link_index(arm.hand).expect("the hand link");
     let mut rng = Rng::new(42);
     let mut draw = |side: f64| loop {
         let q = robot.random_configuration(&mut rng);
         let p = robot.link_pose(&q, hand).translation.vector;
-        if model.first_collision(&q).is_none() && p.y * side > 0.15 && p.x > 0.3 && p.z > 0.3 {
+        if model.first_collision(&q).is_none() && p.y * side > 0.15 && p.x > arm.hand_x && p.z > arm.hand_z {
             return q;
         }
     };
     let mut scene = String::from("name: table_post\nworld:\n  collision_objects:\n");
-    for (name, size, at) in BOXES {
+    for (name, size, at) in arm.boxes {
         let _ = write!(
             scene,
-            "    - id: {name}\n      header: {{frame_id: panda_link0}}\n      primitives:\n        - type: box\n          dimensions: {size:?}\n      primitive_poses:\n        - position: {at:?}\n          orientation: [0, 0, 0, 1]\n"
+            "    - id: {name}\n      header: {{frame_id: {}}}\n      primitives:\n        - type: box\n          dimensions: {size:?}\n      primitive_poses:\n        - position: {at:?}\n          orientation: [0, 0, 0, 1]\n",
+            arm.base
         );
     }
     let names = robot.joint_names();
@@ -70,7 +122,8 @@ fn write_family(urdf: &Path, dir: &Path, count: usize, pose_goals: bool) {
         let (start, goal) = (draw(1.0), draw(-1.0));
         std::fs::write(dir.join(format!("scene{k:04}.yaml")), &scene).expect("scene");
         let mut req = format!(
-            "group_name: panda_arm\nallowed_planning_time: 5\nstart_state:\n  joint_state:\n    name: [{}]\n    position: {:?}\ngoal_constraints:\n  - joint_constraints:\n",
+            "group_name: {}\nallowed_planning_time: 5\nstart_state:\n  joint_state:\n    name: [{}]\n    position: {:?}\ngoal_constraints:\n  - joint_constraints:\n",
+            arm.group,
             names.join(", "),
             start
         );
@@ -81,11 +134,19 @@ fn write_family(urdf: &Path, dir: &Path, count: usize, pose_goals: bool) {
             req = req.replace("  - joint_constraints:\n", "");
             let _ = write!(
                 req,
-                "  - position_constraints:\n      - link_name: panda_hand\n        header: {{frame_id: panda_link0}}\n        constraint_region:\n          primitives: [{{type: sphere, dimensions: [0.005]}}]\n          primitive_poses: [{{position: [{}, {}, {}]}}]\n    orientation_constraints:\n      - link_name: panda_hand\n        orientation: [{}, {}, {}, {}]\n        absolute_x_axis_tolerance: 0.02\n        absolute_y_axis_tolerance: 0.02\n        absolute_z_axis_tolerance: 0.02\n",
-                t.x, t.y, t.z, q.x, q.y, q.z, q.w
+                "  - position_constraints:\n      - link_name: {hand}\n        header: {{frame_id: {base}}}\n        constraint_region:\n          primitives: [{{type: sphere, dimensions: [0.005]}}]\n          primitive_poses: [{{position: [{}, {}, {}]}}]\n    orientation_constraints:\n      - link_name: {hand}\n        orientation: [{}, {}, {}, {}]\n        absolute_x_axis_tolerance: 0.02\n        absolute_y_axis_tolerance: 0.02\n        absolute_z_axis_tolerance: 0.02\n",
+                t.x,
+                t.y,
+                t.z,
+                q.x,
+                q.y,
+                q.z,
+                q.w,
+                hand = arm.hand,
+                base = arm.base
             );
         } else {
-            for j in ARM {
+            for j in arm.joints {
                 let d = names.iter().position(|n| n == j).expect("arm joint");
                 let _ = writeln!(req, "      - {{joint_name: {j}, position: {}}}", goal[d]);
             }
@@ -96,11 +157,11 @@ fn write_family(urdf: &Path, dir: &Path, count: usize, pose_goals: bool) {
 
 /// Write a joint-goal family of `joint_goals` problems and a pose-goal family of `pose_goals`
 /// for `urdf`, plan both with `bench mbm`, and check that every problem is solved and its path
-/// re-checked, in the group's seven joints, and that each family counts all its problems.
-fn plans_and_verifies(urdf: &Path, srdf: &Path, dir: &TempDir, joint_goals: usize, pose_goals: usize) {
+/// re-checked, in the group's joints, and that each family counts all its problems.
+fn plans_and_verifies(arm: &Arm, urdf: &Path, srdf: &Path, dir: &TempDir, joint_goals: usize, pose_goals: usize) {
     let problems = dir.join("problems");
-    write_family(urdf, &problems.join("table_post_panda"), joint_goals, false);
-    write_family(urdf, &problems.join("table_post_pose_panda"), pose_goals, true);
+    write_family(arm, urdf, &problems.join("table_post"), joint_goals, false);
+    write_family(arm, urdf, &problems.join("table_post_pose"), pose_goals, true);
     let s = |p: &Path| p.to_str().expect("utf-8 path").to_string();
     let (code, stdout, stderr) = embodied(&[
         "bench",
@@ -120,7 +181,9 @@ fn plans_and_verifies(urdf: &Path, srdf: &Path, dir: &TempDir, joint_goals: usiz
     let problems = report["problems"].as_array().expect("problems");
     assert_eq!(problems.len(), joint_goals + pose_goals, "{report}");
     for p in problems {
-        assert_eq!(p["joint_names"].as_array().map(Vec::len), Some(7), "the group's seven joints: {p}");
+        let names: Vec<&str> =
+            p["joint_names"].as_array().expect("joint names").iter().filter_map(|n| n.as_str()).collect();
+        assert_eq!(names, arm.joints, "the group's joints: {p}");
         assert_eq!(p["solved"], true, "{p}");
         assert_eq!(p["verified"], true, "{p}");
     }
@@ -142,7 +205,7 @@ fn bench_mbm_plans_and_verifies_a_panda_family() {
         "<robot name=\"panda\"><group name=\"panda_arm\"><chain base_link=\"panda_link0\" tip_link=\"panda_link8\"/></group></robot>",
     )
     .expect("srdf");
-    plans_and_verifies(&panda_urdf(), &srdf, &dir, 6, 3);
+    plans_and_verifies(&PANDA, &panda_urdf(), &srdf, &dir, 6, 3);
 }
 
 /// The spherized Panda of the VAMP comparison (spheres only, the fingers fixed) plans through
@@ -151,5 +214,17 @@ fn bench_mbm_plans_and_verifies_a_panda_family() {
 fn bench_mbm_plans_and_verifies_the_spherized_panda() {
     let dir = TempDir::new("mbm-panda-spheres");
     let (urdf, srdf) = spherized_panda();
-    plans_and_verifies(&urdf, &srdf, &dir, 8, 3);
+    plans_and_verifies(&PANDA, &urdf, &srdf, &dir, 8, 3);
+}
+
+/// The spherized Fetch of the VAMP comparison: VAMP's URDF and SRDF as they are (meshes named
+/// by the visuals only, disabled pairs naming links the URDF lacks), on the sphere fast path,
+/// planning in `arm_with_torso` with its prismatic torso lift.
+#[test]
+fn bench_mbm_plans_and_verifies_the_spherized_fetch() {
+    let dir = TempDir::new("mbm-fetch-spheres");
+    let (urdf, srdf) = spherized_fetch();
+    let robot = load_urdf(&urdf, Some(&srdf)).expect("the Fetch loads with its SRDF");
+    assert!(CollisionModel::new(&robot, Environment::new()).uses_sphere_path(), "every Fetch shape a sphere");
+    plans_and_verifies(&FETCH, &urdf, &srdf, &dir, 8, 3);
 }
