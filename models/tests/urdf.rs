@@ -503,6 +503,34 @@ fn srdf_home_with_unknown_joint_is_a_warning_naming_the_srdf_line() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
+/// A `<disable_collisions>` naming a link the URDF lacks (VAMP's Fetch SRDF has
+/// `torso_link_link_collision_2`) disables nothing and is a warning naming the line and the link;
+/// the pairs around it still apply.
+#[test]
+fn srdf_disabled_pair_with_unknown_link_is_a_warning_naming_the_srdf_line() {
+    let urdf = fixture("tiny_gripper.urdf");
+    let dir = std::env::temp_dir().join(format!("embodied-srdf-pair-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    let srdf = dir.join("pairs.srdf");
+    std::fs::write(
+        &srdf,
+        "<robot name=\"tiny_gripper\">\n<disable_collisions link1=\"base\" link2=\"arm\"/>\n\
+        <disable_collisions link1=\"arm\" link2=\"wirst\"/>\n<disable_collisions link1=\"wrist\" link2=\"finger_left\"/>\n</robot>",
+    )
+    .expect("written");
+    let d = embodied_models::formats::load_description(&urdf, Some(&srdf), &no_meshes()).expect("loads");
+    let all: Vec<String> = d.warnings.iter().map(|w| w.to_string()).collect();
+    let named: Vec<&String> = all.iter().filter(|w| w.contains("`wirst`")).collect();
+    assert_eq!(named.len(), 1, "{all:?}");
+    assert!(named[0].contains("pairs.srdf:3:") && named[0].contains("not in the URDF"), "{all:?}");
+    let index = |n: &str| d.robot.link_index(n).expect(n);
+    let pair = |a: &str, b: &str| (index(a).min(index(b)), index(a).max(index(b)));
+    let disabled = d.robot.disabled_pairs();
+    assert!(disabled.contains(&pair("base", "arm")) && disabled.contains(&pair("wrist", "finger_left")));
+    assert!(!disabled.contains(&pair("arm", "wrist")));
+    std::fs::remove_dir_all(&dir).ok();
+}
+
 #[test]
 fn error_missing_file_is_io() {
     let err = load_urdf(&fixture("nope.urdf"), None).expect_err("missing");

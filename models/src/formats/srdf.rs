@@ -39,6 +39,8 @@ pub struct Srdf {
     pub groups: Vec<Group>,
     /// `<disable_collisions link1 link2>` pairs, in file order.
     pub disabled: Vec<(String, String)>,
+    /// Where each of `disabled` is in the file (line, column; both 1-based), for warnings.
+    pub disabled_at: Vec<(u32, u32)>,
     /// `<enable_collisions link1 link2>` pairs: checked even if disabled elsewhere.
     pub enabled: Vec<(String, String)>,
     /// `<disable_default_collisions link>`: links whose collisions are off by default.
@@ -282,10 +284,13 @@ pub fn parse_srdf(text: &str, file: &Path) -> Result<Srdf, ModelError> {
                 });
             }
             "passive_joint" => srdf.passive_joints.push(x.attr(node, "name", "a joint name")?.to_string()),
-            "disable_collisions" => srdf.disabled.push((
-                x.attr(node, "link1", "a link name")?.to_string(),
-                x.attr(node, "link2", "a link name")?.to_string(),
-            )),
+            "disable_collisions" => {
+                srdf.disabled.push((
+                    x.attr(node, "link1", "a link name")?.to_string(),
+                    x.attr(node, "link2", "a link name")?.to_string(),
+                ));
+                srdf.disabled_at.push(x.position(node));
+            }
             "enable_collisions" => srdf.enabled.push((
                 x.attr(node, "link1", "a link name")?.to_string(),
                 x.attr(node, "link2", "a link name")?.to_string(),
@@ -535,6 +540,15 @@ impl Srdf {
                 );
             }
             g.chains.retain(|(b, t)| robot.link_index(b).is_some() && robot.link_index(t).is_some());
+        }
+        // A pair naming a link the URDF lacks disables nothing (kept, as MoveIt keeps it in its
+        // matrix): said once per name, so that a misspelt link does not leave a pair checked
+        // unnoticed.
+        for (k, (a, b)) in self.disabled.iter().enumerate() {
+            let at = self.disabled_at.get(k).copied().unwrap_or((0, 0));
+            for l in [a, b].into_iter().filter(|l| robot.link_index(l).is_none()) {
+                warn(at, format!("disable_collisions `{a}` / `{b}`: link `{l}` is not in the URDF, ignored"));
+            }
         }
         for s in &mut self.group_states {
             for (j, _) in s.values.iter().filter(|(j, _)| !joint_ok(j)) {
