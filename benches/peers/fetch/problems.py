@@ -38,6 +38,9 @@ import xml.etree.ElementTree as ET
 
 import numpy as np
 
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+from box_problems import vamp_row, write  # noqa: E402
+
 HERE = os.path.dirname(os.path.abspath(__file__))
 JOINTS = ["torso_lift_joint", "shoulder_pan_joint", "shoulder_lift_joint", "upperarm_roll_joint",
           "elbow_flex_joint", "forearm_roll_joint", "wrist_flex_joint", "wrist_roll_joint"]
@@ -219,38 +222,6 @@ def draw(rng, check, boxes, region):
     return None
 
 
-def numbers(values):
-    return "[" + ", ".join(repr(float(v)) for v in values) + "]"
-
-
-def write(folder, index, boxes, start, goal):
-    os.makedirs(folder, exist_ok=True)
-    scene = ["robot_model_name: fetch", "name: \"\"", "world:", "  collision_objects:"]
-    for k, (centre, half) in enumerate(boxes):
-        scene += [f"    - id: box{k}", "      primitives:", "        - type: box",
-                  f"          dimensions: {numbers(2 * h for h in half)}",
-                  "      primitive_poses:", f"        - position: {numbers(centre)}",
-                  "          orientation: [0, 0, 0, 1]"]
-    with open(os.path.join(folder, f"scene{index:04d}.yaml"), "w") as f:
-        f.write("\n".join(scene) + "\n")
-    request = ["goal_constraints:", "  - joint_constraints:"]
-    for name, v in zip(JOINTS, goal):
-        request += [f"      - joint_name: {name}", f"        position: {float(v)!r}"]
-    request += ["group_name: arm_with_torso", "start_state:", "  joint_state:",
-                f"    position: {numbers(start)}", f"    name: [{', '.join(JOINTS)}]"]
-    with open(os.path.join(folder, f"request{index:04d}.yaml"), "w") as f:
-        f.write("\n".join(request) + "\n")
-
-
-def vamp_row(family, index, boxes, start, goal):
-    return {"problem": family, "index": index, "valid": True,
-            "start": [float(v) for v in start], "goals": [[float(v) for v in goal]],
-            "sphere": [], "cylinder": [],
-            "box": [{"name": f"box{k}", "position": [float(c) for c in centre],
-                     "orientation_euler_xyz": [0.0, 0.0, 0.0], "half_extents": [float(h) for h in half]}
-                    for k, (centre, half) in enumerate(boxes)]}
-
-
 def checker(without_vamp):
     if not without_vamp:
         # In a child first: a wheel built for another processor dies on import (SIGILL).
@@ -286,7 +257,7 @@ def main():
             if start is None or goal is None or check.valid_motion(start, goal, boxes):
                 continue
             index = len(rows) + 1
-            write(os.path.join(out, family), index, boxes, start, goal)
+            write(os.path.join(out, family), index, boxes, start, goal, "fetch", "arm_with_torso", JOINTS)
             rows.append(vamp_row(family, index, boxes, start, goal))
         problems[family] = rows
         print(f"{family}: {len(rows)} problems", file=sys.stderr)

@@ -30,6 +30,9 @@ import os
 import sys
 
 import numpy as np
+
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+from box_problems import vamp_row, write  # noqa: E402
 import vamp
 
 JOINTS = [f"panda_joint{i}" for i in range(1, 8)]
@@ -96,38 +99,6 @@ def draw(rng, env, region):
     return None
 
 
-def numbers(values):
-    return "[" + ", ".join(repr(float(v)) for v in values) + "]"
-
-
-def write(folder, index, boxes, start, goal):
-    os.makedirs(folder, exist_ok=True)
-    scene = ["robot_model_name: panda", "name: \"\"", "world:", "  collision_objects:"]
-    for k, (centre, half) in enumerate(boxes):
-        scene += [f"    - id: box{k}", "      primitives:", "        - type: box",
-                  f"          dimensions: {numbers(2 * h for h in half)}",
-                  "      primitive_poses:", f"        - position: {numbers(centre)}",
-                  "          orientation: [0, 0, 0, 1]"]
-    with open(os.path.join(folder, f"scene{index:04d}.yaml"), "w") as f:
-        f.write("\n".join(scene) + "\n")
-    request = ["goal_constraints:", "  - joint_constraints:"]
-    for name, v in zip(JOINTS, goal):
-        request += [f"      - joint_name: {name}", f"        position: {float(v)!r}"]
-    request += ["group_name: panda_arm", "start_state:", "  joint_state:",
-                f"    position: {numbers(start)}", f"    name: [{', '.join(JOINTS)}]"]
-    with open(os.path.join(folder, f"request{index:04d}.yaml"), "w") as f:
-        f.write("\n".join(request) + "\n")
-
-
-def vamp_row(family, index, boxes, start, goal):
-    return {"problem": family, "index": index, "valid": True,
-            "start": [float(v) for v in start], "goals": [[float(v) for v in goal]],
-            "sphere": [], "cylinder": [],
-            "box": [{"name": f"box{k}", "position": [float(c) for c in centre],
-                     "orientation_euler_xyz": [0.0, 0.0, 0.0], "half_extents": [float(h) for h in half]}
-                    for k, (centre, half) in enumerate(boxes)]}
-
-
 def main():
     if len(sys.argv) < 2:
         sys.exit(__doc__)
@@ -149,7 +120,7 @@ def main():
             if start is None or goal is None or vamp.panda.validate_motion(start.tolist(), goal.tolist(), env):
                 continue
             index = len(rows) + 1
-            write(os.path.join(out, family), index, boxes, start, goal)
+            write(os.path.join(out, family), index, boxes, start, goal, "panda", "panda_arm", JOINTS)
             rows.append(vamp_row(family, index, boxes, start, goal))
         problems[family] = rows
     with open(os.path.join(out, "vamp.json"), "w") as f:
