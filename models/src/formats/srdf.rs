@@ -542,13 +542,25 @@ impl Srdf {
             g.chains.retain(|(b, t)| robot.link_index(b).is_some() && robot.link_index(t).is_some());
         }
         // A pair naming a link the URDF lacks disables nothing (kept, as MoveIt keeps it in its
-        // matrix): said once per name, so that a misspelt link does not leave a pair checked
-        // unnoticed.
+        // matrix): said once per name, at its first pair, so that a misspelt link does not
+        // leave a pair checked unnoticed (and a URDF that leaves links out is not a flood).
+        let mut missing: Vec<(&str, (u32, u32), usize)> = Vec::new();
         for (k, (a, b)) in self.disabled.iter().enumerate() {
             let at = self.disabled_at.get(k).copied().unwrap_or((0, 0));
             for l in [a, b].into_iter().filter(|l| robot.link_index(l).is_none()) {
-                warn(at, format!("disable_collisions `{a}` / `{b}`: link `{l}` is not in the URDF, ignored"));
+                match missing.iter_mut().find(|(name, _, _)| *name == l.as_str()) {
+                    Some((_, _, count)) => *count += 1,
+                    None => missing.push((l, at, 1)),
+                }
             }
+        }
+        for (l, at, count) in missing {
+            let pairs = if count == 1 {
+                "its disable_collisions pair is".to_string()
+            } else {
+                format!("its {count} disable_collisions pairs are")
+            };
+            warn(at, format!("link `{l}` is not in the URDF: {pairs} ignored"));
         }
         for s in &mut self.group_states {
             for (j, _) in s.values.iter().filter(|(j, _)| !joint_ok(j)) {
