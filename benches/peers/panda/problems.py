@@ -32,6 +32,7 @@ import sys
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+import box_problems  # noqa: E402
 from box_problems import vamp_row, write  # noqa: E402
 import vamp
 
@@ -56,29 +57,11 @@ def shelf(rng):
 
 
 def table(rng):
-    """Boxes and hand regions of a two-board table with posts."""
-    x = 0.6 + rng.uniform(-0.05, 0.05)
-    boxes = [((x, 0, 0.35), (0.3, 0.6, 0.02)), ((x, 0, 0.9), (0.3, 0.6, 0.02))]
-    for _ in range(3):
-        boxes.append(((x + rng.uniform(-0.2, 0.2), rng.uniform(-0.5, 0.5), 0.45), (0.04, 0.04, 0.08)))
-    regions = [((x - 0.1, side * 0.35, 0.6), (0.12, 0.15, 0.1)) for side in (-1, 1)]
-    return boxes, regions
+    return box_problems.table(rng, 0.6, 0.0)
 
 
 def cage(rng):
-    """Boxes and hand regions of a cage open towards the robot, on a table."""
-    x, y = 0.55 + rng.uniform(-0.05, 0.05), rng.uniform(-0.15, 0.15)
-    inner, wall, floor = 0.15, 0.02, 0.3
-    top = floor + 2 * inner
-    boxes = [((x + 0.1, y, floor - 0.02), (0.35, 0.6, 0.02))]  # the table
-    boxes.append(((x, y, floor - wall), (inner + wall, inner + wall, wall)))  # the cage's floor
-    boxes.append(((x, y, top + wall), (inner + wall, inner + wall, wall)))  # its roof
-    boxes.append(((x + inner + wall, y, floor + inner), (wall, inner + wall, inner)))  # its back
-    for side in (-1, 1):
-        boxes.append(((x, y + side * (inner + wall), floor + inner), (inner + wall, wall, inner)))
-    outside = [((x - 0.1, y + side * 0.4, floor + 0.25), (0.1, 0.1, 0.1)) for side in (-1, 1)]
-    inside = ((x + 0.02, y, floor + inner), (0.06, 0.06, 0.06))
-    return boxes, outside + [inside]
+    return box_problems.cage(rng, 0.55, 0.3)
 
 
 def environment(boxes):
