@@ -166,6 +166,8 @@ struct Body {
     plain: bool,
     /// The one coordinate of `pre_t` that is not zero, if only one is.
     t_axis: Option<usize>,
+    /// The joint's angle is its value as it is (scale 1, nothing added): read, not computed.
+    value_is_angle: bool,
 }
 
 /// A sphere robot's program and geometry in single precision, with its error bound.
@@ -450,6 +452,7 @@ impl Source for RowsIn<'_> {
         match dof {
             6 => transpose::<6>(self.0, cols),
             7 => transpose::<7>(self.0, cols),
+            8 => transpose::<8>(self.0, cols),
             _ => transpose_any(self.0, dof, cols),
         }
     }
@@ -485,6 +488,7 @@ impl Source for SegmentIn<'_> {
         match dof {
             6 => segment_columns::<6>(a, delta, end, &t, cols),
             7 => segment_columns::<7>(a, delta, end, &t, cols),
+            8 => segment_columns::<8>(a, delta, end, &t, cols),
             _ => {
                 cols.resize(dof, [0.0; LANES]);
                 for ((col, &aj), &dj) in cols.iter_mut().zip(a).zip(delta) {
@@ -789,15 +793,27 @@ const COS_T: [f32; 4] = [1.0 / 24.0, -1.0 / 720.0, 1.0 / 40_320.0, -1.0 / 3_628_
 /// `11 + i` roundings, `|r⁴Q| ≤ 0.016`, so under `0.18u`; the last sum `u`; the argument
 /// `0.79u · 0.71 < 0.56u`: under `3.1u`. The quadrant swaps sine and cosine and flips signs,
 /// exactly. Both bounds are below `4u`; the tests check them against `f64` on dense samples.
+/// With `fused` (AVX2 with FMA3), each product and the sum after it round once instead of
+/// twice. In the reduction, `x·2/π + 2^52·1.5` still rounds to `k` plus that constant, `k` an
+/// integer within `2^-32 + 1/2` of `x·2/π`; the first two steps give the very values of the
+/// unfused form (their products are exact: the first step's result is exact, the second's
+/// rounded once either way); the third rounds once, not twice. In the
+/// polynomials every term goes through fewer roundings than counted above. So the bounds hold
+/// for both forms (the tests check both).
 #[inline(always)]
-fn sin_cos_f32(x: &[f64; LANES]) -> ([f32; LANES], [f32; LANES]) {
+fn sin_cos_f32(x: &[f64; LANES], fused: bool) -> ([f32; LANES], [f32; LANES]) {
     use super::{PIO2_1, PIO2_2, PIO2_2T, SIN_ROUND};
+    // `a b + c`, fused where the instruction set fuses (one rounding fewer: within the bounds
+    // above, which count the roundings of the unfused form).
+    // (`fused` is a constant of each kernel: the branch goes once the kernel is inlined.)
+    let fma64 = |a: f64, b: f64, c: f64| if fused { a.mul_add(b, c) } else { a * b + c };
+    let fma = |a: f32, b: f32, c: f32| if fused { a.mul_add(b, c) } else { a * b + c };
     let mut r = [0.0f32; LANES];
     let mut quadrant = [0u32; LANES];
     for i in 0..LANES {
-        let shifted = x[i] * std::f64::consts::FRAC_2_PI + SIN_ROUND;
+        let shifted = fma64(x[i], std::f64::consts::FRAC_2_PI, SIN_ROUND);
         let k = shifted - SIN_ROUND;
-        r[i] = (((x[i] - k * PIO2_1) - k * PIO2_2) - k * PIO2_2T) as f32;
+        r[i] = fma64(-k, PIO2_2T, fma64(-k, PIO2_2, fma64(-k, PIO2_1, x[i]))) as f32;
         // The low bits of `shifted` hold `k` (two's complement).
         quadrant[i] = shifted.to_bits() as u32;
     }
@@ -807,10 +823,10 @@ fn sin_cos_f32(x: &[f64; LANES]) -> ([f32; LANES], [f32; LANES]) {
     for i in 0..LANES {
         let r1 = r[i];
         let r2 = r1 * r1;
-        let ps = s[0] + r2 * (s[1] + r2 * (s[2] + r2 * s[3]));
-        sin[i] = r1 + r1 * r2 * ps;
-        let pc = c[0] + r2 * (c[1] + r2 * (c[2] + r2 * c[3]));
-        cos[i] = (1.0 - 0.5 * r2) + (r2 * r2) * pc;
+        let ps = fma(r2, fma(r2, fma(r2, s[3], s[2]), s[1]), s[0]);
+        sin[i] = fma(r1 * r2, ps, r1);
+        let pc = fma(r2, fma(r2, fma(r2, c[3], c[2]), c[1]), c[0]);
+        cos[i] = fma(r2 * r2, pc, 1.0 - 0.5 * r2);
     }
     let mut out_s = [0.0f32; LANES];
     let mut out_c = [0.0f32; LANES];
@@ -962,7 +978,8 @@ impl Lanes {
             .bodies
             .iter()
             .skip(1)
-            .map(|b| Body {
+            .zip(&g.angles)
+            .map(|(b, a)| Body {
                 parent: b.parent,
                 pre: match &b.pre_perm {
                     Some((perm, sign)) => Pre::Perm(perm.map(Col::of), [f(sign[0]), f(sign[1]), f(sign[2])]),
@@ -975,6 +992,7 @@ impl Lanes {
                 // The double-precision body's forms (a zero coordinate stays zero in `f32`).
                 t_axis: b.t_axis,
                 plain: b.plain,
+                value_is_angle: a.scale == 1.0 && a.add == 0.0 && a.offset == 0.0,
             })
             .collect();
         // The running error bound (module documentation): per body, the error of a rotation
@@ -1560,8 +1578,9 @@ impl SphereGeom {
         for (k, (b, a)) in lanes.bodies.iter().zip(&self.angles).enumerate() {
             // The joint's value in each lane, read first, then turned into the angle in one
             // vectorisable pass (reading and arithmetic lane by lane in one loop was not).
-            let x = s.cols.get(a.dof).copied().unwrap_or([0.0; LANES]);
-            let v = x.map(|x| (x * a.scale + a.add) + a.offset);
+            // (`x · 1 + 0 + 0` is `x` but for the sign of a zero, which no test reads.)
+            let Some(x) = s.cols.get(a.dof) else { return None };
+            let v = if b.value_is_angle { *x } else { x.map(|x| (x * a.scale + a.add) + a.offset) };
             // `fold` with `&`, not `all`: no branch per lane.
             let finite = v.iter().fold(true, |f, v| f & (v.abs() < SIN_COS_RANGE));
             if !finite || (b.prismatic && v.iter().any(|x| x.abs() > PRISMATIC_BOUND)) {
@@ -1571,7 +1590,7 @@ impl SphereGeom {
                 s.sin[k] = F8(v.map(|x| x as f32));
             } else {
                 // Every `|v|` is below `SIN_COS_RANGE` (checked above).
-                let (sn, cs) = sin_cos_f32(&v);
+                let (sn, cs) = sin_cos_f32(&v, O::FUSED);
                 (s.sin[k], s.cos[k]) = (F8(sn), F8(cs));
             }
         }
@@ -2002,9 +2021,10 @@ mod tests {
         xs.extend((0..20_000).map(|_| rng.range(-1_000_000.0, 1_000_000.0)));
         let bound = SIN_COS_ERR - 2f64.powi(-52);
         let mut worst: f64 = 0.0;
-        for chunk in xs.chunks_exact(LANES) {
+        // Fused and not (both forms run in planning).
+        for (chunk, fused) in xs.chunks_exact(LANES).flat_map(|c| [(c, false), (c, true)]) {
             let x: [f64; LANES] = std::array::from_fn(|i| chunk[i]);
-            let (sn, cs) = sin_cos_f32(&x);
+            let (sn, cs) = sin_cos_f32(&x, fused);
             for i in 0..LANES {
                 let (s, c) = x[i].sin_cos();
                 let e = (f64::from(sn[i]) - s).abs().max((f64::from(cs[i]) - c).abs());

@@ -39,6 +39,9 @@ impl F8 {
 pub(crate) trait Ops: Copy {
     /// A vector of eight lanes in registers.
     type V: Copy;
+    /// Whether [`Ops::mul_add`] is fused here (and so `f32::mul_add` one instruction, in the
+    /// plain lane loops a kernel compiled for this instruction set runs).
+    const FUSED: bool;
     fn load(self, x: F8) -> Self::V;
     fn store(self, v: Self::V) -> F8;
     fn splat(self, x: f32) -> Self::V;
@@ -64,6 +67,7 @@ pub(crate) struct Base;
 
 impl Ops for Base {
     type V = wide::f32x8;
+    const FUSED: bool = false;
 
     #[inline(always)]
     fn load(self, x: F8) -> wide::f32x8 {
@@ -120,6 +124,7 @@ impl Ops for Base {
 #[cfg(target_arch = "x86_64")]
 impl Ops for pulp::x86::V3 {
     type V = pulp::f32x8;
+    const FUSED: bool = true;
 
     #[inline(always)]
     fn load(self, x: F8) -> pulp::f32x8 {
