@@ -1579,7 +1579,7 @@ impl SphereGeom {
             // The joint's value in each lane, read first, then turned into the angle in one
             // vectorisable pass (reading and arithmetic lane by lane in one loop was not).
             // (`x · 1 + 0 + 0` is `x` but for the sign of a zero, which no test reads.)
-            let Some(x) = s.cols.get(a.dof) else { return None };
+            let x = s.cols.get(a.dof)?;
             let v = if b.value_is_angle { *x } else { x.map(|x| (x * a.scale + a.add) + a.offset) };
             // `fold` with `&`, not `all`: no branch per lane.
             let finite = v.iter().fold(true, |f, v| f & (v.abs() < SIN_COS_RANGE));
