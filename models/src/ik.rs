@@ -187,7 +187,9 @@ impl Robot {
     /// `position_only`, or when no closed-form solution lies within the limits): damped least
     /// squares (Levenberg-Marquardt style), clamping every step into the limits and solving it
     /// along the joint limits and the ends of screw strokes it meets (so that it slides along
-    /// them), with deterministic random restarts. Continuous joints are returned wrapped near the seed.
+    /// them), with deterministic random restarts; a restart draws only the joints that move the end
+    /// effector, so every other joint is returned as `seed` has it. Continuous joints are returned
+    /// wrapped near the seed.
     pub fn inverse_kinematics(
         &self,
         ee: usize,
@@ -218,6 +220,7 @@ impl Robot {
         // Only the chain to the flange moves it (on two-irp6, not the other arm): the residual
         // and the Jacobian read no other pose.
         let chain = self.chain_to(effector.link);
+        let moving = self.dofs_moving(effector.link);
         let residual_of = |poses: &mut Vec<Isometry3<f64>>, q: &[f64]| -> (Vector6<f64>, f64, f64) {
             self.chain_kinematics_into(&chain, q, poses);
             let e = pose_error(&(poses[effector.link] * effector.tool), target);
@@ -236,7 +239,12 @@ impl Robot {
         // The Jacobian projected off the drive angles of the screws at a stroke end.
         let mut projected = Matrix6xX::zeros(n);
         for attempt in 0..=options.restarts {
-            let mut q = if attempt == 0 { seed.to_vec() } else { self.random_configuration(&mut rng) };
+            // A restart draws only the joints that move the end effector: the others keep the
+            // seed's values (the other arm of a two-arm robot stays where the caller has it).
+            let mut q = seed.to_vec();
+            if attempt > 0 {
+                self.randomise_dofs_into(&mut rng, |i| moving[i], &mut q);
+            }
             // Levenberg-Marquardt: accept a step only if it lowers the error, adapt the damping.
             let mut lambda = options.damping.max(1e-9);
             let (mut e, mut pos_err, mut rot_err) = residual_of(&mut poses, &q);

@@ -73,8 +73,14 @@ impl crate::Robot {
     }
     /// [`crate::Robot::random_configuration`] into a buffer.
     pub fn random_configuration_into(&self, rng: &mut Rng, q: &mut [f64]) {
+        self.randomise_dofs_into(rng, |_| true, q);
+    }
+
+    /// Draw the degrees of freedom `i` with `which(i)` as [`crate::Robot::random_configuration`]
+    /// does, leaving the others of `q` as they are (the strokes checked on the whole of `q`).
+    pub fn randomise_dofs_into(&self, rng: &mut Rng, which: impl Fn(usize) -> bool, q: &mut [f64]) {
         for _ in 0..1000 {
-            for (i, v) in q.iter_mut().enumerate() {
+            for (i, v) in q.iter_mut().enumerate().filter(|(i, _)| which(*i)) {
                 let l = self.dof_joint(i).limits;
                 *v = if l.is_bounded() {
                     rng.range(l.lower, l.upper)

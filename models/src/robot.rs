@@ -631,6 +631,19 @@ impl Robot {
         (flange, flange * e.tool)
     }
 
+    /// Which degrees of freedom move `link` (those its chain's joints read; a mimic joint reads
+    /// the one it follows), indexed like `q`.
+    pub fn dofs_moving(&self, link: usize) -> Vec<bool> {
+        let mut moving = vec![false; self.dof()];
+        for ji in self.chain_to(link) {
+            let j = &self.joints[ji];
+            if let Some(i) = j.dof_index.or(j.mimic.map(|(d, _, _)| d)) {
+                moving[i] = true;
+            }
+        }
+        moving
+    }
+
     /// The joints on the path from the root to `link`, root first.
     pub fn chain_to(&self, link: usize) -> Vec<usize> {
         let mut chain = Vec::new();

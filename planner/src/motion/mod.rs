@@ -815,7 +815,8 @@ fn resolve_goals<V: StateValidity>(
 /// lists (nearest the start first; `resolve_goals` keeps the first `ik_solutions` valid ones).
 /// Otherwise, or when the closed form finds none with the start's other joints (a track held
 /// where it is): up to `ik_solutions` distinct numerical solutions, the first seeded at the
-/// start, the others at random configurations.
+/// start, the others at the start with the joints that move the end effector drawn at random
+/// (a goal for one arm of two leaves the other where it starts).
 fn tool_pose_goals(
     robot: &Robot,
     start: &[f64],
@@ -840,11 +841,17 @@ fn tool_pose_goals(
     let mut solutions: Vec<Vec<f64>> = Vec::new();
     let mut last_error = None;
     let attempts = 2 * wanted + 2;
+    let moving = robot.dofs_moving(robot.end_effectors()[ee].link);
     for attempt in 0..attempts {
         if solutions.len() >= wanted {
             break;
         }
-        let seed = if attempt == 0 { start.to_vec() } else { robot.random_configuration(rng) };
+        // Later seeds draw only the joints that move the end effector: the others stay at the
+        // start, where a goal for this end effector must leave them.
+        let mut seed = start.to_vec();
+        if attempt > 0 {
+            robot.randomise_dofs_into(rng, |i| moving[i], &mut seed);
+        }
         let options = IkOptions {
             seed: settings.seed.wrapping_add(attempt as u64),
             restarts: if attempt == 0 { 20 } else { 2 },
@@ -961,5 +968,54 @@ mod tests {
             }
         }
         assert!(direct > 0 && searched > 0, "problems of both kinds found: {direct} direct, {searched} searched");
+    }
+
+    /// Two six-joint arms 2 m apart on one base, from URDF (no closed-form IK).
+    fn two_small_arms() -> Robot {
+        let mut urdf = String::from(r#"<robot name="two-arms"><link name="base"/>"#);
+        for (arm, y) in [("a", 0.0), ("b", 2.0)] {
+            let mut parent = "base".to_string();
+            for (k, axis) in ["0 0 1", "0 1 0", "0 1 0", "0 0 1", "0 1 0", "0 0 1"].iter().enumerate() {
+                let link = format!("{arm}{k}");
+                let origin = if k == 0 { format!("0 {y} 0.1") } else { "0 0 0.25".into() };
+                urdf += &format!(
+                    r#"<link name="{link}"><collision><origin xyz="0 0 0.15"/><geometry><sphere radius="0.05"/></geometry></collision></link>
+<joint name="{link}_j" type="revolute"><parent link="{parent}"/><child link="{link}"/><origin xyz="{origin}"/><axis xyz="{axis}"/><limit lower="-2.5" upper="2.5" velocity="1"/></joint>"#
+                );
+                parent = link;
+            }
+        }
+        urdf += "</robot>";
+        embodied_models::urdf::parse_urdf(&urdf, std::path::Path::new("two-arms.urdf"), &Default::default())
+            .expect("two arms load")
+    }
+
+    /// Every IK goal for one arm's tool pose, the start-seeded one and the randomly seeded ones,
+    /// leaves the other arm where it starts; and the plan ends there too.
+    #[test]
+    fn tool_pose_goals_of_one_arm_leave_the_other_where_it_starts() {
+        let robot = two_small_arms();
+        assert_eq!((robot.dof(), robot.end_effectors().len()), (12, 2));
+        let model = CollisionModel::new(&robot, embodied_models::Environment::new());
+        let mut rng = Rng::new(5);
+        let mut several = 0;
+        for case in 0..10 {
+            let start = robot.random_configuration(&mut rng);
+            let goal_q = robot.random_configuration(&mut rng);
+            let (_, pose) = robot.end_effector_poses(&goal_q, 1);
+            let settings = MotionSettings { seed: case, ..MotionSettings::default() };
+            let goals = tool_pose_goals(&robot, &start, 1, &pose, &settings, &mut Rng::new(case)).expect("IK");
+            for q in &goals {
+                assert_eq!(q[..6], start[..6], "case {case}: arm a moved for a goal of arm b");
+                let (_, reached) = robot.end_effector_poses(q, 1);
+                assert!((reached.translation.vector - pose.translation.vector).norm() < 1e-4, "case {case}");
+            }
+            several += usize::from(goals.len() > 1);
+            if let Ok(plan) = plan_motion(&model, &start, &Goal::ToolPose { end_effector: 1, pose }, &settings) {
+                assert_eq!(plan.path.last().expect("path")[..6], start[..6], "case {case}: the plan moved arm a");
+            }
+        }
+        // The randomly seeded solutions are what the property is about.
+        assert!(several >= 5, "only {several} of 10 cases found more than one solution");
     }
 }
