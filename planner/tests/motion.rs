@@ -784,9 +784,15 @@ fn probes_in_vector_lanes_give_the_paths_of_single_checks() {
                 break (a, b);
             }
         };
-        // Three attempts: a walled-off goal then costs 150,000 samples each way, which the
-        // single checks spend within the deadline (nine, the default, they do not).
-        let settings = MotionSettings { seed, rrt_restarts: 2, ..settings(PlannerKind::RrtConnect) };
+        // No deadline (the two runs would share one, and a busy machine would decide the
+        // answer): three attempts of 20,000 samples bound a walled-off goal's cost instead.
+        let settings = MotionSettings {
+            seed,
+            rrt_restarts: 2,
+            max_samples: 20_000,
+            deadline: Deadline::none(),
+            ..settings(PlannerKind::RrtConnect)
+        };
         let goal_q = Goal::Configuration(goal.clone());
         let lanes = RrtConnect::new(settings.clone()).plan(&model, &start, &goal_q);
         let ones = RrtConnect::new(settings.clone()).plan(&single, &start, &goal_q);
