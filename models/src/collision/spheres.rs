@@ -70,6 +70,9 @@ struct Body {
     /// joint, in the frame after `pre`.
     axis: Vector3<f64>,
     prismatic: bool,
+    /// Prismatic joints: the largest `|value + offset|` within the joint limits (infinite when
+    /// they do not bound it).
+    reach: f64,
     offset: f64,
     post: Option<(Matrix3<f64>, Vector3<f64>)>,
     value: Value,
@@ -782,6 +785,7 @@ impl SphereGeom {
                 pre_t: b.pre.translation.vector,
                 axis: b.axis.into_inner(),
                 prismatic: b.prismatic,
+                reach: b.reach,
                 offset: b.offset,
                 post: b.post.map(|p| (mat(&p.rotation), p.translation.vector)),
                 value: b.value,

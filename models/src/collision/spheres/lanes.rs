@@ -35,12 +35,16 @@
 //! are at most 1 and every row and column is a unit vector (so `X1 ≤ √3` and `XY ≤ 1` for a
 //! row against a column), sines and cosines at most 1 (`|m0 c| + |m1 s| ≤ 1`), a point's
 //! coordinates at most the sum of the translations above it (`|base|` plus each `|pre_t|` and
-//! `|post_t|`, and each prismatic travel up to [`PRISMATIC_BOUND`]). A point `r t + p` is one
+//! `|post_t|`, and each prismatic joint's travel: its reach within its limits, at most
+//! [`PRISMATIC_BOUND`]; see [`prismatic_travel`]). A point `r t + p` is one
 //! sum of four terms, the origin's coordinate and three products, each of which goes through
 //! at most four roundings: its error is the products' from their factors' errors, plus the
 //! origin's, plus `γ_4` times the sum of the terms' magnitudes. Applied to every body's
 //! rotation and origin and then to every sphere and bounding centre, this gives `e_c`, a bound
 //! on the error of any coordinate of any centre the batch computes, whatever the joint values.
+//! A rotation before a joint within `δ ≤` [`NEAR_PERMUTATION`] of a signed permutation (a
+//! quarter turn written in decimals) is taken as that permutation, exactly; the bound adds its
+//! `√3 δ` to the entries' error there.
 //!
 //! *Distances.* Each test asks whether a point `p` (a sphere's or bounding sphere's centre) is
 //! farther than `R` (its radius plus the margin) from a solid, or two centres farther than `R`
@@ -65,8 +69,9 @@
 //! fewer. The tests compare both exact question and computation on random and near-contact
 //! configurations against the `f64` query, and check that a lane called free is free there.
 //!
-//! Robots whose prismatic joints travel more than [`PRISMATIC_BOUND`], or a configuration that
-//! is not finite, get no free lane (the `f64` query answers).
+//! A lane whose prismatic joint travels more than the bound covers (outside the joint's limits,
+//! or past [`PRISMATIC_BOUND`]), or whose configuration is not finite, is never called free (the
+//! `f64` query answers).
 
 use super::simd8::{self, F8, Isa, Kernel, L, Ops};
 use super::{Check, SIN_COS_RANGE, Solid, SphereGeom};
@@ -76,6 +81,48 @@ pub(crate) const LANES: usize = 8;
 
 /// The largest prismatic joint travel (m) the error bound covers.
 pub(crate) const PRISMATIC_BOUND: f64 = 16.0;
+
+/// The largest entry-wise deviation of a rotation the batch takes for the signed permutation
+/// nearest it. URDF files write quarter turns in decimals (`rpy="1.57079632679 0 0"` in the
+/// Panda's, `1.5708` in many): the rotation is then `δ` off a permutation (`|cos 1.57079632679|
+/// ≈ 5e-12`), and taking the permutation saves the batch a matrix product per body and its
+/// error bound a factor of about √3 per body, for `√3 δ` per body (module documentation).
+const NEAR_PERMUTATION: f64 = 1e-6;
+
+/// The signed permutation the batch takes for body `b`'s rotation before its joint, with the
+/// largest entry-wise deviation `δ` from it (0 when exact): see [`NEAR_PERMUTATION`].
+fn lane_permutation(b: &super::Body) -> Option<([usize; 3], [f64; 3], f64)> {
+    if let Some((perm, sign)) = b.pre_perm {
+        return Some((perm, sign, 0.0));
+    }
+    let m = &b.pre_r;
+    let (mut perm, mut sign) = ([0usize; 3], [0.0; 3]);
+    for c in 0..3 {
+        let r = (0..3).max_by(|&x, &y| m[(x, c)].abs().total_cmp(&m[(y, c)].abs()))?;
+        perm[c] = r;
+        sign[c] = if m[(r, c)] < 0.0 { -1.0 } else { 1.0 };
+    }
+    if perm[0] == perm[1] || perm[1] == perm[2] || perm[0] == perm[2] {
+        return None;
+    }
+    let mut delta: f64 = 0.0;
+    for c in 0..3 {
+        for r in 0..3 {
+            let p = if r == perm[c] { sign[c] } else { 0.0 };
+            delta = delta.max((m[(r, c)] - p).abs());
+        }
+    }
+    // `delta` is computed in `f64`: rounded up by a relative 2^-50 (well above its few roundings).
+    (delta <= NEAR_PERMUTATION).then_some((perm, sign, delta * (1.0 + 1.0 / 1_125_899_906_842_624.0)))
+}
+
+/// The travel the error bound of a prismatic joint of this reach covers: the reach with a
+/// relative 10^-9 to spare (a value computed at a limit may round past the reach computed from
+/// it), at most [`PRISMATIC_BOUND`]. A joint of 0.4 m adds 0.4 m, not 16 m, to the coordinates'
+/// bound, and so to every error term that scales with it.
+fn prismatic_travel(reach: f64) -> f64 {
+    if reach.is_finite() { (reach * (1.0 + 1e-9) + 1e-12).min(PRISMATIC_BOUND) } else { PRISMATIC_BOUND }
+}
 
 type F<O> = L<O>;
 /// A point per lane (struct of arrays).
@@ -160,6 +207,9 @@ struct Body {
     pre: Pre,
     pre_t: [f32; 3],
     prismatic: bool,
+    /// Prismatic joints: the largest travel `|v|` the error bound covers (the joint's reach
+    /// within its limits, at most [`PRISMATIC_BOUND`]); a lane past it is left to the `f64` query.
+    travel: f64,
     axis: [f32; 3],
     post: Option<([f32; 9], [f32; 3])>,
     /// A revolute joint right after the parent's frame: no permutation, no sign, nothing after.
@@ -981,12 +1031,13 @@ impl Lanes {
             .zip(&g.angles)
             .map(|(b, a)| Body {
                 parent: b.parent,
-                pre: match &b.pre_perm {
-                    Some((perm, sign)) => Pre::Perm(perm.map(Col::of), [f(sign[0]), f(sign[1]), f(sign[2])]),
+                pre: match lane_permutation(b) {
+                    Some((perm, sign, _)) => Pre::Perm(perm.map(Col::of), [f(sign[0]), f(sign[1]), f(sign[2])]),
                     None => Pre::Mat(m9(&b.pre_r)),
                 },
                 pre_t: v3(&b.pre_t),
                 prismatic: b.prismatic,
+                travel: prismatic_travel(b.reach),
                 axis: v3(&b.axis),
                 post: b.post.as_ref().map(|(r, t)| (m9(r), v3(t))),
                 // The double-precision body's forms (a zero coordinate stays zero in `f32`).
@@ -1018,16 +1069,18 @@ impl Lanes {
         mp[0] = g.base_t.amax();
         for (k, b) in g.bodies.iter().enumerate().skip(1) {
             let p = b.parent;
-            let em = match b.pre_perm {
-                Some(_) => er[p],
+            // A permutation picks the parent's entries exactly; one standing in for a rotation
+            // `δ` off it adds `|R (M - P)| ≤ √3 δ` (a rotation's row sums to at most √3).
+            let em = match lane_permutation(b) {
+                Some((_, _, delta)) => er[p] + s3 * delta * (1.0 + 4.0 * U),
                 None => dot_err(er[p], U, s3, s3, 1.0, 3.0),
             };
             let mut r_err = if b.prismatic { em } else { dot_err(em, sc, 2f64.sqrt(), 2f64.sqrt(), 1.0, 2.0).max(em) };
             let mut p_err = point(er[p], ep[p], mp[p], &b.pre_t);
             let mut m = mp[p] + b.pre_t.norm();
             if b.prismatic {
-                // `m (axis v)`, `|v| ≤ PRISMATIC_BOUND`, then added to the origin.
-                let a = b.axis * PRISMATIC_BOUND;
+                // `m (axis v)`, `|v| ≤` the joint's travel, then added to the origin.
+                let a = b.axis * prismatic_travel(b.reach);
                 let a_err = gamma(3.0) * a.amax();
                 let dot = dot_err(em, a_err, s3, a.abs().sum(), a.norm(), 3.0);
                 p_err += dot + gamma(1.0) * (m + a.norm() + p_err + dot);
@@ -1551,7 +1604,7 @@ impl SphereGeom {
     }
 
     /// Bodies of the configurations `qs`, in the batch's working memory; `None` when a joint
-    /// value is not finite or a prismatic travel exceeds [`PRISMATIC_BOUND`].
+    /// value is not finite or a prismatic travel exceeds its joint's bound ([`prismatic_travel`]).
     #[inline(always)]
     fn pose_lanes<'s, O: Ops, S: Source>(&self, o: O, qs: S, dof: usize, s: &'s mut LaneScratch) -> Option<Work<'s>> {
         let lanes = &self.lanes;
@@ -1583,7 +1636,7 @@ impl SphereGeom {
             let v = if b.value_is_angle { *x } else { x.map(|x| (x * a.scale + a.add) + a.offset) };
             // `fold` with `&`, not `all`: no branch per lane.
             let finite = v.iter().fold(true, |f, v| f & (v.abs() < SIN_COS_RANGE));
-            if !finite || (b.prismatic && v.iter().any(|x| x.abs() > PRISMATIC_BOUND)) {
+            if !finite || (b.prismatic && v.iter().any(|x| x.abs() > b.travel)) {
                 return None;
             }
             if b.prismatic {
@@ -2002,6 +2055,120 @@ mod tests {
             }
         }
         eprintln!("largest centre error {worst:e} of a bound {bound:e}");
+    }
+
+    /// Quarter turns written in decimals (URDF style) take the permutation nearest them, within
+    /// [`NEAR_PERMUTATION`]: the centres stay within the error bound of double precision (which
+    /// counts each permutation's deviation); a turn further off (`1.5708`) keeps its matrix.
+    #[test]
+    fn near_quarter_turns_take_permutations_within_their_bound() {
+        use crate::{JointKind, JointLimits, PlacedShape, RobotBuilder, Shape};
+        let q = 1.570_796_f64; // 3.3e-7 off a quarter turn
+        let turns = [
+            (q, 0.0, 0.0),
+            (-q, 0.0, 0.0),
+            (1.570_796_326_79, 0.0, 0.0),
+            (0.0, q, 0.0),
+            (0.0, 0.0, -q),
+            (1.5708, 0.0, 0.0),
+        ];
+        let mut b = RobotBuilder::new("decimal-turns");
+        let mut parent = b.link("base", vec![]);
+        for (k, (r, p, y)) in turns.into_iter().enumerate() {
+            let balls = vec![
+                PlacedShape::new(Isometry3::translation(0.0, 0.0, 0.05), Shape::sphere(0.03)),
+                PlacedShape::new(Isometry3::translation(0.08, 0.02, 0.1), Shape::sphere(0.03)),
+            ];
+            let link = b.link(format!("l{k}"), balls);
+            let origin = Isometry3::from_parts(
+                Vector3::new(0.02 * k as f64, 0.1, 0.15).into(),
+                UnitQuaternion::from_euler_angles(r, p, y),
+            );
+            let lim = JointLimits::new(-3.0, 3.0, 1.0, 1.0);
+            b.joint(
+                format!("j{k}"),
+                JointKind::Revolute,
+                parent,
+                link,
+                origin,
+                Vector3::z(),
+                0.0,
+                Isometry3::identity(),
+                lim,
+            );
+            parent = link;
+        }
+        let robot = b.build().expect("a valid arm");
+        let geom = SphereGeom::new(&crate::collision::RobotGeom::new(&robot), false).expect("a sphere robot");
+        let kinds: Vec<bool> = geom.lanes.bodies.iter().map(|b| matches!(b.pre, Pre::Perm(..))).collect();
+        assert_eq!(kinds, [true, true, true, true, true, false], "permutations but for the last body");
+        // Inexact ones (the turn about the joint's own axis joins its angle; the others stay):
+        // the nearness is what is tested.
+        let near = geom.bodies.iter().skip(1).filter(|b| b.pre_perm.is_none()).count();
+        assert!(near >= 4, "{near} inexact turns");
+        let bound = geom.lanes.centre_err;
+        let dof = robot.dof();
+        let mut rng = crate::Rng::new(29);
+        let (mut s, mut f) = (LaneScratch::new(), super::super::SphereScratch::new());
+        let mut worst: f64 = 0.0;
+        for _ in 0..300 {
+            let qs: Vec<f64> = (0..LANES).flat_map(|_| robot.random_configuration(&mut rng)).collect();
+            let mut w = geom.pose_lanes(Base, RowsIn(&qs), dof, &mut s).expect("posed");
+            for l in 0..geom.links.len() {
+                geom.pose_lane_link(Base, l, &mut w);
+            }
+            for (i, q) in qs.chunks(dof).enumerate() {
+                geom.pose(q, &mut f);
+                for (k, c) in geom.centre.iter().enumerate() {
+                    let b = geom.links.iter().find(|l| (l.first..l.end).contains(&k)).expect("a link").body;
+                    let exact = f.rot[b] * c + f.pos[b];
+                    for d in 0..3 {
+                        let e = (f64::from(w.centre[k][d].0[i]) - exact[d]).abs();
+                        assert!(e <= bound, "sphere {k}, coordinate {d}, lane {i}: off by {e:e} (bound {bound:e})");
+                        worst = worst.max(e);
+                    }
+                }
+            }
+        }
+        // The deviations (3.3e-7 a body) are what the batch is off by, not its rounding.
+        assert!(worst > 1e-7, "largest centre error {worst:e}");
+        eprintln!("largest centre error {worst:e} of a bound {bound:e}");
+    }
+
+    /// A prismatic joint's travel is its reach within its limits (3 m here, not
+    /// [`PRISMATIC_BOUND`]): a batch with the joint at either limit is posed, within the bound
+    /// of double precision; one with a lane past the limit is left to the `f64` query.
+    #[test]
+    fn prismatic_travel_is_the_joints_reach() {
+        let robot = every_body_form();
+        let geom = SphereGeom::new(&crate::collision::RobotGeom::new(&robot), false).expect("a sphere robot");
+        let travels: Vec<f64> = geom.lanes.bodies.iter().filter(|b| b.prismatic).map(|b| b.travel).collect();
+        assert_eq!(travels.len(), 1, "test setup: one prismatic joint");
+        assert!(travels[0] >= 3.0 && travels[0] < 3.0 + 1e-6, "travel {}", travels[0]);
+        // Joint 4 is the prismatic one (limits ±3).
+        let dof = robot.dof();
+        let mut rng = crate::Rng::new(5);
+        let mut s = LaneScratch::new();
+        let mut f = super::super::SphereScratch::new();
+        for (at, posed) in [(3.0, true), (-3.0, true), (3.0 + 1e-6, false), (-3.0 - 1e-6, false), (20.0, false)] {
+            let mut qs: Vec<f64> = (0..LANES).flat_map(|_| robot.random_configuration(&mut rng)).collect();
+            qs[3 * dof + 4] = at;
+            let w = geom.pose_lanes(Base, RowsIn(&qs), dof, &mut s);
+            assert_eq!(w.is_some(), posed, "prismatic joint at {at}");
+            let Some(mut w) = w else { continue };
+            for l in 0..geom.links.len() {
+                geom.pose_lane_link(Base, l, &mut w);
+            }
+            geom.pose(&qs[3 * dof..4 * dof], &mut f);
+            for (k, c) in geom.centre.iter().enumerate() {
+                let b = geom.links.iter().find(|l| (l.first..l.end).contains(&k)).expect("a link").body;
+                let exact = f.rot[b] * c + f.pos[b];
+                for d in 0..3 {
+                    let e = (f64::from(w.centre[k][d].0[3]) - exact[d]).abs();
+                    assert!(e <= geom.lanes.centre_err, "sphere {k}, coordinate {d}: off by {e:e}");
+                }
+            }
+        }
     }
 
     /// The single-precision sines and cosines stay within [`SIN_COS_ERR`] of `f64`'s (itself
