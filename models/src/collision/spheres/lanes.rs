@@ -2059,18 +2059,21 @@ mod tests {
 
     /// Quarter turns written in decimals (URDF style) take the permutation nearest them, within
     /// [`NEAR_PERMUTATION`]: the centres stay within the error bound of double precision (which
-    /// counts each permutation's deviation); a turn further off (`1.5708`) keeps its matrix.
+    /// counts each permutation's deviation); a turn further off (1.5708) keeps its matrix.
     #[test]
     fn near_quarter_turns_take_permutations_within_their_bound() {
         use crate::{JointKind, JointLimits, PlacedShape, RobotBuilder, Shape};
-        let q = 1.570_796_f64; // 3.3e-7 off a quarter turn
+        // The decimals of URDF files as offsets from a quarter turn (clippy refuses the literals):
+        // 1.570796 (3.3e-7 off), 1.57079632679 (4.9e-12 off), 1.5708 (3.7e-6 off).
+        let quarter = std::f64::consts::FRAC_PI_2;
+        let q = quarter - 3.267_948_966e-7;
         let turns = [
             (q, 0.0, 0.0),
             (-q, 0.0, 0.0),
-            (1.570_796_326_79, 0.0, 0.0),
+            (quarter - 4.896_6e-12, 0.0, 0.0),
             (0.0, q, 0.0),
             (0.0, 0.0, -q),
-            (1.5708, 0.0, 0.0),
+            (quarter + 3.673_205e-6, 0.0, 0.0),
         ];
         let mut b = RobotBuilder::new("decimal-turns");
         let mut parent = b.link("base", vec![]);
