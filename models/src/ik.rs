@@ -146,6 +146,8 @@ impl Robot {
         found: &mut Vec<(f64, Vec<f64>)>,
     ) {
         let space = self.config_space();
+        let moving = self.dofs_moving(effector.link);
+        let screws = self.actuators_driving(|i| moving[i]);
         'solutions: for angles in raw {
             let mut q = seed.to_vec();
             for (k, &d) in chain.dofs.iter().enumerate() {
@@ -163,8 +165,9 @@ impl Robot {
             let e = pose_error(&(self.link_pose(&q, effector.link) * effector.tool), target);
             let close =
                 e.fixed_rows::<3>(0).norm() <= CLOSED_FORM_CHECK && e.fixed_rows::<3>(3).norm() <= CLOSED_FORM_CHECK;
-            // Within the screws' strokes too (a serial-parallel arm's joint ranges are cut by them).
-            let stroked = self.actuators().iter().all(|a| a.stroke_excess(&q) <= 1e-9);
+            // Within the strokes of the screws that drive the arm too (a serial-parallel arm's
+            // joint ranges are cut by them; the other screws' strokes are the seed's).
+            let stroked = screws.iter().all(|a| a.stroke_excess(&q) <= 1e-9);
             if close && stroked && found.iter().all(|(_, o)| space.distance(o, &q) > 1e-9) {
                 found.push((space.distance(seed, &q), q));
             }
@@ -221,6 +224,9 @@ impl Robot {
         // and the Jacobian read no other pose.
         let chain = self.chain_to(effector.link);
         let moving = self.dofs_moving(effector.link);
+        // The screws that drive those: the others' strokes are the caller's (the other arm's,
+        // kept as the seed has it, in stroke or not).
+        let screws = self.actuators_driving(|i| moving[i]);
         let residual_of = |poses: &mut Vec<Isometry3<f64>>, q: &[f64]| -> (Vector6<f64>, f64, f64) {
             self.chain_kinematics_into(&chain, q, poses);
             let e = pose_error(&(poses[effector.link] * effector.tool), target);
@@ -235,7 +241,7 @@ impl Robot {
         let mut trial = seed.to_vec();
         let mut dq = vec![0.0; n];
         let mut frozen = vec![false; n];
-        let mut active = vec![false; self.actuators().len()];
+        let mut active = vec![false; screws.len()];
         // The Jacobian projected off the drive angles of the screws at a stroke end.
         let mut projected = Matrix6xX::zeros(n);
         for attempt in 0..=options.restarts {
@@ -256,7 +262,7 @@ impl Robot {
                 if pos_err + rot_err < best.0 {
                     best = (pos_err + rot_err, q.clone());
                 }
-                let stroked = self.actuators().iter().all(|a| a.stroke_excess(&q) <= 1e-9);
+                let stroked = screws.iter().all(|a| a.stroke_excess(&q) <= 1e-9);
                 if pos_err <= options.position_tolerance && rot_err <= options.orientation_tolerance && stroked {
                     return Ok(q);
                 }
@@ -272,7 +278,7 @@ impl Robot {
                 for _ in 0..3 {
                     let jp = if active.contains(&true) {
                         projected.copy_from(&jac);
-                        for (a, _) in self.actuators().iter().zip(&active).filter(|(_, on)| **on) {
+                        for (a, _) in screws.iter().zip(&active).filter(|(_, on)| **on) {
                             let angle = || a.angle.iter().filter(|&&(k, _)| k < n);
                             let ww: f64 = angle().map(|&(_, w)| w * w).sum();
                             if ww > 0.0 {
@@ -310,7 +316,7 @@ impl Robot {
                             changed = true;
                         }
                     }
-                    for (a, on) in self.actuators().iter().zip(active.iter_mut()) {
+                    for (a, on) in screws.iter().zip(active.iter_mut()) {
                         let rate = a.rate_along(&q, &dq);
                         let l = a.length(&q);
                         let pushing = (l >= a.max_length - STROKE_END && rate > 0.0)
@@ -340,14 +346,14 @@ impl Robot {
                 // first it is tried again with its share across each screw it leaves cut to end
                 // on that stroke's end: a solution there is reached by sliding along it, which
                 // full steps, all pointing out, never do.
-                let mut stroked = self.actuators().iter().all(|a| a.stroke_excess(&trial) <= 1e-9);
-                if !stroked && onto_strokes(self.actuators(), &q, &trial, scale, &mut dq) {
+                let mut stroked = screws.iter().all(|a| a.stroke_excess(&trial) <= 1e-9);
+                if !stroked && onto_strokes(&screws, &q, &trial, scale, &mut dq) {
                     for i in 0..n {
                         trial[i] = limits[i].clamp(q[i] + scale * dq[i]);
                     }
                     (e2, p2, r2) = residual_of(&mut poses, &trial);
                     cost2 = p2 * p2 + r2 * r2;
-                    stroked = self.actuators().iter().all(|a| a.stroke_excess(&trial) <= 1e-9);
+                    stroked = screws.iter().all(|a| a.stroke_excess(&trial) <= 1e-9);
                 }
                 if cost2 < cost && stroked {
                     q.copy_from_slice(&trial);
@@ -379,7 +385,7 @@ const STROKE_END: f64 = 1e-6;
 /// where the screw has that length (`dq += ((t / scale) - w.dq) / (w.w) w`), or not at all when
 /// no angle gives it. `false` when no screw was changed or nothing of the step remains.
 fn onto_strokes(
-    actuators: &[crate::actuator::ScrewTriangle],
+    actuators: &[&crate::actuator::ScrewTriangle],
     q: &[f64],
     trial: &[f64],
     scale: f64,

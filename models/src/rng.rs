@@ -77,8 +77,10 @@ impl crate::Robot {
     }
 
     /// Draw the degrees of freedom `i` with `which(i)` as [`crate::Robot::random_configuration`]
-    /// does, leaving the others of `q` as they are (the strokes checked on the whole of `q`).
+    /// does, leaving the others of `q` as they are (the strokes checked of the screws that drive
+    /// a degree of freedom drawn: the others' do not change).
     pub fn randomise_dofs_into(&self, rng: &mut Rng, which: impl Fn(usize) -> bool, q: &mut [f64]) {
+        let screws = self.actuators_driving(&which);
         for _ in 0..1000 {
             for (i, v) in q.iter_mut().enumerate().filter(|(i, _)| which(*i)) {
                 let l = self.dof_joint(i).limits;
@@ -88,7 +90,7 @@ impl crate::Robot {
                     rng.range(-std::f64::consts::PI, std::f64::consts::PI)
                 };
             }
-            if self.strokes_hold(q) {
+            if screws.iter().all(|a| a.stroke_excess(q) <= 0.0) {
                 return;
             }
         }

@@ -644,6 +644,12 @@ impl Robot {
         moving
     }
 
+    /// The screws that drive some degree of freedom `i` with `which(i)` (the others' strokes do
+    /// not depend on those degrees of freedom).
+    pub fn actuators_driving(&self, which: impl Fn(usize) -> bool) -> Vec<&ScrewTriangle> {
+        self.actuators.iter().filter(|a| a.angle.iter().any(|&(k, _)| which(k))).collect()
+    }
+
     /// The joints on the path from the root to `link`, root first.
     pub fn chain_to(&self, link: usize) -> Vec<usize> {
         let mut chain = Vec::new();

@@ -30,3 +30,37 @@ fn restarts_leave_the_other_arm_where_the_seed_has_it() {
     // The property is about restarts: most cases must have needed one.
     assert!(restarted >= 10, "only {restarted} of 20 cases restarted");
 }
+
+/// The other arm's screws out of their strokes in the seed (the caller's business) do not stop
+/// this arm's IK, closed form or numerical: only the screws driving this arm's joints count.
+#[test]
+fn the_other_arms_strokes_do_not_stop_this_arms_ik() {
+    let two = builtin("two-irp6").unwrap();
+    assert!(!two.actuators().is_empty(), "test setup: screws");
+    let limits = two.limits();
+    let mut rng = Rng::new(3);
+    // The track and the on-track arm anywhere within their limits, out of some stroke; the
+    // postument arm within its strokes (as `random_configuration` drew it).
+    let seed = (0..10_000)
+        .find_map(|_| {
+            let mut q = two.random_configuration(&mut rng);
+            for (k, v) in q[..7].iter_mut().enumerate() {
+                *v = rng.range(limits[k].lower, limits[k].upper);
+            }
+            (!two.strokes_hold(&q)).then_some(q)
+        })
+        .expect("test setup: a seed out of the on-track arm's strokes");
+    for case in 0..10 {
+        let goal = two.random_configuration(&mut rng);
+        let (_, target) = two.end_effector_poses(&goal, 1);
+        for closed_form in [true, false] {
+            let options = IkOptions { closed_form, seed: case, ..Default::default() };
+            let q = two
+                .inverse_kinematics(1, &target, &seed, &options)
+                .unwrap_or_else(|e| panic!("case {case}, closed form {closed_form}: {e}"));
+            assert_eq!(q[..7], seed[..7], "case {case}: the other arm moved");
+            let (_, reached) = two.end_effector_poses(&q, 1);
+            assert!((reached.translation.vector - target.translation.vector).norm() < 1e-5, "case {case}");
+        }
+    }
+}
