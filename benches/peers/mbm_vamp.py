@@ -1,13 +1,15 @@
 #!/usr/bin/env python3
 """MotionBenchMaker folders for VAMP, and VAMP's figures per family.
 
-  mbm_vamp.py convert PROBLEMS_DIR OUT.json
-      Every <family>_ur5/sceneNNNN.yaml + requestNNNN.yaml pair (as `embodied bench mbm` reads them,
-      e.g. the output of `embodied bench mbm-generate`) as the problem file of VAMP's
+  mbm_vamp.py convert PROBLEMS_DIR OUT.json [ROBOT]
+      Every <family>_<robot>/sceneNNNN.yaml + requestNNNN.yaml pair (as `embodied bench mbm` reads
+      them, e.g. the output of `embodied bench mbm-generate`) as the problem file of VAMP's
       MotionBenchMaker loop (the layout of ../shared/peers/vamp/ur5-public.json: boxes by half
       extents, cylinders by length and radius, world poses with XYZ Euler angles and quaternions).
-      Needs PyYAML, NumPy and SciPy. On the three public families it reproduces ur5-public.json to
-      1e-15.
+      ROBOT is one of VAMP's robots (ur5 by default; another, such as baxter with the
+      MotionBenchMaker problems VAMP ships for it, takes its joints in the order of
+      vamp.<robot>.joint_names(), so it needs the vamp module). Needs PyYAML, NumPy and SciPy. On
+      the three public families it reproduces ur5-public.json to 1e-15.
   mbm_vamp.py summarize VAMP_OUT.json
       Per family: VAMP's planning and planning + simplification p50 / p95 / max and the share
       within 1 ms, from the output of ../shared/peers/vamp/vamp_run.py.
@@ -21,11 +23,15 @@ ARM = ["shoulder_pan_joint", "shoulder_lift_joint", "elbow_joint",
        "wrist_1_joint", "wrist_2_joint", "wrist_3_joint"]
 
 
-def convert(root, out):
+def convert(root, out, robot="ur5"):
     import numpy as np
     import yaml
     from scipy.spatial.transform import Rotation
 
+    joints = ARM
+    if robot != "ur5":
+        import vamp
+        joints = list(getattr(vamp, robot).joint_names())
     problems = {}
     for family in sorted(os.listdir(root)):
         rows = []
@@ -34,7 +40,7 @@ def convert(root, out):
             scene = yaml.safe_load(open(scene_file))
             request = yaml.safe_load(open(os.path.join(root, family, f"request{index:04d}.yaml")))
             row = {"sphere": [], "cylinder": [], "box": [], "index": index,
-                   "problem": family.removesuffix("_ur5")}
+                   "problem": family.removesuffix(f"_{robot}")}
             for obj in scene["world"]["collision_objects"]:
                 pose = obj.get("pose", {"position": [0, 0, 0], "orientation": [0, 0, 0, 1]})
                 r_obj, t_obj = Rotation.from_quat(pose["orientation"]), np.array(pose["position"])
@@ -60,12 +66,12 @@ def convert(root, out):
             start = dict(zip(state["name"], state["position"]))
             goal = {c["joint_name"]: c["position"]
                     for c in request["goal_constraints"][0]["joint_constraints"]}
-            row["start"] = [start[j] for j in ARM]
-            row["goals"] = [[goal[j] for j in ARM]]
+            row["start"] = [start[j] for j in joints]
+            row["goals"] = [[goal[j] for j in joints]]
             row["valid"] = True
             rows.append(row)
-        problems[family.removesuffix("_ur5")] = rows
-    json.dump({"robot": "ur5", "joints": ARM, "problems": problems}, open(out, "w"))
+        problems[family.removesuffix(f"_{robot}")] = rows
+    json.dump({"robot": robot, "joints": joints, "problems": problems}, open(out, "w"))
     print({family: len(rows) for family, rows in problems.items()})
 
 
@@ -88,8 +94,8 @@ def summarize(path):
 
 
 if __name__ == "__main__":
-    if len(sys.argv) == 4 and sys.argv[1] == "convert":
-        convert(sys.argv[2], sys.argv[3])
+    if len(sys.argv) in (4, 5) and sys.argv[1] == "convert":
+        convert(*sys.argv[2:])
     elif len(sys.argv) == 3 and sys.argv[1] == "summarize":
         summarize(sys.argv[2])
     else:
