@@ -366,6 +366,9 @@ impl Tree {
             return match q.len() {
                 6 => scan::<6>(&self.blocks, q),
                 7 => scan::<7>(&self.blocks, q),
+                8 => scan::<8>(&self.blocks, q),
+                12 => scan::<12>(&self.blocks, q),
+                14 => scan::<14>(&self.blocks, q),
                 _ => scan::<0>(&self.blocks, q),
             };
         }
@@ -386,6 +389,10 @@ impl Tree {
             (true, _) => kd.nearest::<true, 0>(coords, alive, space, q),
             (false, 6) => kd.nearest::<false, 6>(coords, alive, space, q),
             (false, 7) => kd.nearest::<false, 7>(coords, alive, space, q),
+            // An arm on a lift (the Fetch), two six- and two seven-joint arms planned together.
+            (false, 8) => kd.nearest::<false, 8>(coords, alive, space, q),
+            (false, 12) => kd.nearest::<false, 12>(coords, alive, space, q),
+            (false, 14) => kd.nearest::<false, 14>(coords, alive, space, q),
             (false, _) => kd.nearest::<false, 0>(coords, alive, space, q),
         }
     }
@@ -682,10 +689,11 @@ mod tests {
 
     #[test]
     fn kd_tree_answers_exactly_what_the_scan_does() {
-        // Six and seven joints run the unrolled searches, three the general one.
-        kd_tree_matches_scan(vec![false; 6], 3.0);
-        kd_tree_matches_scan(vec![false; 7], 3.0);
-        kd_tree_matches_scan(vec![false; 3], 3.0);
+        // Six, seven, eight, twelve and fourteen joints run the unrolled searches, three and
+        // nine the general one.
+        for dof in [6, 7, 8, 12, 14, 3, 9] {
+            kd_tree_matches_scan(vec![false; dof], 3.0);
+        }
     }
 
     #[test]
