@@ -2003,6 +2003,35 @@ mod tests {
         }
     }
 
+    /// The sphere centres of a posed batch against double precision, lane by lane in `lanes`:
+    /// each coordinate within the batch's error bound. The largest error.
+    fn centres_within_bound(
+        geom: &SphereGeom,
+        w: &mut Work<'_>,
+        qs: &[f64],
+        lanes: std::ops::Range<usize>,
+        f: &mut super::super::SphereScratch,
+    ) -> f64 {
+        let (bound, dof) = (geom.lanes.centre_err, qs.len() / LANES);
+        for l in 0..geom.links.len() {
+            geom.pose_lane_link(Base, l, w);
+        }
+        let mut worst: f64 = 0.0;
+        for i in lanes {
+            geom.pose(&qs[i * dof..(i + 1) * dof], f);
+            for (k, c) in geom.centre.iter().enumerate() {
+                let b = geom.links.iter().find(|l| (l.first..l.end).contains(&k)).expect("a link").body;
+                let exact = f.rot[b] * c + f.pos[b];
+                for d in 0..3 {
+                    let e = (f64::from(w.centre[k][d].0[i]) - exact[d]).abs();
+                    assert!(e <= bound, "sphere {k}, coordinate {d}, lane {i}: off by {e:e} (bound {bound:e})");
+                    worst = worst.max(e);
+                }
+            }
+        }
+        worst
+    }
+
     /// The batch's sphere centres lie within its error bound of the double-precision ones, on
     /// every form of body (a wrong column, sign or product would be off by centimetres).
     #[test]
@@ -2038,21 +2067,7 @@ mod tests {
                 s.link_posed.fill(0);
             }
             let mut w = geom.pose_lanes(Base, RowsIn(&qs), dof, &mut s).expect("posed");
-            for l in 0..geom.links.len() {
-                geom.pose_lane_link(Base, l, &mut w);
-            }
-            for (i, q) in qs.chunks(dof).enumerate() {
-                geom.pose(q, &mut f);
-                for (k, c) in geom.centre.iter().enumerate() {
-                    let b = geom.links.iter().find(|l| (l.first..l.end).contains(&k)).expect("a link").body;
-                    let exact = f.rot[b] * c + f.pos[b];
-                    for d in 0..3 {
-                        let e = (f64::from(w.centre[k][d].0[i]) - exact[d]).abs();
-                        assert!(e <= bound, "sphere {k}, coordinate {d}, lane {i}: off by {e:e} (bound {bound:e})");
-                        worst = worst.max(e);
-                    }
-                }
-            }
+            worst = worst.max(centres_within_bound(&geom, &mut w, &qs, 0..LANES, &mut f));
         }
         eprintln!("largest centre error {worst:e} of a bound {bound:e}");
     }
@@ -2117,21 +2132,7 @@ mod tests {
         for _ in 0..300 {
             let qs: Vec<f64> = (0..LANES).flat_map(|_| robot.random_configuration(&mut rng)).collect();
             let mut w = geom.pose_lanes(Base, RowsIn(&qs), dof, &mut s).expect("posed");
-            for l in 0..geom.links.len() {
-                geom.pose_lane_link(Base, l, &mut w);
-            }
-            for (i, q) in qs.chunks(dof).enumerate() {
-                geom.pose(q, &mut f);
-                for (k, c) in geom.centre.iter().enumerate() {
-                    let b = geom.links.iter().find(|l| (l.first..l.end).contains(&k)).expect("a link").body;
-                    let exact = f.rot[b] * c + f.pos[b];
-                    for d in 0..3 {
-                        let e = (f64::from(w.centre[k][d].0[i]) - exact[d]).abs();
-                        assert!(e <= bound, "sphere {k}, coordinate {d}, lane {i}: off by {e:e} (bound {bound:e})");
-                        worst = worst.max(e);
-                    }
-                }
-            }
+            worst = worst.max(centres_within_bound(&geom, &mut w, &qs, 0..LANES, &mut f));
         }
         // The deviations (3.3e-7 a body) are what the batch is off by, not its rounding.
         assert!(worst > 1e-7, "largest centre error {worst:e}");
@@ -2159,18 +2160,7 @@ mod tests {
             let w = geom.pose_lanes(Base, RowsIn(&qs), dof, &mut s);
             assert_eq!(w.is_some(), posed, "prismatic joint at {at}");
             let Some(mut w) = w else { continue };
-            for l in 0..geom.links.len() {
-                geom.pose_lane_link(Base, l, &mut w);
-            }
-            geom.pose(&qs[3 * dof..4 * dof], &mut f);
-            for (k, c) in geom.centre.iter().enumerate() {
-                let b = geom.links.iter().find(|l| (l.first..l.end).contains(&k)).expect("a link").body;
-                let exact = f.rot[b] * c + f.pos[b];
-                for d in 0..3 {
-                    let e = (f64::from(w.centre[k][d].0[3]) - exact[d]).abs();
-                    assert!(e <= geom.lanes.centre_err, "sphere {k}, coordinate {d}: off by {e:e}");
-                }
-            }
+            centres_within_bound(&geom, &mut w, &qs, 3..4, &mut f);
         }
     }
 
