@@ -1027,10 +1027,15 @@ impl CollisionModel {
     /// Cells are about as wide as a typical link's bounding sphere, so a link's box overlaps a
     /// few cells.
     fn grid_obstacles(&mut self) {
-        let fast = self.fast.is_some();
+        let sphere_geom = self.fast.clone();
+        let fast = sphere_geom.is_some();
         let geom = Arc::clone(&self.geom);
         let scene = Arc::make_mut(&mut self.scene);
-        scene.solids32 = if fast { Solids32::new(&scene.solids).map(Arc::new) } else { None };
+        scene.solids32 = sphere_geom.and_then(|g| {
+            let mut solids32 = Solids32::new(&scene.solids)?;
+            solids32.set_fixed_clearance(&g, &scene.solids);
+            Some(Arc::new(solids32))
+        });
         scene.grid = None;
         if scene.obstacles.len() < GRID_MIN_OBSTACLES || fast {
             return;
@@ -2487,6 +2492,26 @@ mod tests {
         let again = model.scratch();
         assert_eq!(again.body_iso.capacity(), grown, "the spare is handed out");
         assert_eq!(again.spheres.lanes.isa, Isa::Best);
+    }
+
+    /// The clearance of the world-fixed body's spheres (the UR5's base sphere, radius 0.08 m,
+    /// 0.9144 m up) is the double-precision gap to the nearest obstacle, worked out again when
+    /// an obstacle moves: none is infinite, an overlap is negative.
+    #[test]
+    fn the_world_fixed_spheres_clearance_follows_the_obstacles() {
+        let path = |f: &str| std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures").join(f);
+        let robot = crate::urdf::load_urdf(&path("ur5_spherized.urdf"), Some(&path("ur5.srdf"))).expect("the UR5");
+        let clear = |m: &CollisionModel| m.scene.solids32.as_ref().expect("balls have closed forms").fixed_clear;
+        let mut model = CollisionModel::new(&robot, Environment::new());
+        assert_eq!(clear(&model), f64::INFINITY);
+        let mut env = Environment::new();
+        let at = |x: f64| Isometry3::translation(x, 0.0, 0.9144);
+        env.add(Obstacle::new("ball", at(0.08 + 0.05 + 0.2), Shape::sphere(0.05)));
+        env.add(Obstacle::new("far", at(3.0), Shape::sphere(0.05)));
+        model.set_environment(env);
+        assert!((clear(&model) - 0.2).abs() < 1e-12, "{}", clear(&model));
+        assert!(model.set_obstacle_pose("ball", at(0.08 + 0.05 - 0.01)));
+        assert!((clear(&model) + 0.01).abs() < 1e-12, "{}", clear(&model));
     }
 
     /// The table's order is the bit reversal of each piece's index, for every power-of-two

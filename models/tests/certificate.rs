@@ -691,6 +691,65 @@ fn solid_clutter(seed: u64, n: usize) -> Environment {
 }
 
 /// Configurations within about `gap` (rad) of where the clearance crosses `margin`.
+/// A world-fixed base sphere (radius 0.1 m, at the origin) and one arm sphere turning on a
+/// circle 0.5 m above it, with a ball beside the base at a clearance just below, at and above
+/// each margin a batch grows the spheres by, and overlapping it. Only the base can meet the
+/// ball, so a batch's answer is the base's: in contact every lane collides, within the margin
+/// none is free, beyond the margin and the batch's allowance every lane is free (the batches
+/// skip the base's obstacle tests there), and what is settled is the truth.
+#[test]
+fn batches_beside_the_world_fixed_spheres_settle_only_the_truth() {
+    let mut b = RobotBuilder::new("base-and-arm");
+    let base = b.link("base", vec![PlacedShape::new(Isometry3::identity(), Shape::sphere(0.1))]);
+    let arm = b.link("arm", vec![PlacedShape::new(Isometry3::translation(0.5, 0.0, 0.0), Shape::sphere(0.05))]);
+    b.joint(
+        "turn",
+        JointKind::Revolute,
+        base,
+        arm,
+        Isometry3::translation(0.0, 0.0, 0.5),
+        Vector3::z(),
+        0.0,
+        Isometry3::identity(),
+        JointLimits::new(-3.0, 3.0, 1.0, 2.0),
+    );
+    let robot = b.build().unwrap();
+    let mut rng = Rng::new(17);
+    for margin in [0.0, 1e-3, 0.03] {
+        for gap in [-0.01, margin - 1e-4, margin + 1e-7, margin + 1e-3, margin + 0.05] {
+            if gap <= 0.0 && gap != -0.01 {
+                continue;
+            }
+            let mut env = Environment::new();
+            env.add(Obstacle::new("ball", Isometry3::translation(-(0.1 + 0.05 + gap), 0.0, 0.0), Shape::sphere(0.05)));
+            let model = CollisionModel::new(&robot, env);
+            assert!(model.certifies_in_batches());
+            let mut s = model.scratch();
+            for _ in 0..10 {
+                let qs: Vec<f64> = (0..8).flat_map(|_| robot.random_configuration(&mut rng)).collect();
+                let settled = model.settle_batch(&qs, margin, &mut s).unwrap();
+                for (i, q) in qs.chunks(1).enumerate() {
+                    let d = model.distance(q).distance;
+                    assert!((d - gap).abs() < 1e-9, "the base's gap is the clearance: {d} against {gap}");
+                    if settled.free & (1 << i) != 0 {
+                        assert!(d > margin - 1e-9, "gap {gap}, margin {margin}: free with clearance {d}: {q:?}");
+                    }
+                    if settled.colliding & (1 << i) != 0 {
+                        assert!(model.collides_with(q, &mut s), "gap {gap}: called colliding: {q:?}");
+                    }
+                }
+                if gap < 0.0 {
+                    assert_eq!(settled.colliding, 0xff, "the base is in contact in every lane");
+                } else if gap < margin {
+                    assert_eq!(settled.free, 0, "gap {gap} within the margin {margin}");
+                } else if gap >= margin + 1e-3 {
+                    assert_eq!(settled.free, 0xff, "gap {gap} beyond the margin {margin}");
+                }
+            }
+        }
+    }
+}
+
 fn near_clearance(model: &CollisionModel, robot: &Robot, rng: &mut Rng, margin: f64, gap: f64) -> Option<Vec<f64>> {
     near_boundary(robot, rng, gap, |q| model.distance(q).distance > margin)
 }
