@@ -354,6 +354,10 @@ enum BenchCommand {
         /// RRT-Connect without dynamic domain (Yershova et al. 2005; on by default).
         #[arg(long)]
         no_dynamic_domain: bool,
+        /// RRT-Connect searches every joint at once even on a robot of independent groups of
+        /// joints (two arms on a fixed torso), instead of first one group at a time.
+        #[arg(long)]
+        no_by_groups: bool,
         /// RRT-Connect swaps its trees every iteration instead of growing the smaller one while
         /// the other has twice its nodes (the default).
         #[arg(long)]
@@ -826,6 +830,7 @@ fn run(cli: Cli) -> Result<(), AppError> {
             rrt_late_after,
             rrt_local_span,
             no_dynamic_domain,
+            no_by_groups,
             no_balance,
             sampler,
             shard,
@@ -848,6 +853,7 @@ fn run(cli: Cli) -> Result<(), AppError> {
             args.algorithm = algorithm;
             args.threads = threads;
             args.dynamic_domain = !no_dynamic_domain;
+            args.by_groups = !no_by_groups;
             args.balance = !no_balance;
             args.sampler = sampler;
             if let Some(r) = rrt_range {

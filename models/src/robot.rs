@@ -75,6 +75,8 @@ pub struct Robot {
     pub(crate) closed_forms: Vec<Option<ArmChain>>,
     /// Linear actuators driving joints through triangles (serial-parallel actuation).
     actuators: Vec<ScrewTriangle>,
+    /// [`Robot::independent_dof_groups`], worked out whenever the tree or the actuators change.
+    dof_groups: Vec<Vec<usize>>,
 }
 
 /// Builds a [`Robot`] link by link; [`RobotBuilder::build`] checks and orders the tree.
@@ -321,7 +323,7 @@ impl RobotBuilder {
             };
             closed_forms[ee] = Some(arm_chain(&links, &joints, end_effectors[ee].link, *kind).map_err(&invalid)?);
         }
-        Ok(Robot {
+        let mut robot = Robot {
             closed_forms,
             name: self.name,
             provenance: self.provenance,
@@ -333,7 +335,10 @@ impl RobotBuilder {
             disabled_pairs,
             base: self.base,
             actuators: self.actuators,
-        })
+            dof_groups: Vec::new(),
+        };
+        robot.dof_groups = robot.group_dofs();
+        Ok(robot)
     }
 }
 
@@ -564,6 +569,7 @@ impl Robot {
             });
         }
         self.actuators.push(actuator);
+        self.dof_groups = self.group_dofs();
         Ok(())
     }
 
@@ -642,6 +648,65 @@ impl Robot {
             }
         }
         moving
+    }
+
+    /// The degrees of freedom in independent groups: two are in one group when some link moves
+    /// with both (one joint's chain holds the other's, as along one arm), or one actuator's
+    /// stroke depends on both; groups share no link they move. A robot of two arms on a fixed
+    /// torso has two groups, an arm on a lifting torso one. Each group's indices ascend; the
+    /// groups are ordered by their first index.
+    pub fn independent_dof_groups(&self) -> &[Vec<usize>] {
+        &self.dof_groups
+    }
+
+    /// [`Robot::independent_dof_groups`] worked out.
+    fn group_dofs(&self) -> Vec<Vec<usize>> {
+        let n = self.dof();
+        let mut parent: Vec<usize> = (0..n).collect();
+        fn root(parent: &mut [usize], mut i: usize) -> usize {
+            while parent[i] != i {
+                parent[i] = parent[parent[i]];
+                i = parent[i];
+            }
+            i
+        }
+        let join = |parent: &mut Vec<usize>, a: usize, b: usize| {
+            let (ra, rb) = (root(parent, a), root(parent, b));
+            if ra != rb {
+                parent[ra.max(rb)] = ra.min(rb);
+            }
+        };
+        // Each joint's degree of freedom with the nearest one above it (joints come after their
+        // parent link's joint): a chain's degrees of freedom end up in one group.
+        let mut above: Vec<Option<usize>> = vec![None; self.links.len()];
+        for j in &self.joints {
+            let here = j.dof_index.or(j.mimic.map(|(d, _, _)| d)).filter(|&d| d < n);
+            let up = above.get(j.parent_link).copied().flatten();
+            if let (Some(a), Some(d)) = (up, here) {
+                join(&mut parent, a, d);
+            }
+            if let Some(slot) = above.get_mut(j.child_link) {
+                *slot = here.or(up);
+            }
+        }
+        for a in &self.actuators {
+            for w in a.angle.windows(2) {
+                if w[0].0 < n && w[1].0 < n {
+                    join(&mut parent, w[0].0, w[1].0);
+                }
+            }
+        }
+        let mut groups: Vec<Vec<usize>> = Vec::new();
+        let mut index_of = vec![usize::MAX; n];
+        for i in 0..n {
+            let r = root(&mut parent, i);
+            if index_of[r] == usize::MAX {
+                index_of[r] = groups.len();
+                groups.push(Vec::new());
+            }
+            groups[index_of[r]].push(i);
+        }
+        groups
     }
 
     /// The screws that drive some degree of freedom `i` with `which(i)` (the others' strokes do
@@ -801,6 +866,7 @@ impl Robot {
                 .and_then(|c| arm_chain(&robot.links, &robot.joints, robot.end_effectors[ee].link, c.kind).ok());
             robot.closed_forms[ee] = resolved;
         }
+        robot.dof_groups = robot.group_dofs();
         Ok(robot)
     }
 }

@@ -541,3 +541,45 @@ fn error_missing_file_is_io() {
     assert!(matches!(err, ModelError::Io { .. }));
     assert_mentions(&err.to_string(), &["nope.urdf"]);
 }
+
+/// Two arms on a torso: independent groups when the torso is fixed (a mimic finger stays with
+/// its arm), one group when a torso joint moves both arms.
+#[test]
+fn independent_dof_groups_follow_the_tree() {
+    let arm = |side: &str, parent: &str| {
+        format!(
+            r#"<link name="{side}_upper"/><link name="{side}_lower"/><link name="{side}_finger"/>
+            <joint name="{side}_shoulder" type="revolute"><parent link="{parent}"/><child link="{side}_upper"/>
+              <axis xyz="0 0 1"/><limit lower="-2" upper="2" effort="1" velocity="1"/></joint>
+            <joint name="{side}_elbow" type="revolute"><parent link="{side}_upper"/><child link="{side}_lower"/>
+              <origin xyz="0.3 0 0"/><axis xyz="0 1 0"/><limit lower="-2" upper="2" effort="1" velocity="1"/></joint>
+            <joint name="{side}_finger" type="prismatic"><parent link="{side}_lower"/><child link="{side}_finger"/>
+              <origin xyz="0.3 0 0"/><axis xyz="1 0 0"/><limit lower="0" upper="0.04" effort="1" velocity="1"/>
+              <mimic joint="{side}_elbow" multiplier="0.01"/></joint>"#
+        )
+    };
+    let robot = |torso_joint: &str| {
+        format!(
+            r#"<robot name="two"><link name="base"/><link name="torso"/>
+            <joint name="torso" type="{torso_joint}"><parent link="base"/><child link="torso"/>
+              <axis xyz="0 0 1"/><limit lower="0" upper="0.3" effort="1" velocity="1"/></joint>
+            {}{}</robot>"#,
+            arm("left", "torso"),
+            arm("right", "torso")
+        )
+    };
+    let fixed = parse_urdf(&robot("fixed"), Path::new("two.urdf"), &no_meshes()).unwrap();
+    assert_eq!(fixed.dof(), 4);
+    assert_eq!(fixed.independent_dof_groups(), vec![vec![0, 1], vec![2, 3]]);
+    let lift = parse_urdf(&robot("prismatic"), Path::new("two.urdf"), &no_meshes()).unwrap();
+    assert_eq!(lift.dof(), 5);
+    assert_eq!(lift.independent_dof_groups(), vec![vec![0, 1, 2, 3, 4]]);
+    // The lift frozen: the arms part again (renumbered).
+    let frozen = lift.freeze_joints(&[("torso", 0.1)]).unwrap();
+    assert_eq!(frozen.independent_dof_groups(), vec![vec![0, 1], vec![2, 3]]);
+    // The built-in cell: the track and its arm, then the postument arm (screws stay in each).
+    let two = embodied_models::builtin("two-irp6").unwrap();
+    assert_eq!(two.independent_dof_groups(), vec![(0..7).collect::<Vec<_>>(), (7..13).collect()]);
+    let one = embodied_models::builtin("irp6-postument").unwrap();
+    assert_eq!(one.independent_dof_groups(), vec![(0..6).collect::<Vec<_>>()]);
+}

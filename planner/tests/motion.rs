@@ -812,3 +812,80 @@ fn probes_in_vector_lanes_give_the_paths_of_single_checks() {
     assert!(solved >= 4, "test setup: {solved} of 8 solved");
     assert!(detours > 0, "test setup: some plans leave the straight segment");
 }
+
+/// The two-IRp-6 cell among two posts, and a start and goal (both free, the straight segment
+/// between them blocked) whose waypoints (one arm at its goal, the other at its start) are
+/// free or in collision as `want` asks (first: the track's arm moved first; second: the
+/// postument's), from the seeded draws.
+fn two_arm_problem(seed: u64, want: [bool; 2]) -> (CollisionModel, Vec<f64>, Vec<f64>) {
+    let model = boxed(
+        "two-irp6",
+        &[("post", [0.8, 1.05, 0.5], [0.15, 0.15, 0.5]), ("post2", [-0.7, 1.0, 0.4], [0.1, 0.1, 0.4])],
+    );
+    let robot = model.robot();
+    let mut rng = embodied_models::Rng::new(seed);
+    let mut free = || {
+        (0..10_000)
+            .map(|_| robot.random_configuration(&mut rng))
+            .find(|q| !model.collides(q))
+            .expect("a free configuration in 10,000 draws")
+    };
+    for _ in 0..20_000 {
+        let (start, goal) = (free(), free());
+        let first: Vec<f64> = goal[..7].iter().chain(&start[7..]).copied().collect();
+        let second: Vec<f64> = start[..7].iter().chain(&goal[7..]).copied().collect();
+        if [!model.collides(&first), !model.collides(&second)] == want
+            && !model.motion_is_certified_free(&start, &goal, CERTIFY_TOLERANCE)
+        {
+            return (model, start, goal);
+        }
+    }
+    panic!("test setup: no problem with waypoints {want:?} in 20,000 draws");
+}
+
+/// On a robot of two independent arms, a path moving one arm at a time is searched first; it
+/// is certified like any (and the shortcuts may move both arms at once); switched off, the
+/// search over every joint runs.
+#[test]
+fn independent_arms_are_planned_one_at_a_time_first() {
+    assert_eq!(builtin("two-irp6").unwrap().independent_dof_groups().len(), 2);
+    for (seed, want) in [(3, [true, true]), (4, [false, true]), (5, [true, false])] {
+        let (model, start, goal) = two_arm_problem(seed, want);
+        let plan = plan_motion(&model, &start, &Goal::Configuration(goal.clone()), &settings(PlannerKind::RrtConnect))
+            .unwrap_or_else(|e| panic!("{want:?}: {e}"));
+        assert_plan_ok(&model, &start, &goal, &plan.path);
+        assert_eq!(plan.stats.planner, "rrt-connect-groups+shortcut", "{want:?}");
+        let whole = MotionSettings { rrt_by_groups: false, ..settings(PlannerKind::RrtConnect) };
+        let plan = plan_motion(&model, &start, &Goal::Configuration(goal.clone()), &whole).unwrap();
+        assert_plan_ok(&model, &start, &goal, &plan.path);
+        assert_eq!(plan.stats.planner, "rrt-connect+shortcut", "{want:?}");
+    }
+}
+
+/// When neither order of the arms has a free waypoint, the search over every joint finds the
+/// path; when only one arm must move, the other stays where it is along the whole path.
+#[test]
+fn arms_that_block_each_other_fall_back_and_a_still_arm_stays() {
+    let (model, start, goal) = two_arm_problem(6, [false, false]);
+    let plan = plan_motion(&model, &start, &Goal::Configuration(goal.clone()), &settings(PlannerKind::RrtConnect))
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert_plan_ok(&model, &start, &goal, &plan.path);
+    assert_eq!(plan.stats.planner, "rrt-connect+shortcut");
+
+    // Only the postument's arm moves, and not straight to its goal.
+    let (model, start, goal) = (7..40)
+        .map(|seed| {
+            let (model, start, goal) = two_arm_problem(seed, [true, true]);
+            let goal: Vec<f64> = start[..7].iter().chain(&goal[7..]).copied().collect();
+            (model, start, goal)
+        })
+        .find(|(model, start, goal)| !model.motion_is_certified_free(start, goal, CERTIFY_TOLERANCE))
+        .expect("test setup: a blocked one-arm motion");
+    let plan = plan_motion(&model, &start, &Goal::Configuration(goal.clone()), &settings(PlannerKind::RrtConnect))
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert_plan_ok(&model, &start, &goal, &plan.path);
+    assert_eq!(plan.stats.planner, "rrt-connect-groups+shortcut");
+    for q in &plan.path {
+        assert_eq!(q[..7], start[..7], "the still arm moved: {q:?}");
+    }
+}

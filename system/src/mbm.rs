@@ -66,6 +66,8 @@ pub struct MbmArgs {
     pub rrt_range: f64,
     /// RRT-Connect with dynamic domain.
     pub dynamic_domain: bool,
+    /// RRT-Connect first one independent group of joints at a time (two arms on a fixed torso).
+    pub by_groups: bool,
     /// RRT-Connect grows the smaller tree while the other has twice its nodes.
     pub balance: bool,
     /// How RRT-Connect draws samples.
@@ -117,6 +119,7 @@ impl MbmArgs {
             algorithm: PlannerKind::RrtConnect,
             rrt_range: MotionSettings::default().rrt_range,
             dynamic_domain: MotionSettings::default().rrt_dynamic_domain,
+            by_groups: MotionSettings::default().rrt_by_groups,
             balance: MotionSettings::default().rrt_balance,
             sampler: MotionSettings::default().sampler,
             rrt_local_bias: MotionSettings::default().rrt_local_bias,
@@ -255,6 +258,10 @@ pub struct MbmSettings {
     pub rrt_range: f64,
     /// Whether RRT-Connect's sampling was restricted to a dynamic domain around each tree.
     pub dynamic_domain: bool,
+    /// Whether RRT-Connect planned one independent group of joints at a time first (absent in
+    /// reports written before it existed, which did not: read as false).
+    #[serde(default)]
+    pub by_groups: bool,
     /// Whether the smaller tree was grown while the other had twice its nodes.
     pub balance: bool,
     /// How RRT-Connect drew its samples.
@@ -629,6 +636,7 @@ fn run_problem(args: &MbmArgs, loaded: &Loaded, p: &ProblemFiles, run: u32) -> R
         planner: args.algorithm,
         rrt_range: args.rrt_range,
         rrt_dynamic_domain: args.dynamic_domain,
+        rrt_by_groups: args.by_groups,
         rrt_balance: args.balance,
         sampler: args.sampler,
         rrt_local_bias: args.rrt_local_bias,
@@ -786,6 +794,7 @@ fn settings_of(args: &MbmArgs, loaded: &Loaded) -> MbmSettings {
         algorithm: args.algorithm,
         rrt_range: args.rrt_range,
         dynamic_domain: args.dynamic_domain,
+        by_groups: args.by_groups,
         balance: args.balance,
         sampler: args.sampler,
         rrt_local_bias: args.rrt_local_bias,

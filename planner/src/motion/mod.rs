@@ -238,6 +238,13 @@ pub struct MotionSettings {
     /// all 296 problems from 6.53 to 6.27 (Halton samples on top: 311 M; range 2 rad on top of
     /// that: path length 6.73).
     pub rrt_dynamic_domain: bool,
+    /// RRT-Connect on a robot of independent groups of joints (two arms on a fixed torso, see
+    /// [`embodied_models::Robot::independent_dof_groups`]): before the search over every joint,
+    /// a path that moves one group at a time, each leg searched in its group's joints alone (at
+    /// most 2,000 samples a leg; the search over every joint follows when no order of the groups
+    /// works). On by default: on the first ten problems of each of VAMP's three Baxter families
+    /// (both arms moving, 14 joints; `bench mbm`, one core), p50 4.5 -> 1.0 ms, p95 30 -> 5.4 ms.
+    pub rrt_by_groups: bool,
     /// RRT-Connect: keep growing the smaller tree while the other has twice its nodes (instead
     /// of swapping the trees every iteration). On by default (see
     /// [`MotionSettings::rrt_dynamic_domain`]).
@@ -321,6 +328,7 @@ impl Default for MotionSettings {
             rrt_range: 1.0,
             lazy_probe: DEFAULT_LAZY_PROBE,
             rrt_dynamic_domain: true,
+            rrt_by_groups: true,
             rrt_balance: true,
             sampler: Sampler::Uniform,
             rrt_local_bias: 0.5,
@@ -657,16 +665,35 @@ fn plan_alone<V: StateValidity>(
         }
     }
 
-    // 2. The search.
+    // 2. The search: on a robot of independent groups of joints, first one group at a time.
     let mut greedy_done = false;
+    let nearest = goals.iter().min_by(|a, b| space.distance(start, a).total_cmp(&space.distance(start, b)));
+    if let (None, PlannerKind::RrtConnect, Some(goal), true) = (&raw, settings.planner, nearest, settings.rrt_by_groups)
+    {
+        budget.hold_hand_over(false);
+        let lazy = matches!(settings.edge_check, EdgeCheck::Certified { .. }) && settings.lazy_probe > 0.0;
+        match by_groups(&mut validity, &mut budget, &mut rng, start, goal, settings, lazy, &mut stats) {
+            Some(Outcome::Solved(p)) => raw = Some((p, "rrt-connect-groups")),
+            Some(Outcome::OutOfTime { .. }) => return Err(out_of_time(&budget, &validity, &stats)),
+            Some(Outcome::Infeasible) | None => {}
+        }
+    }
     if raw.is_none() {
         budget.hold_hand_over(false);
         let found = match settings.planner {
             PlannerKind::RrtConnect => {
                 let lazy = matches!(settings.edge_check, EdgeCheck::Certified { .. }) && settings.lazy_probe > 0.0;
                 greedy_done = lazy && settings.shortcut;
-                let mut outcome =
-                    rrt_connect::plan(&mut validity, &mut budget, &mut rng, start, &goals, settings, lazy, &mut stats);
+                let mut outcome = rrt_connect::plan(
+                    &mut validity,
+                    &mut budget,
+                    &mut rng,
+                    start,
+                    &goals,
+                    settings,
+                    (lazy, None),
+                    &mut stats,
+                );
                 // An attempt that drew `max_samples` samples without a path is stuck more often
                 // than the problem is infeasible: new trees, the random stream going on.
                 for _ in 0..settings.rrt_restarts {
@@ -681,7 +708,7 @@ fn plan_alone<V: StateValidity>(
                         start,
                         &goals,
                         settings,
-                        lazy,
+                        (lazy, None),
                         &mut stats,
                     );
                 }
@@ -709,6 +736,7 @@ fn plan_alone<V: StateValidity>(
         }
         planner = match planner {
             "rrt-connect" => "rrt-connect+shortcut",
+            "rrt-connect-groups" => "rrt-connect-groups+shortcut",
             "lazy-prm" => "lazy-prm+shortcut",
             other => other,
         };
@@ -721,6 +749,169 @@ fn plan_alone<V: StateValidity>(
     stats.probe_checks = validity.probe_checks;
     stats.elapsed = budget.started.elapsed();
     Ok(MotionPlan { path, stats })
+}
+
+/// Samples of one leg of [`by_groups`] before it gives the leg up (the search over every
+/// joint follows).
+const GROUP_LEG_SAMPLES: usize = 2_000;
+
+/// On a robot of independent groups of joints ([`Robot::independent_dof_groups`]: two arms on a
+/// fixed torso), a path from `start` to `goal` that moves one group at a time: the groups that
+/// must move, in their order and then in the reverse order, each leg a straight segment or an
+/// RRT-Connect search in that group's joints alone (at most [`GROUP_LEG_SAMPLES`] samples). Each
+/// leg's search is as hard as one arm's problem, where the search over every joint draws
+/// samples in all of them (on VAMP's Baxter problems, both arms moving). The legs' paths are
+/// certified as any; the shortcuts that follow may move several groups at once. `None` when
+/// the robot has one group or only one group must move and it is all there is; `Infeasible`
+/// when no order gave a path (a waypoint in collision, a leg out of samples).
+#[allow(clippy::too_many_arguments)]
+fn by_groups<V: StateValidity>(
+    validity: &mut Validity<'_, V>,
+    budget: &mut Budget<'_>,
+    rng: &mut Rng,
+    start: &[f64],
+    goal: &[f64],
+    settings: &MotionSettings,
+    lazy: bool,
+    stats: &mut MotionStats,
+) -> Option<Outcome<Vec<Vec<f64>>, ()>> {
+    let robot = validity.model.robot();
+    let groups = robot.independent_dof_groups();
+    if groups.len() < 2 {
+        return None;
+    }
+    let mut delta = vec![0.0; start.len()];
+    validity.space.deltas_into(start, goal, &mut delta);
+    let moving: Vec<&Vec<usize>> = groups.iter().filter(|g| g.iter().any(|&d| delta[d] != 0.0)).collect();
+    if moving.is_empty() {
+        return None;
+    }
+    let leg_settings = MotionSettings { max_samples: GROUP_LEG_SAMPLES, ..settings.clone() };
+    let orders: Vec<Vec<&Vec<usize>>> = if moving.len() == 1 {
+        vec![moving]
+    } else {
+        let reversed = moving.iter().rev().copied().collect();
+        vec![moving, reversed]
+    };
+    let mut mask = vec![false; start.len()];
+    'orders: for order in orders {
+        // The waypoints: each group in turn moved to the goal.
+        let mut points = vec![start.to_vec()];
+        for group in &order {
+            let mut q = points.last().cloned().unwrap_or_default();
+            for &d in group.iter() {
+                q[d] = goal[d];
+            }
+            points.push(q);
+        }
+        if let Some(last) = points.last_mut() {
+            // The goal itself (its values, not a copy put together joint by joint).
+            last.copy_from_slice(goal);
+        }
+        for q in &points[1..points.len() - 1] {
+            if budget.spend(1, validity.collision_checks) {
+                return Some(Outcome::OutOfTime { best: None, cause: budget.cause() });
+            }
+            if !validity.config_free(q) {
+                continue 'orders;
+            }
+        }
+        let mut legs: Vec<Vec<Vec<f64>>> = Vec::with_capacity(order.len());
+        for (leg, group) in points.windows(2).zip(&order) {
+            if budget.spend(1, validity.collision_checks) {
+                return Some(Outcome::OutOfTime { best: None, cause: budget.cause() });
+            }
+            if validity.segment_free(&leg[0], &leg[1]) {
+                legs.push(leg.to_vec());
+                continue;
+            }
+            mask.iter_mut().for_each(|m| *m = false);
+            for &d in group.iter() {
+                mask[d] = true;
+            }
+            let goals = [leg[1].clone()];
+            let found =
+                rrt_connect::plan(validity, budget, rng, &leg[0], &goals, &leg_settings, (lazy, Some(&mask)), stats);
+            match found {
+                Outcome::Solved(p) => legs.push(p),
+                Outcome::OutOfTime { best, cause } => return Some(Outcome::OutOfTime { best, cause }),
+                Outcome::Infeasible => continue 'orders,
+            }
+        }
+        // The legs side by side when that motion is free too (the groups only meet each other
+        // there: each moves among the obstacles as in its leg), else one after the other.
+        if legs.len() > 1 {
+            let together = side_by_side(&validity.space, start, &legs, &order);
+            let mut free = true;
+            for w in together.windows(2) {
+                if budget.spend(1, validity.collision_checks) {
+                    return Some(Outcome::OutOfTime { best: None, cause: budget.cause() });
+                }
+                if !validity.segment_free(&w[0], &w[1]) {
+                    free = false;
+                    break;
+                }
+            }
+            if free {
+                return Some(Outcome::Solved(together));
+            }
+        }
+        let mut path = vec![start.to_vec()];
+        for leg in legs {
+            path.extend(leg.into_iter().skip(1));
+        }
+        return Some(Outcome::Solved(path));
+    }
+    Some(Outcome::Infeasible)
+}
+
+/// The legs of [`by_groups`] (leg `i` moves the joints `groups[i]` alone) run at once: each
+/// group along its leg at the same share of the leg's length, with a vertex wherever some leg
+/// has one. The path is as long as `sqrt(sum of squared leg lengths)` where one leg after the
+/// other is the plain sum (two equal legs: 0.71 of it).
+fn side_by_side(
+    space: &embodied_models::ConfigSpace,
+    start: &[f64],
+    legs: &[Vec<Vec<f64>>],
+    groups: &[&Vec<usize>],
+) -> Vec<Vec<f64>> {
+    // Each leg's vertices as shares of its length.
+    let shares: Vec<Vec<f64>> = legs
+        .iter()
+        .map(|leg| {
+            let mut at = vec![0.0];
+            for w in leg.windows(2) {
+                at.push(at.last().copied().unwrap_or(0.0) + space.distance(&w[0], &w[1]));
+            }
+            let total = at.last().copied().unwrap_or(0.0);
+            if total > 0.0 { at.iter().map(|a| a / total).collect() } else { vec![0.0; leg.len()] }
+        })
+        .collect();
+    let mut cuts: Vec<f64> = shares.iter().flatten().copied().chain([1.0]).collect();
+    cuts.sort_by(f64::total_cmp);
+    cuts.dedup_by(|a, b| *a - *b < 1e-12);
+    cuts.into_iter()
+        .map(|s| {
+            let mut q = start.to_vec();
+            for ((leg, at), group) in legs.iter().zip(&shares).zip(groups) {
+                // The leg's segment holding the share `s`, and the point there.
+                let j = at.partition_point(|&a| a <= s).clamp(1, leg.len().max(2) - 1);
+                let (a0, a1) = (at[j - 1], at.get(j).copied().unwrap_or(1.0));
+                let t = if a1 > a0 { ((s - a0) / (a1 - a0)).clamp(0.0, 1.0) } else { 1.0 };
+                // The ends exactly (the start, and each group's goal values).
+                let p = match (leg.get(j), leg.last()) {
+                    (_, Some(last)) if s >= 1.0 => last.clone(),
+                    _ if s <= 0.0 => start.to_vec(),
+                    (Some(next), _) => space.interpolate(&leg[j - 1], next, t),
+                    (None, _) => leg[j - 1].clone(),
+                };
+                for &d in group.iter() {
+                    q[d] = p[d];
+                }
+            }
+            q
+        })
+        .collect()
 }
 
 /// Lazy PRM grown in batches: add start and goals, then grow, search, grow...
@@ -1017,5 +1208,46 @@ mod tests {
         }
         // The randomly seeded solutions are what the property is about.
         assert!(several >= 5, "only {several} of 10 cases found more than one solution");
+    }
+}
+
+#[cfg(test)]
+mod side_by_side_tests {
+    use embodied_models::ConfigSpace;
+
+    use super::side_by_side;
+
+    /// Two legs of other vertex counts run at once: the ends are the start and the goal to the
+    /// bit, each group's values lie on its leg at the same share of its length, and the path is
+    /// as long as the root of the legs' squared lengths.
+    #[test]
+    fn legs_side_by_side_keep_each_leg_and_shorten_the_path() {
+        let space = ConfigSpace::from_wraps(vec![false; 5]);
+        let start = vec![0.0, 0.0, 0.0, 0.0, 0.7];
+        // Group [0, 1] along an L of lengths 1 and 2; group [2, 3] along three steps of 1.
+        let a = vec![start.clone(), vec![1.0, 0.0, 0.0, 0.0, 0.7], vec![1.0, 2.0, 0.0, 0.0, 0.7]];
+        let b = vec![
+            a[2].clone(),
+            vec![1.0, 2.0, 1.0, 0.0, 0.7],
+            vec![1.0, 2.0, 1.0, 1.0, 0.7],
+            vec![1.0, 2.0, 2.0, 1.0, 0.7],
+        ];
+        let (ga, gb) = (vec![0, 1], vec![2, 3]);
+        let path = side_by_side(&space, &start, &[a.clone(), b.clone()], &[&ga, &gb]);
+        assert_eq!(path.first(), Some(&start));
+        assert_eq!(path.last(), b.last());
+        // Cuts at the shares 0, 1/3 (both legs), 2/3 (b), 1.
+        assert_eq!(path.len(), 4);
+        let length: f64 = path.windows(2).map(|w| space.distance(&w[0], &w[1])).sum();
+        assert!((length - (3.0f64 * 3.0 + 3.0 * 3.0).sqrt()).abs() < 1e-12, "{length}");
+        for q in &path {
+            assert_eq!(q[4], 0.7, "a joint of no group moved: {q:?}");
+            // Group a at share s: along its L (x first, then y).
+            let s_a = q[0] + q[1];
+            let s_b = q[2] + q[3];
+            assert!((s_a - s_b).abs() < 1e-12, "the legs are at other shares: {q:?}");
+            assert!(q[1] == 0.0 || q[0] == 1.0, "group a left its leg: {q:?}");
+            assert!(q[3] == 0.0 || q[2] == 1.0 || q[3] == 1.0, "group b left its leg: {q:?}");
+        }
     }
 }

@@ -463,7 +463,9 @@ fn extend<V: StateValidity>(
 
 /// Plan from `start` to any of `goals` (all valid). The path runs start -> goal. `lazy`: probe
 /// tree edges at `settings.lazy_probe` and certify them once on a path, there with the greedy
-/// shortcut pass when `settings.shortcut`.
+/// shortcut pass when `settings.shortcut`. With `moving`, only the degrees of freedom `d` with
+/// `moving[d]` are drawn: the others keep `start`'s values in every sample (the goals must
+/// have them too), so the trees grow in that subspace.
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn plan<V: StateValidity>(
     validity: &mut Validity<'_, V>,
@@ -472,7 +474,7 @@ pub(crate) fn plan<V: StateValidity>(
     start: &[f64],
     goals: &[Vec<f64>],
     settings: &MotionSettings,
-    lazy: bool,
+    (lazy, moving): (bool, Option<&[bool]>),
     stats: &mut MotionStats,
 ) -> Outcome<Vec<Vec<f64>>, ()> {
     let robot = validity.model.robot();
@@ -512,6 +514,11 @@ pub(crate) fn plan<V: StateValidity>(
         match near_node {
             Some(k) if a.alive[k] => draw.near_into(robot, rng, a.node(k), local_span, &mut sample),
             _ => draw.next_into(robot, rng, &mut sample),
+        }
+        if let Some(moving) = moving {
+            for ((v, &s), _) in sample.iter_mut().zip(start).zip(moving).filter(|(_, m)| !**m) {
+                *v = s;
+            }
         }
         let mut new = None;
         // Dynamic domain: a sample outside the nearest node's radius is not extended towards.
