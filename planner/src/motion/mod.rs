@@ -684,23 +684,16 @@ fn plan_alone<V: StateValidity>(
             PlannerKind::RrtConnect => {
                 let lazy = matches!(settings.edge_check, EdgeCheck::Certified { .. }) && settings.lazy_probe > 0.0;
                 greedy_done = lazy && settings.shortcut;
-                let mut outcome = rrt_connect::plan(
-                    &mut validity,
-                    &mut budget,
-                    &mut rng,
-                    start,
-                    &goals,
-                    settings,
-                    (lazy, None),
-                    &mut stats,
-                );
                 // An attempt that drew `max_samples` samples without a path is stuck more often
                 // than the problem is infeasible: new trees, the random stream going on.
-                for _ in 0..settings.rrt_restarts {
-                    if !matches!(outcome, Outcome::Infeasible) || settings.max_samples == 0 {
-                        break;
+                let mut outcome = Outcome::Infeasible;
+                for attempt in 0..=settings.rrt_restarts {
+                    if attempt > 0 {
+                        if !matches!(outcome, Outcome::Infeasible) || settings.max_samples == 0 {
+                            break;
+                        }
+                        stats.restarts += 1;
                     }
-                    stats.restarts += 1;
                     outcome = rrt_connect::plan(
                         &mut validity,
                         &mut budget,
