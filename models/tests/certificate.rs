@@ -877,6 +877,110 @@ fn edge_probes_answer_as_their_points_do() {
     assert!(blocked > 100 && clear > 100, "{blocked} blocked, {clear} clear");
 }
 
+/// Two arms of three sphere links on a torso of two balls, reaching across each other: a robot
+/// whose arms move apart (one group of joints each).
+fn two_sphere_arms() -> Robot {
+    let mut b = RobotBuilder::new("two-sphere-arms");
+    let lim = JointLimits::new(-2.0, 2.0, 1.0, 1.0);
+    let ball = |x: f64, r: f64| PlacedShape::new(Isometry3::translation(x, 0.0, 0.0), Shape::sphere(r));
+    let torso = b.link(
+        "torso",
+        vec![
+            PlacedShape::new(Isometry3::translation(0.0, 0.0, 0.1), Shape::sphere(0.1)),
+            PlacedShape::new(Isometry3::translation(0.0, 0.0, 0.3), Shape::sphere(0.08)),
+        ],
+    );
+    for (side, y) in [("left", 0.2), ("right", -0.2)] {
+        let mut parent = torso;
+        for k in 0..3 {
+            let link = b.link(format!("{side}{k}"), vec![ball(0.05, 0.04), ball(0.15, 0.04), ball(0.25, 0.035)]);
+            let at = if k == 0 { Isometry3::translation(0.0, y, 0.3) } else { Isometry3::translation(0.3, 0.0, 0.0) };
+            let axis = if k == 1 { Vector3::y() } else { Vector3::z() };
+            b.joint(
+                format!("{side}_j{k}"),
+                JointKind::Revolute,
+                parent,
+                link,
+                at,
+                axis,
+                0.0,
+                Isometry3::identity(),
+                lim,
+            );
+            parent = link;
+        }
+    }
+    b.build().unwrap()
+}
+
+/// A probe from a free configuration that holds some joints still answers as the same probe
+/// with every body tested (and as its points one by one): the batches skip the bodies no
+/// joint moves, whose poses are those of the free start. On two arms moved one at a time, an
+/// arm with a mimic joint and a prismatic joint, a long chain and the UR5, with starts near
+/// contact (where a still body's tests could not settle a lane) and anywhere, ends near
+/// contact, anywhere and a short step away, on both instruction sets.
+#[test]
+fn probes_from_free_starts_skip_still_bodies_with_the_same_answer() {
+    let (mut blocked, mut clear) = (0, 0);
+    let robots = [two_sphere_arms(), skewed_sphere_arm(), snake(), ur5()];
+    for (which, robot) in robots.iter().enumerate() {
+        let space = robot.config_space();
+        let dof = robot.dof();
+        for seed in 0..6u64 {
+            let model = CollisionModel::new(robot, solid_clutter(seed + 20, 10));
+            assert!(model.certifies_in_batches());
+            let mut rng = Rng::new(seed * 17 + which as u64);
+            let mut s = model.scratch();
+            let mut baseline = model.scratch().with_baseline_vectors();
+            for k in 0..30usize {
+                let near = if k % 2 == 0 { near_contact(&model, robot, &mut rng, 1e-6) } else { None };
+                let Some(a) = near.filter(|q| !model.collides_with(q, &mut s)).or_else(|| {
+                    (0..200).map(|_| robot.random_configuration(&mut rng)).find(|q| !model.collides_with(q, &mut s))
+                }) else {
+                    continue;
+                };
+                let mut b = match k % 3 {
+                    0 => near_contact(&model, robot, &mut rng, 1e-6)
+                        .unwrap_or_else(|| robot.random_configuration(&mut rng)),
+                    1 => robot.random_configuration(&mut rng),
+                    _ => a.iter().map(|v| v + rng.range(-0.05, 0.05)).collect(),
+                };
+                // The first half of the joints still, the second half, or a random few.
+                for d in 0..dof {
+                    let hold = match k % 4 {
+                        0 => d < dof / 2,
+                        1 => d >= dof / 2,
+                        2 => rng.range(0.0, 1.0) < 0.4,
+                        _ => d + 1 < dof,
+                    };
+                    if hold {
+                        b[d] = a[d];
+                    }
+                }
+                let mut delta = Vec::new();
+                space.deltas_into(&a, &b, &mut delta);
+                let n = 1 + (k * 5 + seed as usize) % 30;
+                for end in [None, Some(&b[..])] {
+                    let mut points: Vec<f64> = end.map(<[f64]>::to_vec).unwrap_or_default();
+                    let mut q = vec![0.0; dof];
+                    embodied_models::cspace::bisection_order(n, |i| {
+                        ConfigSpace::step_into(&a, &delta, i as f64 / n as f64, &mut q);
+                        points.extend_from_slice(&q);
+                        true
+                    });
+                    let expected = points.chunks(dof).any(|q| model.collides_with(q, &mut s));
+                    let at = format!("robot {which}, seed {seed}, segment {k}, {n} steps, end {}", end.is_some());
+                    assert_eq!(model.probe_collides(&a, end, &delta, n, &mut s), expected, "{at}");
+                    assert_eq!(model.probe_from_free_collides(&a, end, &delta, n, &mut s), expected, "{at}");
+                    assert_eq!(model.probe_from_free_collides(&a, end, &delta, n, &mut baseline), expected, "{at}");
+                    if expected { blocked += 1 } else { clear += 1 }
+                }
+            }
+        }
+    }
+    assert!(blocked > 100 && clear > 100, "{blocked} blocked, {clear} clear");
+}
+
 /// The batches settle nearly everything that is not within a hair of the question, so the
 /// certificate gains from them: on the UR5 among obstacles, batches of eight random free
 /// configurations are settled free, and a batch holding one colliding configuration among
@@ -924,6 +1028,58 @@ fn single_precision_batches_settle_random_configurations() {
 #[test]
 fn certificate_with_batches_is_sound_under_dense_sampling() {
     certificates_are_sound_under_dense_sampling(|seed| solid_clutter(seed + 20, 12), 90, true);
+}
+
+/// Certificates of motions that hold some joints still (one arm of two, half a chain, a few at
+/// random) from free ends, often within a hair of contact, stay sound: the batches skip the
+/// bodies no joint moves, and whatever is certified is free when sampled every 0.0005 rad by
+/// the general path. Some motions are certified, some refused.
+#[test]
+fn certificates_holding_joints_still_stay_sound() {
+    let robots = [two_sphere_arms(), skewed_sphere_arm(), snake(), ur5()];
+    for (which, robot) in robots.iter().enumerate() {
+        let space = robot.config_space();
+        let dof = robot.dof();
+        let (mut certified, mut refused) = (0, 0);
+        for seed in 0..3 {
+            let model = CollisionModel::new(robot, solid_clutter(seed + 40, 12));
+            assert!(model.certifies_in_batches());
+            let general = model.clone().general_path_only();
+            let mut rng = Rng::new(seed * 7 + 3 + which as u64);
+            let mut s = model.scratch();
+            let mut tried = 0;
+            while tried < 40 {
+                let near = if tried % 2 == 0 { near_contact(&model, robot, &mut rng, 1e-6) } else { None };
+                let qa = near.unwrap_or_else(|| robot.random_configuration(&mut rng));
+                let far = robot.random_configuration(&mut rng);
+                let mut qb = space.interpolate(&qa, &far, [0.2, 0.5, 1.0][tried % 3]);
+                for d in 0..dof {
+                    let hold = match tried % 3 {
+                        0 => d < dof / 2,
+                        1 => d >= dof / 2,
+                        _ => rng.range(0.0, 1.0) < 0.5,
+                    };
+                    if hold {
+                        qb[d] = qa[d];
+                    }
+                }
+                if model.collides(&qa) || model.collides(&qb) {
+                    continue;
+                }
+                tried += 1;
+                if model.certify(&qa, &qb, 1e-4, false, &mut s).0 {
+                    certified += 1;
+                    assert!(
+                        general.motion_is_free(&qa, &qb, 0.0005),
+                        "{which}: certified but collides: {qa:?} -> {qb:?}"
+                    );
+                } else {
+                    refused += 1;
+                }
+            }
+        }
+        assert!(certified > 20 && refused > 3, "robot {which}: {certified} certified, {refused} refused");
+    }
 }
 
 #[test]

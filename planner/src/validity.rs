@@ -81,7 +81,9 @@ pub trait StateValidity: Sync {
     /// points `a + (i / n) delta` of the segment cut into `n` steps ([`ConfigSpace::step_into`]
     /// with `t = i / n`, `i` from 1 to `n - 1` in bisection order). By default the points are
     /// built (in a new buffer) and passed to [`Self::any_collides`]; an implementation may
-    /// check them without building them, as long as the answer is the same.
+    /// check them without building them, as long as the answer is the same. `a` is valid (a
+    /// probe starts at a configuration already checked): an implementation may take what does
+    /// not move along the probe as valid ([`CollisionModel::probe_from_free_collides`]).
     fn probe_collides(
         &self,
         a: &[f64],
@@ -157,7 +159,7 @@ impl StateValidity for CollisionModel {
         n: usize,
         scratch: &mut CollisionScratch,
     ) -> bool {
-        CollisionModel::probe_collides(self, a, end, delta, n, scratch)
+        self.probe_from_free_collides(a, end, delta, n, scratch)
     }
 
     fn first_collision(&self, q: &[f64]) -> Option<String> {
@@ -363,7 +365,8 @@ impl<'m, V: StateValidity> Validity<'m, V> {
 
     /// No sampled configuration of the segment `a`-`b` collides, at `resolution` (largest joint
     /// step), ends excluded; with `check_end`, the end `b` too (within the position limits and
-    /// free). A probe, not a certificate: an obstacle between samples is missed. The points go
+    /// free). `a` is valid (a tree node): the model may take the bodies that do not move as
+    /// free. A probe, not a certificate: an obstacle between samples is missed. The points go
     /// to the model in one query ([`StateValidity::probe_collides`]: in vector lanes for a
     /// [`CollisionModel`] on the sphere path), the end first, then the inner points in
     /// bisection order. (The end checked alone first, then the inner points: on the 296 public

@@ -396,6 +396,11 @@ pub(crate) struct LaneMargins<'a> {
     /// with its link's margin is tested again with its own margin along the motion (see
     /// [`LaneMotion`]).
     pub along: bool,
+    /// Groups free in every lane without a test (bit `g` for group `g`): the caller knows the
+    /// configuration the lanes move from is free and that no joint moves these groups' bodies
+    /// ([`SphereGeom::still_groups`]), so each lane poses them as there. None of their spheres
+    /// is tested against an obstacle, nor against another such group's. 0: every group is tested.
+    pub still: u64,
 }
 
 /// A straight motion's terms for the batches of its pieces (all of one length, see
@@ -950,6 +955,12 @@ fn transpose_any(qs: &[f64], dof: usize, cols: &mut Vec<[f64; LANES]>) -> bool {
 /// `(1 + 2^-21)`: see [`thr`].
 const WIDEN: f32 = 1.0 + 1.0 / 2_097_152.0;
 
+/// Whether group `g` is set in the mask `still` ([`LaneMargins::still`]).
+#[inline(always)]
+fn is_still(still: u64, g: usize) -> bool {
+    g < 64 && still >> g & 1 != 0
+}
+
 /// A threshold at least `(1 + γ_3)(a + b + c)²` for `a`, `b`, `c` ≥ 0 (each already holding its
 /// share of the rounding allowance, rounded up), in three `f32` operations and a square: the
 /// two sums and the product lose at most a factor `(1 - u)³` before the square, which squares
@@ -1318,8 +1329,11 @@ impl SphereGeom {
 
 /// One call of [`SphereGeom::free_lanes`], compiled for each instruction set.
 /// `ALONG`: [`LaneMargins::along`] (a kernel of its own: the test it adds in the sphere loop
-/// made the other batches' code slower).
-struct Batch<'a, S, const ALONG: bool> {
+/// made the other batches' code slower). `STILL`: some [`LaneMargins::still`] group (a kernel
+/// of its own too: its tests in the group and group-pair loops cost the public
+/// MotionBenchMaker UR5 problems, where no group but the base is ever still, 2.4% of their
+/// planning instructions).
+struct Batch<'a, S, const ALONG: bool, const STILL: bool> {
     geom: &'a SphereGeom,
     qs: S,
     dof: usize,
@@ -1328,13 +1342,13 @@ struct Batch<'a, S, const ALONG: bool> {
     s: &'a mut LaneScratch,
 }
 
-impl<S: Source, const ALONG: bool> Kernel for Batch<'_, S, ALONG> {
+impl<S: Source, const ALONG: bool, const STILL: bool> Kernel for Batch<'_, S, ALONG, STILL> {
     type Output = Lanes8;
 
     #[inline(always)]
     fn run<O: Ops>(self, o: O) -> Lanes8 {
         let Batch { geom, qs, dof, obstacles, margins, s } = self;
-        geom.free_lanes_in::<O, S, ALONG>(o, qs, dof, obstacles, margins, s)
+        geom.free_lanes_in::<O, S, ALONG, STILL>(o, qs, dof, obstacles, margins, s)
     }
 }
 
@@ -1353,24 +1367,34 @@ impl SphereGeom {
         s: &mut LaneScratch,
     ) -> Lanes8 {
         let isa = s.isa;
-        match qs {
-            // Rows are never pieces of one motion here: their batches leave `along` out (it
-            // only settles more lanes, never changes what a settled lane means).
-            LaneInput::Rows(qs) => {
-                simd8::dispatch(Batch::<_, false> { geom: self, qs: RowsIn(qs), dof, obstacles, margins, s }, isa)
+        // Rows are never pieces of one motion here: their batches leave `along` out (it only
+        // settles more lanes, never changes what a settled lane means), and hold no still group.
+        match (qs, margins.along, margins.still != 0) {
+            (LaneInput::Rows(qs), ..) => {
+                let margins = LaneMargins { still: 0, ..margins };
+                simd8::dispatch(
+                    Batch::<_, false, false> { geom: self, qs: RowsIn(qs), dof, obstacles, margins, s },
+                    isa,
+                )
             }
-            LaneInput::Segment(qs) if margins.along => {
-                simd8::dispatch(Batch::<_, true> { geom: self, qs, dof, obstacles, margins, s }, isa)
+            (LaneInput::Segment(qs), true, false) => {
+                simd8::dispatch(Batch::<_, true, false> { geom: self, qs, dof, obstacles, margins, s }, isa)
             }
-            LaneInput::Segment(qs) => {
-                simd8::dispatch(Batch::<_, false> { geom: self, qs, dof, obstacles, margins, s }, isa)
+            (LaneInput::Segment(qs), true, true) => {
+                simd8::dispatch(Batch::<_, true, true> { geom: self, qs, dof, obstacles, margins, s }, isa)
+            }
+            (LaneInput::Segment(qs), false, false) => {
+                simd8::dispatch(Batch::<_, false, false> { geom: self, qs, dof, obstacles, margins, s }, isa)
+            }
+            (LaneInput::Segment(qs), false, true) => {
+                simd8::dispatch(Batch::<_, false, true> { geom: self, qs, dof, obstacles, margins, s }, isa)
             }
         }
     }
 
     /// [`Self::free_lanes`] on the instruction set of `o`.
     #[inline(always)]
-    fn free_lanes_in<O: Ops, S: Source, const ALONG: bool>(
+    fn free_lanes_in<O: Ops, S: Source, const ALONG: bool, const STILL: bool>(
         &self,
         o: O,
         qs: S,
@@ -1379,7 +1403,7 @@ impl SphereGeom {
         margins: LaneMargins<'_>,
         s: &mut LaneScratch,
     ) -> Lanes8 {
-        let LaneMargins { link: link_m, pair: pair_m, uniform, step, pairs_of_near, along } = margins;
+        let LaneMargins { link: link_m, pair: pair_m, uniform, step, pairs_of_near, along, still } = margins;
         let none = Lanes8 { free: 0, hit: 0, pairs_free: 0 };
         let lanes = &self.lanes;
         let margins_fit =
@@ -1452,7 +1476,7 @@ impl SphereGeom {
             // group has been here): a batch that ends in a contact skips the groups after it.
             let gc = place(o, &load(o, &s.rot[g.body]), &load(o, &s.pos[g.body]), &lanes.groups[gi]);
             store(&gc, &mut s.group_c[gi]);
-            if gi == 0 && skip_fixed {
+            if (gi == 0 && skip_fixed) || (STILL && is_still(still, gi)) {
                 continue;
             }
             let gg = if kept {
@@ -1520,6 +1544,9 @@ impl SphereGeom {
         let point_cells = step.is_some_and(|st| st.iter().all(|&d| d == 0.0));
         for (k, gp) in self.group_pairs.iter().enumerate() {
             let Some(range) = lanes.pair_ranges.get(k) else { break };
+            if STILL && is_still(still, gp.outer) && is_still(still, gp.inner) {
+                continue;
+            }
             let pairs = &lanes.pairs[range.clone()];
             let tg = if kept {
                 s.grown.group_pair[k]
@@ -1939,8 +1966,15 @@ mod tests {
         given.bound.reverse();
         assert!(given.bound.windows(2).any(|w| w[0].1 < w[1].1), "test setup: an unsorted order");
         let model = CollisionModel::new(&robot, env);
-        let margins =
-            LaneMargins { link: &[], pair: &[], uniform: Some(0.02), step: None, pairs_of_near: false, along: false };
+        let margins = LaneMargins {
+            link: &[],
+            pair: &[],
+            uniform: Some(0.02),
+            step: None,
+            pairs_of_near: false,
+            along: false,
+            still: 0,
+        };
         let (mut s1, mut s2) = (LaneScratch::new(), LaneScratch::new());
         let (mut same, mut hits) = (0, 0);
         for _ in 0..400 {
@@ -2075,6 +2109,51 @@ mod tests {
             }
         }
         worst
+    }
+
+    /// A group is still when the joints that move leave its body's pose as it was, and only
+    /// then: each joint moved alone, then pairs of joints, against the double-precision poses.
+    #[test]
+    fn still_groups_are_those_whose_bodies_keep_their_poses() {
+        let robot = every_body_form();
+        let geom = SphereGeom::new(&crate::collision::RobotGeom::new(&robot), false).expect("a sphere robot");
+        let dof = robot.dof();
+        let mut rng = crate::Rng::new(3);
+        let mut f = super::super::SphereScratch::new();
+        for trial in 0..40 {
+            let a = robot.random_configuration(&mut rng);
+            let mut b = a.clone();
+            let mut moving = 0u64;
+            for d in 0..dof {
+                if d == trial % dof || (trial >= dof && rng.range(0.0, 1.0) < 0.3) {
+                    b[d] += 0.3;
+                    moving |= 1 << d;
+                }
+            }
+            geom.pose(&a, &mut f);
+            let before: Vec<_> = geom.groups.iter().map(|g| (f.rot[g.body], f.pos[g.body])).collect();
+            geom.pose(&b, &mut f);
+            let still = geom.still_groups(moving, dof);
+            // From the steps, with and without the end: the same groups, or none when only
+            // those no joint moves (the base) would be.
+            let fixed = geom.group_dofs.iter().enumerate().filter(|(_, m)| **m == 0).fold(0, |f, (g, _)| f | 1 << g);
+            let along = if still & !fixed == 0 { 0 } else { still };
+            let delta: Vec<f64> = a.iter().zip(&b).map(|(x, y)| y - x).collect();
+            assert_eq!(geom.still_along(&a, &delta, None), along, "trial {trial}");
+            assert_eq!(geom.still_along(&a, &delta, Some(&b)), along, "trial {trial}");
+            // An end that leaves the segment moves the joints it changes.
+            let mut off = a.clone();
+            off[dof - 1] += 1.0;
+            let last = geom.still_groups(1 << (dof - 1), dof);
+            assert_ne!(last & !fixed, 0);
+            assert_eq!(geom.still_along(&a, &vec![0.0; dof], Some(&off)), last);
+            for (gi, g) in geom.groups.iter().enumerate() {
+                let kept = before[gi] == (f.rot[g.body], f.pos[g.body]);
+                assert_eq!(still >> gi & 1 != 0, kept, "trial {trial}, joints {moving:b}, group {gi}");
+            }
+        }
+        // Every joint moving: nothing is still, not even the base (answered at once).
+        assert_eq!(geom.still_groups((1 << dof) - 1, dof), 0);
     }
 
     /// The batch's sphere centres lie within its error bound of the double-precision ones, on
