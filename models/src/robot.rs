@@ -659,9 +659,22 @@ impl Robot {
         &self.dof_groups
     }
 
+    /// [`Robot::independent_dof_groups`] once the degrees of freedom `held` (indexed like `q`;
+    /// missing entries are not held) keep their values: a held one is in no group and joins
+    /// none, as a fixed joint. Two arms on a lifting torso, the lift held: two groups.
+    pub fn dof_groups_holding(&self, held: &[bool]) -> Vec<Vec<usize>> {
+        self.group_dofs_with(held)
+    }
+
     /// [`Robot::independent_dof_groups`] worked out.
     fn group_dofs(&self) -> Vec<Vec<usize>> {
+        self.group_dofs_with(&[])
+    }
+
+    /// [`Robot::dof_groups_holding`].
+    fn group_dofs_with(&self, held: &[bool]) -> Vec<Vec<usize>> {
         let n = self.dof();
+        let is_held = |d: usize| held.get(d).copied().unwrap_or(false);
         let mut parent: Vec<usize> = (0..n).collect();
         fn root(parent: &mut [usize], mut i: usize) -> usize {
             while parent[i] != i {
@@ -680,7 +693,7 @@ impl Robot {
         // parent link's joint): a chain's degrees of freedom end up in one group.
         let mut above: Vec<Option<usize>> = vec![None; self.links.len()];
         for j in &self.joints {
-            let here = j.dof_index.or(j.mimic.map(|(d, _, _)| d)).filter(|&d| d < n);
+            let here = j.dof_index.or(j.mimic.map(|(d, _, _)| d)).filter(|&d| d < n && !is_held(d));
             let up = above.get(j.parent_link).copied().flatten();
             if let (Some(a), Some(d)) = (up, here) {
                 join(&mut parent, a, d);
@@ -690,15 +703,16 @@ impl Robot {
             }
         }
         for a in &self.actuators {
-            for w in a.angle.windows(2) {
-                if w[0].0 < n && w[1].0 < n {
-                    join(&mut parent, w[0].0, w[1].0);
+            let mut driven = a.angle.iter().map(|&(k, _)| k).filter(|&k| k < n && !is_held(k));
+            if let Some(first) = driven.next() {
+                for k in driven {
+                    join(&mut parent, first, k);
                 }
             }
         }
         let mut groups: Vec<Vec<usize>> = Vec::new();
         let mut index_of = vec![usize::MAX; n];
-        for i in 0..n {
+        for i in (0..n).filter(|&i| !is_held(i)) {
             let r = root(&mut parent, i);
             if index_of[r] == usize::MAX {
                 index_of[r] = groups.len();

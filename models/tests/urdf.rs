@@ -577,6 +577,12 @@ fn independent_dof_groups_follow_the_tree() {
     // The lift frozen: the arms part again (renumbered).
     let frozen = lift.freeze_joints(&[("torso", 0.1)]).unwrap();
     assert_eq!(frozen.independent_dof_groups(), vec![vec![0, 1], vec![2, 3]]);
+    // The lift held (in no group): the arms part, numbered as before; an elbow held leaves its
+    // shoulder in a group of its own; nothing held, or too short a mask: the plain groups.
+    assert_eq!(lift.dof_groups_holding(&[true, false, false, false, false]), vec![vec![1, 2], vec![3, 4]]);
+    assert_eq!(lift.dof_groups_holding(&[true, false, true, false, false]), vec![vec![1], vec![3, 4]]);
+    assert_eq!(lift.dof_groups_holding(&[false; 5]), lift.independent_dof_groups());
+    assert_eq!(lift.dof_groups_holding(&[]), lift.independent_dof_groups());
     // The built-in cell: the track and its arm, then the postument arm (screws stay in each).
     let two = embodied_models::builtin("two-irp6").unwrap();
     assert_eq!(two.independent_dof_groups(), vec![(0..7).collect::<Vec<_>>(), (7..13).collect()]);

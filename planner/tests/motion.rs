@@ -4,8 +4,8 @@
 use std::time::{Duration, Instant};
 
 use embodied_models::collision::{CollisionModel, CollisionScratch, Environment, Obstacle};
-use embodied_models::nalgebra::Isometry3;
-use embodied_models::{Robot, Shape, builtin};
+use embodied_models::nalgebra::{Isometry3, Vector3};
+use embodied_models::{JointKind, JointLimits, PlacedShape, Robot, RobotBuilder, Shape, builtin};
 use embodied_planner::PlanError;
 use embodied_planner::deadline::{Deadline, Interrupt};
 use embodied_planner::motion::{
@@ -860,6 +860,87 @@ fn independent_arms_are_planned_one_at_a_time_first() {
         assert_plan_ok(&model, &start, &goal, &plan.path);
         assert_eq!(plan.stats.planner, "rrt-connect+shortcut", "{want:?}");
     }
+}
+
+/// Two arms of three sphere links on a lift (one prismatic joint, first), among two posts.
+fn lifted_arms_among_posts() -> CollisionModel {
+    let mut b = RobotBuilder::new("lifted-arms");
+    let id = Isometry3::identity();
+    let ball = |x: f64, r: f64| PlacedShape::new(Isometry3::translation(x, 0.0, 0.0), Shape::sphere(r));
+    let base = b.link("base", vec![PlacedShape::new(Isometry3::translation(0.0, 0.0, 0.1), Shape::sphere(0.1))]);
+    let lift = b.link("lift", vec![PlacedShape::new(Isometry3::translation(0.0, 0.0, 0.35), Shape::sphere(0.08))]);
+    let travel = JointLimits::new(0.0, 0.3, 0.5, 1.0);
+    b.joint("lift", JointKind::Prismatic, base, lift, id, Vector3::z(), 0.0, id, travel);
+    let turn = JointLimits::new(-2.5, 2.5, 1.0, 1.0);
+    for (side, y) in [("left", 0.25), ("right", -0.25)] {
+        let mut parent = lift;
+        for k in 0..3 {
+            let link = b.link(format!("{side}{k}"), vec![ball(0.08, 0.05), ball(0.2, 0.05)]);
+            let at = if k == 0 { Isometry3::translation(0.0, y, 0.4) } else { Isometry3::translation(0.28, 0.0, 0.0) };
+            let axis = if k == 1 { Vector3::y() } else { Vector3::z() };
+            b.joint(format!("{side}_j{k}"), JointKind::Revolute, parent, link, at, axis, 0.0, id, turn);
+            parent = link;
+        }
+    }
+    let robot = b.build().expect("a robot");
+    let mut env = Environment::new();
+    for (name, c) in [("post", [0.55, 0.45, 0.4]), ("post2", [0.55, -0.45, 0.4])] {
+        env.add(Obstacle::new(name, Isometry3::translation(c[0], c[1], c[2]), Shape::cuboid(0.06, 0.06, 0.4)));
+    }
+    CollisionModel::new(&robot, env)
+}
+
+/// Two arms on a lift that stays where it is: the lift is held and the arms are planned one at
+/// a time first, as on a fixed torso; the lift never moves along the path. A lift that must
+/// move joins the arms again: the search over every joint.
+#[test]
+fn arms_on_a_still_lift_are_planned_one_at_a_time() {
+    let model = lifted_arms_among_posts();
+    let robot = model.robot();
+    assert_eq!(robot.dof(), 7);
+    assert_eq!(robot.independent_dof_groups().len(), 1);
+    let mut rng = embodied_models::Rng::new(11);
+    let mut free = |lift: Option<f64>| {
+        (0..10_000)
+            .map(|_| {
+                let mut q = robot.random_configuration(&mut rng);
+                if let Some(h) = lift {
+                    q[0] = h;
+                }
+                q
+            })
+            .find(|q| !model.collides(q))
+            .expect("a free configuration in 10,000 draws")
+    };
+    let (mut held, mut joined) = (0, 0);
+    for _ in 0..400 {
+        let start = free(None);
+        let same = held < 3;
+        let goal = free(same.then_some(start[0]));
+        let first: Vec<f64> = start[..1].iter().chain(&goal[1..4]).chain(&start[4..]).copied().collect();
+        let second: Vec<f64> = start[..4].iter().chain(&goal[4..]).copied().collect();
+        if model.collides(&first)
+            || model.collides(&second)
+            || model.motion_is_certified_free(&start, &goal, CERTIFY_TOLERANCE)
+        {
+            continue;
+        }
+        let plan = plan_motion(&model, &start, &Goal::Configuration(goal.clone()), &settings(PlannerKind::RrtConnect))
+            .unwrap_or_else(|e| panic!("{start:?} -> {goal:?}: {e}"));
+        assert_plan_ok(&model, &start, &goal, &plan.path);
+        if same {
+            assert_eq!(plan.stats.planner, "rrt-connect-groups+shortcut");
+            assert!(plan.path.iter().all(|q| q[0] == start[0]), "the lift moved: {:?}", plan.path);
+            held += 1;
+        } else {
+            assert_eq!(plan.stats.planner, "rrt-connect+shortcut");
+            joined += 1;
+            if joined == 2 {
+                break;
+            }
+        }
+    }
+    assert_eq!((held, joined), (3, 2), "test setup: problems found");
 }
 
 /// When neither order of the arms has a free waypoint, the search over every joint finds the

@@ -770,12 +770,13 @@ fn by_groups<V: StateValidity>(
     stats: &mut MotionStats,
 ) -> Option<Outcome<Vec<Vec<f64>>, ()>> {
     let robot = validity.model.robot();
-    let groups = robot.independent_dof_groups();
-    if groups.len() < 2 {
-        return None;
-    }
     let mut delta = vec![0.0; start.len()];
     validity.space.deltas_into(start, goal, &mut delta);
+    let groups = groups_holding_still_branches(robot, &delta);
+    // One group of every joint: nothing to take apart.
+    if groups.len() < 2 && groups.iter().map(Vec::len).sum::<usize>() == robot.dof() {
+        return None;
+    }
     let moving: Vec<&Vec<usize>> = groups.iter().filter(|g| g.iter().any(|&d| delta[d] != 0.0)).collect();
     if moving.is_empty() {
         return None;
@@ -857,6 +858,48 @@ fn by_groups<V: StateValidity>(
         return Some(Outcome::Solved(path));
     }
     Some(Outcome::Infeasible)
+}
+
+/// The independent groups of joints of [`by_groups`] for a motion by the joint steps `delta`:
+/// [`Robot::independent_dof_groups`], except that a joint the motion does not move (`delta` 0)
+/// is held ([`Robot::dof_groups_holding`]: in no group) where two groups would meet on its
+/// chain (a lifting torso under two arms: the lift at the same height at start and goal; the
+/// groups part there) or where no joint that moves shares its links (an arm that stays where it
+/// is). A joint that does not move inside one moving group's chain stays in that group: a leg
+/// may still move it on its way.
+fn groups_holding_still_branches<'r>(robot: &'r Robot, delta: &[f64]) -> std::borrow::Cow<'r, [Vec<usize>]> {
+    let plain = std::borrow::Cow::Borrowed(robot.independent_dof_groups());
+    let still: Vec<bool> = delta.iter().map(|&d| d == 0.0).collect();
+    if delta.len() != robot.dof() || !still.contains(&true) {
+        return plain;
+    }
+    // Every joint that does not move held: the groups that are left.
+    let parted = robot.dof_groups_holding(&still);
+    let mut group_of = vec![usize::MAX; delta.len()];
+    for (k, g) in parted.iter().enumerate() {
+        for &d in g {
+            group_of[d] = k;
+        }
+    }
+    // A still joint stays held unless the links it moves are moved by joints of one group.
+    let mut meets: Vec<Vec<usize>> = vec![Vec::new(); delta.len()];
+    for link in 0..robot.links().len() {
+        let movers = robot.dofs_moving(link);
+        let groups_here: Vec<usize> =
+            movers.iter().enumerate().filter(|&(d, &m)| m && !still[d]).map(|(d, _)| group_of[d]).collect();
+        for (d, _) in movers.iter().enumerate().filter(|&(d, &m)| m && still[d]) {
+            for &k in &groups_here {
+                if !meets[d].contains(&k) {
+                    meets[d].push(k);
+                }
+            }
+        }
+    }
+    let held: Vec<bool> = (0..delta.len()).map(|d| still[d] && meets[d].len() != 1).collect();
+    if !held.contains(&true) {
+        return plain;
+    }
+    std::borrow::Cow::Owned(robot.dof_groups_holding(&held))
 }
 
 /// The legs of [`by_groups`] (leg `i` moves the joints `groups[i]` alone) run at once: each
@@ -1243,5 +1286,50 @@ mod side_by_side_tests {
             assert!(q[1] == 0.0 || q[0] == 1.0, "group a left its leg: {q:?}");
             assert!(q[3] == 0.0 || q[2] == 1.0 || q[3] == 1.0, "group b left its leg: {q:?}");
         }
+    }
+}
+
+#[cfg(test)]
+mod holding_tests {
+    use embodied_models::nalgebra::{Isometry3, Vector3};
+    use embodied_models::{JointKind, JointLimits, RobotBuilder};
+
+    use super::groups_holding_still_branches;
+
+    /// A lift (DOF 0) under two arms of three joints (1-3 and 4-6).
+    fn lifted_arms() -> embodied_models::Robot {
+        let mut b = RobotBuilder::new("lifted");
+        let id = Isometry3::identity();
+        let lim = JointLimits::new(-1.0, 1.0, 1.0, 1.0);
+        let base = b.link("base", vec![]);
+        let lift = b.link("lift", vec![]);
+        b.joint("lift", JointKind::Prismatic, base, lift, id, Vector3::z(), 0.0, id, lim);
+        for side in ["l", "r"] {
+            let mut parent = lift;
+            for k in 0..3 {
+                let link = b.link(format!("{side}{k}"), vec![]);
+                b.joint(format!("{side}_j{k}"), JointKind::Revolute, parent, link, id, Vector3::z(), 0.0, id, lim);
+                parent = link;
+            }
+        }
+        b.build().expect("a robot")
+    }
+
+    /// The still lift is held and the arms part; a still joint inside an arm stays in its
+    /// group (a leg may move it); a moving lift, or no still joint, keeps the one group.
+    #[test]
+    fn only_still_joints_where_groups_meet_are_held() {
+        let robot = lifted_arms();
+        let groups = |delta: &[f64]| groups_holding_still_branches(&robot, delta).into_owned();
+        assert_eq!(groups(&[0.0, 0.1, 0.2, 0.3, 0.1, 0.2, 0.3]), vec![vec![1, 2, 3], vec![4, 5, 6]]);
+        assert_eq!(groups(&[0.0, 0.1, 0.0, 0.3, 0.1, 0.2, 0.0]), vec![vec![1, 2, 3], vec![4, 5, 6]]);
+        // One arm still as a whole: held, and the lift with the arm that moves.
+        assert_eq!(groups(&[0.0, 0.0, 0.0, 0.0, 0.1, 0.2, 0.3]), vec![vec![0, 4, 5, 6]]);
+        // Nothing moves: every joint held.
+        assert!(groups(&[0.0; 7]).is_empty());
+        assert_eq!(groups(&[0.1, 0.1, 0.2, 0.3, 0.1, 0.2, 0.3]), vec![(0..7).collect::<Vec<_>>()]);
+        assert_eq!(groups(&[0.1; 7]), vec![(0..7).collect::<Vec<_>>()]);
+        // Steps of another length than the robot's: the plain groups.
+        assert_eq!(groups(&[0.0; 3]), vec![(0..7).collect::<Vec<_>>()]);
     }
 }
