@@ -2124,9 +2124,9 @@ mod tests {
             let a = robot.random_configuration(&mut rng);
             let mut b = a.clone();
             let mut moving = 0u64;
-            for d in 0..dof {
+            for (d, v) in b.iter_mut().enumerate() {
                 if d == trial % dof || (trial >= dof && rng.range(0.0, 1.0) < 0.3) {
-                    b[d] += 0.3;
+                    *v += 0.3;
                     moving |= 1 << d;
                 }
             }
