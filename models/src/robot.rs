@@ -55,6 +55,9 @@ pub struct EndEffector {
     pub tool: Isometry3<f64>,
 }
 
+/// The most degrees of freedom [`Robot::branch_dofs`] are searched for.
+const BRANCH_SEARCH_DOFS: usize = 128;
+
 /// A robot: a kinematic tree of joints (revolute, continuous, prismatic, fixed) with limits,
 /// collision shapes per link and a self-collision pair filter.
 ///
@@ -77,6 +80,8 @@ pub struct Robot {
     actuators: Vec<ScrewTriangle>,
     /// [`Robot::independent_dof_groups`], worked out whenever the tree or the actuators change.
     dof_groups: Vec<Vec<usize>>,
+    /// [`Robot::branch_dofs`], worked out with `dof_groups`.
+    branch_dofs: Vec<usize>,
 }
 
 /// Builds a [`Robot`] link by link; [`RobotBuilder::build`] checks and orders the tree.
@@ -336,8 +341,9 @@ impl RobotBuilder {
             base: self.base,
             actuators: self.actuators,
             dof_groups: Vec::new(),
+            branch_dofs: Vec::new(),
         };
-        robot.dof_groups = robot.group_dofs();
+        (robot.dof_groups, robot.branch_dofs) = robot.group_dofs();
         Ok(robot)
     }
 }
@@ -569,7 +575,7 @@ impl Robot {
             });
         }
         self.actuators.push(actuator);
-        self.dof_groups = self.group_dofs();
+        (self.dof_groups, self.branch_dofs) = self.group_dofs();
         Ok(())
     }
 
@@ -666,9 +672,29 @@ impl Robot {
         self.group_dofs_with(held)
     }
 
-    /// [`Robot::independent_dof_groups`] worked out.
-    fn group_dofs(&self) -> Vec<Vec<usize>> {
-        self.group_dofs_with(&[])
+    /// The degrees of freedom where groups of joints meet: holding one of them alone
+    /// ([`Robot::dof_groups_holding`]) parts its group in two or more (a turning or lifting
+    /// torso under two arms). None on a chain, an arm on a lift, or two arms on a fixed torso.
+    pub fn branch_dofs(&self) -> &[usize] {
+        &self.branch_dofs
+    }
+
+    /// [`Robot::independent_dof_groups`] and [`Robot::branch_dofs`] worked out.
+    fn group_dofs(&self) -> (Vec<Vec<usize>>, Vec<usize>) {
+        let plain = self.group_dofs_with(&[]);
+        let mut held = vec![false; self.dof()];
+        let mut branch = Vec::new();
+        // One grouping per degree of freedom: a robot of more than `BRANCH_SEARCH_DOFS` gets none
+        // (its build would take time quadratic in its size).
+        let searched = if held.len() <= BRANCH_SEARCH_DOFS { held.len() } else { 0 };
+        for d in 0..searched {
+            held[d] = true;
+            if self.group_dofs_with(&held).len() > plain.len() {
+                branch.push(d);
+            }
+            held[d] = false;
+        }
+        (plain, branch)
     }
 
     /// [`Robot::dof_groups_holding`].
@@ -880,7 +906,7 @@ impl Robot {
                 .and_then(|c| arm_chain(&robot.links, &robot.joints, robot.end_effectors[ee].link, c.kind).ok());
             robot.closed_forms[ee] = resolved;
         }
-        robot.dof_groups = robot.group_dofs();
+        (robot.dof_groups, robot.branch_dofs) = robot.group_dofs();
         Ok(robot)
     }
 }

@@ -583,9 +583,13 @@ fn independent_dof_groups_follow_the_tree() {
     assert_eq!(lift.dof_groups_holding(&[true, false, true, false, false]), vec![vec![1], vec![3, 4]]);
     assert_eq!(lift.dof_groups_holding(&[false; 5]), lift.independent_dof_groups());
     assert_eq!(lift.dof_groups_holding(&[]), lift.independent_dof_groups());
+    // Where groups meet: the lift; none on a fixed torso, a chain or the built-in cell.
+    assert_eq!(lift.branch_dofs(), [0]);
+    assert!(fixed.branch_dofs().is_empty() && frozen.branch_dofs().is_empty());
     // The built-in cell: the track and its arm, then the postument arm (screws stay in each).
     let two = embodied_models::builtin("two-irp6").unwrap();
     assert_eq!(two.independent_dof_groups(), vec![(0..7).collect::<Vec<_>>(), (7..13).collect()]);
     let one = embodied_models::builtin("irp6-postument").unwrap();
     assert_eq!(one.independent_dof_groups(), vec![(0..6).collect::<Vec<_>>()]);
+    assert!(two.branch_dofs().is_empty() && one.branch_dofs().is_empty());
 }

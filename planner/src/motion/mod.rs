@@ -772,7 +772,7 @@ fn by_groups<V: StateValidity>(
     let robot = validity.model.robot();
     let mut delta = vec![0.0; start.len()];
     validity.space.deltas_into(start, goal, &mut delta);
-    let groups = groups_holding_still_branches(robot, &delta);
+    let groups = groups_for_legs(robot, &delta);
     // One group of every joint: nothing to take apart.
     if groups.len() < 2 && groups.iter().map(Vec::len).sum::<usize>() == robot.dof() {
         return None;
@@ -861,45 +861,62 @@ fn by_groups<V: StateValidity>(
 }
 
 /// The independent groups of joints of [`by_groups`] for a motion by the joint steps `delta`:
-/// [`Robot::independent_dof_groups`], except that a joint the motion does not move (`delta` 0)
-/// is held ([`Robot::dof_groups_holding`]: in no group) where two groups would meet on its
-/// chain (a lifting torso under two arms: the lift at the same height at start and goal; the
-/// groups part there) or where no joint that moves shares its links (an arm that stays where it
-/// is). A joint that does not move inside one moving group's chain stays in that group: a leg
-/// may still move it on its way.
-fn groups_holding_still_branches<'r>(robot: &'r Robot, delta: &[f64]) -> std::borrow::Cow<'r, [Vec<usize>]> {
+/// [`Robot::independent_dof_groups`], except that
+/// - a joint the motion does not move (`delta` 0) is held ([`Robot::dof_groups_holding`]: in no
+///   group) where two groups would meet on its chain (a lifting torso under two arms: the lift
+///   at the same height at start and goal; the groups part there) or where no joint that moves
+///   shares its links (an arm that stays where it is). A joint that does not move inside one
+///   moving group's chain stays in that group: a leg may still move it on its way;
+/// - a joint where groups meet that moves ([`Robot::branch_dofs`]: a turning torso under two
+///   arms) is a group of its own, so its leg moves it alone (the arms riding along, as they are),
+///   and the groups below it part.
+///
+/// The groups come in the order of their first joint.
+fn groups_for_legs<'r>(robot: &'r Robot, delta: &[f64]) -> std::borrow::Cow<'r, [Vec<usize>]> {
     let plain = std::borrow::Cow::Borrowed(robot.independent_dof_groups());
-    let still: Vec<bool> = delta.iter().map(|&d| d == 0.0).collect();
-    if delta.len() != robot.dof() || !still.contains(&true) {
+    if delta.len() != robot.dof() {
         return plain;
     }
-    // Every joint that does not move held: the groups that are left.
-    let parted = robot.dof_groups_holding(&still);
-    let mut group_of = vec![usize::MAX; delta.len()];
-    for (k, g) in parted.iter().enumerate() {
-        for &d in g {
-            group_of[d] = k;
+    let still: Vec<bool> = delta.iter().map(|&d| d == 0.0).collect();
+    let mut held = vec![false; delta.len()];
+    if still.contains(&true) {
+        // Every joint that does not move held: the groups that are left.
+        let parted = robot.dof_groups_holding(&still);
+        let mut group_of = vec![usize::MAX; delta.len()];
+        for (k, g) in parted.iter().enumerate() {
+            for &d in g {
+                group_of[d] = k;
+            }
         }
-    }
-    // A still joint stays held unless the links it moves are moved by joints of one group.
-    let mut meets: Vec<Vec<usize>> = vec![Vec::new(); delta.len()];
-    for link in 0..robot.links().len() {
-        let movers = robot.dofs_moving(link);
-        let groups_here: Vec<usize> =
-            movers.iter().enumerate().filter(|&(d, &m)| m && !still[d]).map(|(d, _)| group_of[d]).collect();
-        for (d, _) in movers.iter().enumerate().filter(|&(d, &m)| m && still[d]) {
-            for &k in &groups_here {
-                if !meets[d].contains(&k) {
-                    meets[d].push(k);
+        // A still joint stays held unless the links it moves are moved by joints of one group.
+        let mut meets: Vec<Vec<usize>> = vec![Vec::new(); delta.len()];
+        for link in 0..robot.links().len() {
+            let movers = robot.dofs_moving(link);
+            let groups_here: Vec<usize> =
+                movers.iter().enumerate().filter(|&(d, &m)| m && !still[d]).map(|(d, _)| group_of[d]).collect();
+            for (d, _) in movers.iter().enumerate().filter(|&(d, &m)| m && still[d]) {
+                for &k in &groups_here {
+                    if !meets[d].contains(&k) {
+                        meets[d].push(k);
+                    }
                 }
             }
         }
+        for (d, h) in held.iter_mut().enumerate() {
+            *h = still[d] && meets[d].len() != 1;
+        }
     }
-    let held: Vec<bool> = (0..delta.len()).map(|d| still[d] && meets[d].len() != 1).collect();
-    if !held.contains(&true) {
+    let own: Vec<usize> = robot.branch_dofs().iter().copied().filter(|&d| !still[d]).collect();
+    if !held.contains(&true) && own.is_empty() {
         return plain;
     }
-    std::borrow::Cow::Owned(robot.dof_groups_holding(&held))
+    for &d in &own {
+        held[d] = true;
+    }
+    let mut groups = robot.dof_groups_holding(&held);
+    groups.extend(own.into_iter().map(|d| vec![d]));
+    groups.sort_unstable_by_key(|g| g.first().copied());
+    std::borrow::Cow::Owned(groups)
 }
 
 /// The legs of [`by_groups`] (leg `i` moves the joints `groups[i]` alone) run at once: each
@@ -1294,7 +1311,7 @@ mod holding_tests {
     use embodied_models::nalgebra::{Isometry3, Vector3};
     use embodied_models::{JointKind, JointLimits, RobotBuilder};
 
-    use super::groups_holding_still_branches;
+    use super::groups_for_legs;
 
     /// A lift (DOF 0) under two arms of three joints (1-3 and 4-6).
     fn lifted_arms() -> embodied_models::Robot {
@@ -1316,19 +1333,24 @@ mod holding_tests {
     }
 
     /// The still lift is held and the arms part; a still joint inside an arm stays in its
-    /// group (a leg may move it); a moving lift, or no still joint, keeps the one group.
+    /// group (a leg may move it); a moving lift is a group of its own.
     #[test]
     fn only_still_joints_where_groups_meet_are_held() {
         let robot = lifted_arms();
-        let groups = |delta: &[f64]| groups_holding_still_branches(&robot, delta).into_owned();
+        let groups = |delta: &[f64]| groups_for_legs(&robot, delta).into_owned();
         assert_eq!(groups(&[0.0, 0.1, 0.2, 0.3, 0.1, 0.2, 0.3]), vec![vec![1, 2, 3], vec![4, 5, 6]]);
         assert_eq!(groups(&[0.0, 0.1, 0.0, 0.3, 0.1, 0.2, 0.0]), vec![vec![1, 2, 3], vec![4, 5, 6]]);
         // One arm still as a whole: held, and the lift with the arm that moves.
         assert_eq!(groups(&[0.0, 0.0, 0.0, 0.0, 0.1, 0.2, 0.3]), vec![vec![0, 4, 5, 6]]);
         // Nothing moves: every joint held.
         assert!(groups(&[0.0; 7]).is_empty());
-        assert_eq!(groups(&[0.1, 0.1, 0.2, 0.3, 0.1, 0.2, 0.3]), vec![(0..7).collect::<Vec<_>>()]);
-        assert_eq!(groups(&[0.1; 7]), vec![(0..7).collect::<Vec<_>>()]);
+        // The lift moving: a group of its own, the arms apart.
+        assert_eq!(robot.branch_dofs(), [0]);
+        assert_eq!(groups(&[0.1, 0.1, 0.2, 0.3, 0.1, 0.2, 0.3]), vec![vec![0], vec![1, 2, 3], vec![4, 5, 6]]);
+        assert_eq!(groups(&[0.1; 7]), vec![vec![0], vec![1, 2, 3], vec![4, 5, 6]]);
+        // The lift and one arm moving, the other arm still (a group of no leg: none of its
+        // joints moves).
+        assert_eq!(groups(&[0.1, 0.0, 0.0, 0.0, 0.1, 0.2, 0.3]), vec![vec![0], vec![1, 2, 3], vec![4, 5, 6]]);
         // Steps of another length than the robot's: the plain groups.
         assert_eq!(groups(&[0.0; 3]), vec![(0..7).collect::<Vec<_>>()]);
     }
