@@ -239,7 +239,9 @@ pub struct MotionSettings {
     /// that: path length 6.73).
     pub rrt_dynamic_domain: bool,
     /// RRT-Connect on a robot of independent groups of joints (two arms on a fixed torso, see
-    /// [`embodied_models::Robot::independent_dof_groups`]): before the search over every joint,
+    /// [`embodied_models::Robot::independent_dof_groups`]; two arms on a torso joint, which is
+    /// held when it keeps its value and else moved in a leg of its own): before the search over
+    /// every joint,
     /// a path that moves one group at a time, each leg searched in its group's joints alone (at
     /// most 2,000 samples a leg; the search over every joint follows when no order of the groups
     /// works), then the legs side by side when that motion certifies. On by default: on the
@@ -755,8 +757,9 @@ const GROUP_LEG_SAMPLES: usize = 2_000;
 /// RRT-Connect search in that group's joints alone (at most [`GROUP_LEG_SAMPLES`] samples). Each
 /// leg's search is as hard as one arm's problem, where the search over every joint draws
 /// samples in all of them (on VAMP's Baxter problems, both arms moving). The legs' paths are
-/// certified as any; the shortcuts that follow may move several groups at once. `None` when
-/// the robot has one group or no group must move (the goal is the start); `Infeasible`
+/// certified as any; the shortcuts that follow may move several groups at once. The groups are
+/// those of [`groups_for_legs`]. `None` when they are one group of every joint or no group must
+/// move (the goal is the start); `Infeasible`
 /// when no order gave a path (a waypoint in collision, a leg out of samples).
 #[allow(clippy::too_many_arguments)]
 fn by_groups<V: StateValidity>(
