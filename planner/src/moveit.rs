@@ -1,7 +1,7 @@
 //! MoveIt in and out: plan what a `MotionPlanRequest` asks in a planning scene, write the result
 //! as a `trajectory_msgs/JointTrajectory`, and turn a JointTrajectory that anything else made
 //! into a [`Trajectory`] over a [`CollisionModel`] for the certified checker
-//! ([`crate::verify::certified::check_trajectory`]).
+//! ([`crate::verify::Verifier::check_trajectory`]).
 //!
 //! The readers (scene, request, joint limits, joint trajectory) live in
 //! [`embodied_models::formats`] and are re-exported here.
