@@ -206,8 +206,8 @@ pub(crate) struct SphereGeom {
     /// Per group, the degrees of freedom that move its body: bit `d` for DOF `d`, bit 63 for
     /// every DOF from 63 on (see [`Self::still_groups`]).
     group_dofs: Vec<u64>,
-    /// The first joint up the chain of each group that has one (a group is still only when
-    /// that joint is); `None` when a group's first is past 62 (see [`Self::still_along`]).
+    /// The lowest DOF of each group's mask that has one (a group is still only when that joint
+    /// is), without repeats; `None` when one of them is past 62 (see [`Self::still_along`]).
     still_keys: Option<Vec<usize>>,
     /// Link slots, grouped by body.
     group_links: Vec<u32>,
@@ -957,10 +957,10 @@ impl SphereGeom {
 
     /// [`Self::still_groups`] along the straight motion from `a` by the joint steps `delta`
     /// (ending at `end`, when given), each of one value per DOF (the caller checks). At once 0
-    /// when the first joint up every group's chain moves (then only the groups no joint moves
+    /// when the lowest joint of every group's mask moves (then only the groups no joint moves
     /// at all, the base, would be still: few tests, the world-fixed body's skipped anyway when
-    /// clear of every obstacle): a random edge of a one-arm robot costs a compare (the full mask cost the public MotionBenchMaker UR5 problems 0.4% of
-    /// their planning instructions).
+    /// clear of every obstacle): a random edge of a one-arm robot costs a compare (the full
+    /// mask cost the public MotionBenchMaker UR5 problems 0.4% of their planning instructions).
     pub(crate) fn still_along(&self, a: &[f64], delta: &[f64], end: Option<&[f64]>) -> u64 {
         if let Some(keys) = &self.still_keys {
             let held = |d: usize| delta.get(d) == Some(&0.0) && end.is_none_or(|e| e.get(d) == a.get(d));
