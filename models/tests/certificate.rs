@@ -1030,6 +1030,81 @@ fn certificate_with_batches_is_sound_under_dense_sampling() {
     certificates_are_sound_under_dense_sampling(|seed| solid_clutter(seed + 20, 12), 90, true);
 }
 
+/// Probes one after another that hold the same joints at the same values (one arm of two
+/// still while the other searches, as in a planner's leg) answer as their points do, with
+/// other queries between them on the same scratch (a certificate, a batch of rows, a probe
+/// moving every joint) and the held values changed now and then: what a batch keeps from the
+/// last one never answers for another pose.
+#[test]
+fn consecutive_probes_holding_joints_answer_as_their_points_do() {
+    let (mut blocked, mut clear) = (0, 0);
+    for (which, robot) in [two_sphere_arms(), ur5(), snake()].iter().enumerate() {
+        let space = robot.config_space();
+        let dof = robot.dof();
+        for seed in 0..4u64 {
+            let model = CollisionModel::new(robot, solid_clutter(seed + 60, 10));
+            let mut rng = Rng::new(seed * 13 + 5 + which as u64);
+            let mut s = model.scratch();
+            let mut base = robot.random_configuration(&mut rng);
+            let held = |d: usize| d < dof / 2;
+            for k in 0..80usize {
+                if k % 16 == 0 {
+                    base = robot.random_configuration(&mut rng);
+                }
+                // A free start with the held joints at the base's values.
+                let Some(a) = (0..200)
+                    .map(|_| {
+                        let q = robot.random_configuration(&mut rng);
+                        (0..dof).map(|d| if held(d) { base[d] } else { q[d] }).collect::<Vec<f64>>()
+                    })
+                    .find(|q| !model.collides_with(q, &mut s))
+                else {
+                    continue;
+                };
+                let far = robot.random_configuration(&mut rng);
+                let t = [0.1, 0.4, 1.0][k % 3];
+                let b: Vec<f64> = (0..dof).map(|d| if held(d) { a[d] } else { a[d] + t * (far[d] - a[d]) }).collect();
+                let mut delta = Vec::new();
+                space.deltas_into(&a, &b, &mut delta);
+                let n = 2 + (k * 3) % 20;
+                let mut points = b.clone();
+                let mut q = vec![0.0; dof];
+                embodied_models::cspace::bisection_order(n, |i| {
+                    ConfigSpace::step_into(&a, &delta, i as f64 / n as f64, &mut q);
+                    points.extend_from_slice(&q);
+                    true
+                });
+                let expected = points.chunks(dof).any(|q| model.collides_with(q, &mut s));
+                let at = format!("robot {which}, seed {seed}, probe {k}");
+                assert_eq!(model.probe_from_free_collides(&a, Some(&b), &delta, n, &mut s), expected, "{at}");
+                if expected {
+                    blocked += 1
+                } else {
+                    clear += 1
+                }
+                // Something else on the same scratch now and then.
+                match k % 7 {
+                    3 => {
+                        model.certify(&a, &b, 1e-4, false, &mut s);
+                    }
+                    5 => {
+                        let rows: Vec<f64> = (0..8).flat_map(|_| robot.random_configuration(&mut rng)).collect();
+                        model.settle_batch(&rows, 0.0, &mut s);
+                    }
+                    6 => {
+                        let c = robot.random_configuration(&mut rng);
+                        let mut d = Vec::new();
+                        space.deltas_into(&a, &c, &mut d);
+                        model.probe_from_free_collides(&a, Some(&c), &d, 8, &mut s);
+                    }
+                    _ => {}
+                }
+            }
+        }
+    }
+    assert!(blocked > 50 && clear > 50, "{blocked} blocked, {clear} clear");
+}
+
 /// Certificates of motions that hold some joints still (one arm of two, half a chain, a few at
 /// random) from free ends, often within a hair of contact, stay sound: the batches skip the
 /// bodies no joint moves, and whatever is certified is free when sampled every 0.0005 rad by

@@ -657,6 +657,13 @@ pub(crate) struct LaneScratch {
     pub(crate) isa: Isa,
     /// The bodies, groups, links and spheres the buffers above are sized for.
     shape: [usize; 4],
+    /// The frames `rot` and `pos` as the last batch left them, when it was an edge probe's with
+    /// still groups and posed every body: its program, those groups and every joint's value
+    /// (lane 0; each still joint's in every lane). The next such batch keeps the frames of the
+    /// bodies of groups still in both, with the same values (see `SphereGeom::pose_lanes`).
+    kept_frames: Option<ProgramId>,
+    kept_groups: u64,
+    kept_values: Vec<f64>,
 }
 
 impl LaneScratch {
@@ -692,6 +699,9 @@ impl LaneScratch {
             along_at: Vec::new(),
             isa: Isa::Best,
             shape: [0; 4],
+            kept_frames: None,
+            kept_groups: 0,
+            kept_values: Vec::new(),
         }
     }
 
@@ -719,6 +729,7 @@ impl LaneScratch {
         self.along_at.resize(centres, 0);
         self.batch = 1;
         self.shape = shape;
+        self.kept_frames = None;
     }
 }
 
@@ -749,6 +760,8 @@ struct Work<'a> {
     twisted: u32,
     along: &'a mut [F8],
     along_at: &'a mut [u32],
+    /// [`LaneScratch::kept_frames`].
+    kept_frames: &'a mut Option<ProgramId>,
 }
 
 impl LaneScratch {
@@ -776,6 +789,7 @@ impl LaneScratch {
             twisted: 0,
             along: &mut self.along,
             along_at: &mut self.along_at,
+            kept_frames: &mut self.kept_frames,
         }
     }
 }
@@ -1462,7 +1476,10 @@ impl SphereGeom {
                 obstacles.fixed_clear > m + 2.0 * grow + 1e-6 * (1.0 + obstacles.scale)
             }
         });
-        let Some(mut w) = self.pose_lanes(o, qs, dof, s) else { return none };
+        // Edge probes (no `along`) with still groups keep those groups' frames from batch to
+        // batch while their joints' values stay.
+        let keep = (STILL && !ALONG).then_some(still);
+        let Some(mut w) = self.pose_lanes(o, qs, dof, keep, s) else { return none };
         let s = &mut w;
         let mut live: u32 = (1 << LANES) - 1;
         // Against obstacles: group, link, sphere; the groups farthest down the chain first
@@ -1678,7 +1695,19 @@ impl SphereGeom {
     /// Bodies of the configurations `qs`, in the batch's working memory; `None` when a joint
     /// value is not finite or a prismatic travel exceeds its joint's bound ([`prismatic_travel`]).
     #[inline(always)]
-    fn pose_lanes<'s, O: Ops, S: Source>(&self, o: O, qs: S, dof: usize, s: &'s mut LaneScratch) -> Option<Work<'s>> {
+    /// With `keep` (the still groups of an edge probe, see [`LaneMargins::still`]), the frames
+    /// of the bodies of groups still here and in the last batch (when it was such a batch of
+    /// this program and posed every body), whose joints hold the same values (to the bit), are
+    /// the ones that batch left: not posed again. A still joint holds one value in every lane
+    /// (the probe's start's), so those frames are this batch's too.
+    fn pose_lanes<'s, O: Ops, S: Source>(
+        &self,
+        o: O,
+        qs: S,
+        dof: usize,
+        keep: Option<u64>,
+        s: &'s mut LaneScratch,
+    ) -> Option<Work<'s>> {
         let lanes = &self.lanes;
         let n = self.bodies.len();
         // Sized once per model shape: seven `resize` calls a batch cost about 300 instructions.
@@ -1689,8 +1718,34 @@ impl SphereGeom {
         }
         // Each joint's values in the lanes, one row per joint.
         let ready = qs.columns(dof, &mut s.cols);
+        // The frames kept from the last batch, then none until this one has posed every body.
+        let kept = s.kept_frames.take();
         if !ready {
             return None;
+        }
+        let mut reuse = 0u64;
+        if let (Some(still), Some(id)) = (keep, kept)
+            && id == lanes.id
+            && dof < 64
+            && s.kept_values.len() == dof
+        {
+            let mut same = 0u64;
+            for (d, (c, v)) in s.cols.iter().zip(&s.kept_values).enumerate() {
+                if c[0].to_bits() == v.to_bits() {
+                    same |= 1 << d;
+                }
+            }
+            let both = still & s.kept_groups;
+            for (g, (gr, &dofs)) in self.groups.iter().zip(&self.group_dofs).enumerate().take(64) {
+                if both >> g & 1 != 0 && dofs & !same == 0 && gr.body < 64 {
+                    reuse |= 1 << gr.body;
+                }
+            }
+        }
+        if let Some(still) = keep {
+            s.kept_groups = still;
+            s.kept_values.clear();
+            s.kept_values.extend(s.cols.iter().map(|c| c[0]));
         }
         let mut w = s.work();
         let s = &mut w;
@@ -1700,7 +1755,11 @@ impl SphereGeom {
         // neither on one another nor on the frames, so their long chains of dependent operations
         // can overlap; the frames below only read them. (Computed body by body between the
         // frames: about 1% slower per MotionBenchMaker cage problem, 30 alternating rounds.)
+        let kept = |k: usize| k + 1 < 64 && reuse >> (k + 1) & 1 != 0;
         for (k, (b, a)) in lanes.bodies.iter().zip(&self.angles).enumerate() {
+            if kept(k) {
+                continue;
+            }
             // The joint's value in each lane, read first, then turned into the angle in one
             // vectorisable pass (reading and arithmetic lane by lane in one loop was not).
             // (`x · 1 + 0 + 0` is `x` but for the sign of a zero, which no test reads.)
@@ -1722,6 +1781,11 @@ impl SphereGeom {
         // The frame just computed (its index in `s.rot`), still in registers.
         let mut last: Option<(usize, R<O>, P<O>)> = None;
         for (k, b) in lanes.bodies.iter().enumerate() {
+            if kept(k) {
+                // The frame the last batch left; the next body reads its parent's from memory.
+                last = None;
+                continue;
+            }
             // The parent's frame in registers, built entry by entry (an array built by
             // `from_fn` went through `memcpy`); the previous body's as it was computed.
             let (pr, pp): (R<O>, P<O>) = match last {
@@ -1825,6 +1889,8 @@ impl SphereGeom {
             store(&out_p, &mut s.pos[k + 1]);
             last = Some((k + 1, out_r, out_p));
         }
+        // Every body posed: the next probe batch may keep these frames.
+        *s.kept_frames = keep.map(|_| lanes.id);
         Some(w)
     }
 
@@ -2190,7 +2256,7 @@ mod tests {
                 s.posed.fill(0);
                 s.link_posed.fill(0);
             }
-            let mut w = geom.pose_lanes(Base, RowsIn(&qs), dof, &mut s).expect("posed");
+            let mut w = geom.pose_lanes(Base, RowsIn(&qs), dof, None, &mut s).expect("posed");
             worst = worst.max(centres_within_bound(&geom, &mut w, &qs, 0..LANES, &mut f));
         }
         eprintln!("largest centre error {worst:e} of a bound {bound:e}");
@@ -2255,7 +2321,7 @@ mod tests {
         let mut worst: f64 = 0.0;
         for _ in 0..300 {
             let qs: Vec<f64> = (0..LANES).flat_map(|_| robot.random_configuration(&mut rng)).collect();
-            let mut w = geom.pose_lanes(Base, RowsIn(&qs), dof, &mut s).expect("posed");
+            let mut w = geom.pose_lanes(Base, RowsIn(&qs), dof, None, &mut s).expect("posed");
             worst = worst.max(centres_within_bound(&geom, &mut w, &qs, 0..LANES, &mut f));
         }
         // The deviations (3.3e-7 a body) are what the batch is off by, not its rounding.
@@ -2281,7 +2347,7 @@ mod tests {
         for (at, posed) in [(3.0, true), (-3.0, true), (3.0 + 1e-6, false), (-3.0 - 1e-6, false), (20.0, false)] {
             let mut qs: Vec<f64> = (0..LANES).flat_map(|_| robot.random_configuration(&mut rng)).collect();
             qs[3 * dof + 4] = at;
-            let w = geom.pose_lanes(Base, RowsIn(&qs), dof, &mut s);
+            let w = geom.pose_lanes(Base, RowsIn(&qs), dof, None, &mut s);
             assert_eq!(w.is_some(), posed, "prismatic joint at {at}");
             let Some(mut w) = w else { continue };
             centres_within_bound(&geom, &mut w, &qs, 3..4, &mut f);
@@ -2518,7 +2584,7 @@ mod tests {
             let grow = geom.allowance(&obstacles, 0.05, 0.1).expect("finite");
             assert_eq!(s.motion.ready, Some(geom.lanes.id), "trial {trial}: terms held");
             let qs: Vec<f64> = (0..LANES).flat_map(|_| robot.random_configuration(&mut rng)).collect();
-            let mut w = geom.pose_lanes(Base, RowsIn(&qs), dof, &mut s).expect("posed");
+            let mut w = geom.pose_lanes(Base, RowsIn(&qs), dof, None, &mut s).expect("posed");
             for (l, link) in geom.links.iter().enumerate() {
                 geom.pose_lane_link(Base, l, &mut w);
                 for k in link.first..link.end {
