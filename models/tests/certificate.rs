@@ -1103,6 +1103,14 @@ fn consecutive_probes_holding_joints_answer_as_their_points_do() {
         }
     }
     assert!(blocked > 50 && clear > 50, "{blocked} blocked, {clear} clear");
+    // Ends and steps of another length than the robot's count as colliding here too.
+    let robot = ur5();
+    let model = CollisionModel::new(&robot, solid_clutter(1, 4));
+    let (a, dof) = (robot.home().to_vec(), robot.dof());
+    let mut s = model.scratch();
+    assert!(model.probe_from_free_collides(&a[..dof - 1], None, &a[..dof - 1], 4, &mut s));
+    assert!(model.probe_from_free_collides(&a, Some(&a[..dof - 1]), &vec![0.0; dof], 4, &mut s));
+    assert!(model.probe_from_free_collides(&a, None, &a[..dof - 1], 4, &mut s));
 }
 
 /// Certificates of motions that hold some joints still (one arm of two, half a chain, a few at

@@ -880,9 +880,15 @@ fn groups_for_legs<'r>(robot: &'r Robot, delta: &[f64]) -> std::borrow::Cow<'r, 
     if delta.len() != robot.dof() {
         return plain;
     }
+    // Every joint moving and none where groups meet (a one-arm robot's plan): as they are,
+    // with nothing allocated.
+    let any_still = delta.contains(&0.0);
+    if !any_still && robot.branch_dofs().is_empty() {
+        return plain;
+    }
     let still: Vec<bool> = delta.iter().map(|&d| d == 0.0).collect();
     let mut held = vec![false; delta.len()];
-    if still.contains(&true) {
+    if any_still {
         // Every joint that does not move held: the groups that are left.
         let parted = robot.dof_groups_holding(&still);
         let mut group_of = vec![usize::MAX; delta.len()];
