@@ -299,6 +299,27 @@ struct RobotGeom {
     /// `lever`'s rows, then `pair_lever`'s, joint by joint: `lever_t[i * rows + r]` is row
     /// `r`'s arm for joint `i` (a certificate's travel bounds, row by row in vector lanes).
     lever_t: Vec<f64>,
+    /// Per joint `i`, the runs `[start, end)` of rows of `lever_t` that hold its nonzero arms
+    /// (runs less than [`LEVER_GAP`] rows apart joined): the rows a joint cannot move (the other
+    /// arm's links and pairs) are not summed.
+    lever_runs: Vec<Vec<(u32, u32)>>,
+}
+
+/// Zero arms between two runs of [`RobotGeom::lever_runs`] below which the runs are one (a
+/// few zero products cost less than a second loop).
+const LEVER_GAP: usize = 8;
+
+/// The runs of nonzero entries of `arms` (see [`RobotGeom::lever_runs`]).
+fn nonzero_runs(arms: &[f64]) -> Vec<(u32, u32)> {
+    let mut runs: Vec<(u32, u32)> = Vec::new();
+    for (r, _) in arms.iter().enumerate().filter(|&(_, &a)| a != 0.0) {
+        let r = r as u32;
+        match runs.last_mut() {
+            Some(last) if (r - last.1) as usize <= LEVER_GAP => last.1 = r + 1,
+            _ => runs.push((r, r + 1)),
+        }
+    }
+    runs
 }
 
 #[derive(Debug, Clone)]
@@ -345,14 +366,22 @@ impl RobotGeom {
     /// `travel` := how far each link's points can travel (against obstacles), then how far each
     /// self-collision pair can close in on itself, over a motion whose joints change by
     /// `steps` (magnitudes). Joint by joint over all rows at once: each row's sum in joint
-    /// order from 0, as the sum of its products would be (the same values), but in vector lanes.
+    /// order from 0, as the sum of its products would be (the same values: the products left
+    /// out, of a joint that does not move or of a zero arm, are zeros added to sums that are not
+    /// negative), but in vector lanes.
     fn travel_into(&self, steps: &[f64], travel: &mut Vec<f64>) {
         travel.clear();
         let rows = self.links.len() + self.self_pairs.len();
         travel.resize(rows, 0.0);
-        for (arms, &d) in self.lever_t.chunks_exact(rows.max(1)).zip(steps) {
-            for (t, a) in travel.iter_mut().zip(arms) {
-                *t += a * d;
+        for ((arms, &d), runs) in self.lever_t.chunks_exact(rows.max(1)).zip(steps).zip(&self.lever_runs) {
+            if d == 0.0 {
+                continue;
+            }
+            for &(a, b) in runs {
+                let (a, b) = (a as usize, b as usize);
+                for (t, arm) in travel[a..b].iter_mut().zip(&arms[a..b]) {
+                    *t += arm * d;
+                }
             }
         }
     }
@@ -482,7 +511,8 @@ impl RobotGeom {
             lever_arms(dof, &kept, &slots, &shapes, b, stop, out);
         }
         let rows: Vec<&[f64]> = lever.chunks_exact(dof.max(1)).chain(pair_lever.chunks_exact(dof.max(1))).collect();
-        let lever_t = (0..dof).flat_map(|i| rows.iter().map(move |r| r[i])).collect();
+        let lever_t: Vec<f64> = (0..dof).flat_map(|i| rows.iter().map(move |r| r[i])).collect();
+        let lever_runs = lever_t.chunks_exact(rows.len().max(1)).map(nonzero_runs).take(dof).collect();
         RobotGeom {
             dof: robot.dof(),
             base: *robot.base(),
@@ -494,6 +524,7 @@ impl RobotGeom {
             lever,
             pair_lever,
             lever_t,
+            lever_runs,
         }
     }
 }
@@ -2559,6 +2590,39 @@ mod tests {
         assert!((clear(&model) - 0.2).abs() < 1e-12, "{}", clear(&model));
         assert!(model.set_obstacle_pose("ball", at(0.08 + 0.05 - 0.01)));
         assert!((clear(&model) + 0.01).abs() < 1e-12, "{}", clear(&model));
+    }
+
+    /// The travel bounds summed over each joint's runs of nonzero arms are the rows' sums in
+    /// joint order, bit for bit, for joints held (zero steps) or moving, on robots whose joints
+    /// move a part of the rows (two arms, a track under an arm) or all of them.
+    #[test]
+    fn travel_over_the_nonzero_runs_is_each_rows_sum() {
+        let path = |f: &str| std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures").join(f);
+        let ur5 = crate::urdf::load_urdf(&path("ur5_spherized.urdf"), Some(&path("ur5.srdf"))).expect("the UR5");
+        let robots = ["two-irp6", "irp6-on-track", "polycrank", "rnt"].map(|n| crate::builtin(n).expect("robot"));
+        let mut rng = crate::Rng::new(3);
+        let mut skipped = 0;
+        for robot in robots.iter().chain([&ur5]) {
+            let model = CollisionModel::new(robot, Environment::new());
+            let g = &*model.geom;
+            let rows: Vec<&[f64]> = g.lever.chunks_exact(g.dof).chain(g.pair_lever.chunks_exact(g.dof)).collect();
+            skipped += usize::from(
+                g.lever_runs.iter().flatten().map(|&(a, b)| (b - a) as usize).sum::<usize>() < rows.len() * g.dof,
+            );
+            for k in 0..50 {
+                let steps: Vec<f64> =
+                    (0..g.dof).map(|i| if (k + i) % 3 == 0 { 0.0 } else { rng.uniform() * 2.0 }).collect();
+                let mut travel = Vec::new();
+                g.travel_into(&steps, &mut travel);
+                let direct: Vec<f64> =
+                    rows.iter().map(|r| r.iter().zip(&steps).fold(0.0, |t, (a, d)| t + a * d)).collect();
+                assert_eq!(travel.len(), direct.len());
+                for (r, (t, d)) in travel.iter().zip(&direct).enumerate() {
+                    assert_eq!(t.to_bits(), d.to_bits(), "{}: row {r}, steps {steps:?}", robot.name());
+                }
+            }
+        }
+        assert!(skipped >= 1, "no robot left a row out of a joint's runs");
     }
 
     /// The table's order is the bit reversal of each piece's index, for every power-of-two
