@@ -31,6 +31,7 @@ pub use crate::outcome::{MotionPlan, MotionStats, Outcome, path_length};
 use crate::roadmap::{LazyOutcome, QueryCounters, Roadmap};
 pub use crate::validity::{CERTIFY_TOLERANCE, DEFAULT_RESOLUTION, EdgeCheck, StateValidity};
 use crate::validity::{Validity, check_start};
+use rrt_connect::Certified;
 
 /// Where a motion must end.
 #[derive(Debug, Clone)]
@@ -677,7 +678,10 @@ fn plan_alone<V: StateValidity>(
     {
         budget.hold_hand_over(false);
         match by_groups(&mut validity, &mut budget, &mut rng, start, goal, settings, lazy, &mut stats) {
-            Some(Outcome::Solved(p)) => raw = Some((p, "rrt-connect-groups")),
+            Some(Outcome::Solved((p, greedy))) => {
+                raw = Some((p, "rrt-connect-groups"));
+                greedy_done = greedy;
+            }
             Some(Outcome::OutOfTime { .. }) => return Err(out_of_time(&budget, &validity, &stats)),
             Some(Outcome::Infeasible) | None => {}
         }
@@ -758,9 +762,10 @@ const GROUP_LEG_SAMPLES: usize = 2_000;
 /// leg's search is as hard as one arm's problem, where the search over every joint draws
 /// samples in all of them (on VAMP's Baxter problems, both arms moving). The legs' paths are
 /// certified as any; the shortcuts that follow may move several groups at once. The groups are
-/// those of [`groups_for_legs`]. `None` when they are one group of every joint or no group must
-/// move (the goal is the start); `Infeasible`
-/// when no order gave a path (a waypoint in collision, a leg out of samples).
+/// those of [`groups_for_legs`]. `Solved` with the path and whether the greedy shortcut pass
+/// has run over it (the legs side by side); `None` when they are one group of every joint or no
+/// group must move (the goal is the start); `Infeasible` when no order gave a path (a waypoint
+/// in collision, a leg out of samples).
 #[allow(clippy::too_many_arguments)]
 fn by_groups<V: StateValidity>(
     validity: &mut Validity<'_, V>,
@@ -771,7 +776,7 @@ fn by_groups<V: StateValidity>(
     settings: &MotionSettings,
     lazy: bool,
     stats: &mut MotionStats,
-) -> Option<Outcome<Vec<Vec<f64>>, ()>> {
+) -> Option<Outcome<(Vec<Vec<f64>>, bool), ()>> {
     let robot = validity.model.robot();
     let mut delta = vec![0.0; start.len()];
     validity.space.deltas_into(start, goal, &mut delta);
@@ -832,33 +837,29 @@ fn by_groups<V: StateValidity>(
                 rrt_connect::plan(validity, budget, rng, &leg[0], &goals, &leg_settings, (lazy, Some(&mask)), stats);
             match found {
                 Outcome::Solved(p) => legs.push(p),
-                Outcome::OutOfTime { best, cause } => return Some(Outcome::OutOfTime { best, cause }),
+                Outcome::OutOfTime { cause, .. } => return Some(Outcome::OutOfTime { best: None, cause }),
                 Outcome::Infeasible => continue 'orders,
             }
         }
         // The legs side by side when that motion is free too (the groups only meet each other
-        // there: each moves among the obstacles as in its leg), else one after the other.
+        // there: each moves among the obstacles as in its leg), else one after the other. With
+        // shortcuts, the greedy pass checks the side-by-side path: from each vertex the
+        // farthest one it sees, the next vertex's edge checked only when it sees none, so the
+        // edges it skips are never checked (as on a path of lazy RRT-Connect).
         if legs.len() > 1 {
             let together = side_by_side(&validity.space, start, &legs, &order);
-            let mut free = true;
-            for w in together.windows(2) {
-                if budget.spend(1, validity.collision_checks) {
-                    return Some(Outcome::OutOfTime { best: None, cause: budget.cause() });
-                }
-                if !validity.segment_free(&w[0], &w[1]) {
-                    free = false;
-                    break;
-                }
-            }
-            if free {
-                return Some(Outcome::Solved(together));
+            let mut checked = vec![false; together.len().saturating_sub(1)];
+            match rrt_connect::certify_path(together, &mut checked, validity, budget, settings.shortcut) {
+                Certified::Path(p) => return Some(Outcome::Solved((p, settings.shortcut))),
+                Certified::OutOfTime => return Some(Outcome::OutOfTime { best: None, cause: budget.cause() }),
+                Certified::Blocked(_) => {}
             }
         }
         let mut path = vec![start.to_vec()];
         for leg in legs {
             path.extend(leg.into_iter().skip(1));
         }
-        return Some(Outcome::Solved(path));
+        return Some(Outcome::Solved((path, false)));
     }
     Some(Outcome::Infeasible)
 }

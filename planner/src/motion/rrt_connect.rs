@@ -623,7 +623,7 @@ pub(crate) fn plan<V: StateValidity>(
 }
 
 /// What [`certify_path`] found.
-enum Certified {
+pub(crate) enum Certified {
     /// The certified path (shortcut by the greedy pass if asked).
     Path(Vec<Vec<f64>>),
     /// Path edge `e` (`path[e]`-`path[e + 1]`) failed its certificate.
@@ -637,7 +637,7 @@ enum Certified {
 /// certificates stop at their first hit and cost a few checks), then the edge to the next vertex
 /// when none does; edges skipped are never certified. Unlike the eager greedy pass, there is
 /// no cap on the path's length: skipping edges here saves their certificates.
-fn certify_path<V: StateValidity>(
+pub(crate) fn certify_path<V: StateValidity>(
     path: Vec<Vec<f64>>,
     certified: &mut [bool],
     validity: &mut Validity<'_, V>,
