@@ -488,6 +488,10 @@ pub(crate) fn plan<V: StateValidity>(
     }
     let probe = lazy.then_some(settings.lazy_probe);
     let mut draw = Draw::new(settings.sampler, robot, rng);
+    if let Some(moving) = moving {
+        // The others keep `start`'s values in every sample, and take no random draws.
+        draw.hold(moving, start);
+    }
     let mut sample = vec![0.0; dof];
     let mut buf = Vec::with_capacity(dof);
     let mut connect_buf = Vec::with_capacity(dof);
@@ -514,11 +518,6 @@ pub(crate) fn plan<V: StateValidity>(
         match near_node {
             Some(k) if a.alive[k] => draw.near_into(robot, rng, a.node(k), local_span, &mut sample),
             _ => draw.next_into(robot, rng, &mut sample),
-        }
-        if let Some(moving) = moving {
-            for ((v, &s), _) in sample.iter_mut().zip(start).zip(moving).filter(|(_, m)| !**m) {
-                *v = s;
-            }
         }
         let mut new = None;
         // Dynamic domain: a sample outside the nearest node's radius is not extended towards.

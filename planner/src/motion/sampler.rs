@@ -130,6 +130,9 @@ pub(crate) struct Draw {
     boxes: Vec<(f64, f64)>,
     /// Per degree of freedom, whether its joint has limits (a continuous joint has none).
     bounded: Vec<bool>,
+    /// Per degree of freedom, the value it is held at in every sample (empty: none held; see
+    /// [`Self::hold`]).
+    held: Vec<Option<f64>>,
 }
 
 impl Draw {
@@ -153,7 +156,26 @@ impl Draw {
                 (0..robot.dof()).map(|_| rng.uniform()).collect(),
             ),
         };
-        Self { sampler, halton, offset, boxes, bounded }
+        Self { sampler, halton, offset, boxes, bounded, held: Vec::new() }
+    }
+
+    /// Every later sample holds the degrees of freedom `d` with `!moving[d]` at `at[d]` and
+    /// draws only the others (the uniform samples take no random number for a held one: a leg of
+    /// one arm of a two-arm robot draws half of them). Slices of another length hold none.
+    pub fn hold(&mut self, moving: &[bool], at: &[f64]) {
+        self.held.clear();
+        if moving.len() == self.boxes.len() && at.len() == self.boxes.len() && moving.contains(&false) {
+            self.held.extend(moving.iter().zip(at).map(|(&m, &x)| (!m).then_some(x)));
+        }
+    }
+
+    /// The held values written over `q` (see [`Self::hold`]).
+    fn overwrite_held(&self, q: &mut [f64]) {
+        for (v, h) in q.iter_mut().zip(&self.held) {
+            if let Some(x) = h {
+                *v = *x;
+            }
+        }
     }
 
     /// A sample near `node`: each joint uniform within `span` times its sampling width of the
@@ -168,9 +190,24 @@ impl Draw {
             let span = span / f64::from(1u32 << (k / 4));
             // A local copy of the generator for the loop, as in `next_into`.
             let mut local = rng.clone();
-            for (((v, &x), &(lower, width)), &bounded) in q.iter_mut().zip(node).zip(&self.boxes).zip(&self.bounded) {
+            let mut draw = |v: &mut f64, x: f64, (lower, width): (f64, f64), bounded: bool| {
                 let y = x + (2.0 * local.uniform() - 1.0) * span * width;
                 *v = if bounded { y.clamp(lower, lower + width) } else { y };
+            };
+            if self.held.is_empty() {
+                for (((v, &x), &b), &bounded) in q.iter_mut().zip(node).zip(&self.boxes).zip(&self.bounded) {
+                    draw(v, x, b, bounded);
+                }
+            } else {
+                let held = self.held.iter();
+                for ((((v, &x), &b), &bounded), h) in
+                    q.iter_mut().zip(node).zip(&self.boxes).zip(&self.bounded).zip(held)
+                {
+                    match h {
+                        Some(at) => *v = *at,
+                        None => draw(v, x, b, bounded),
+                    }
+                }
             }
             *rng = local;
             if robot.strokes_hold(q) {
@@ -192,12 +229,24 @@ impl Draw {
                 // draw inlined: 163 -> about 130 instructions a six-joint sample on the
                 // generated MotionBenchMaker cage problems (the same numbers).
                 let mut local = rng.clone();
-                for (v, &(lower, width)) in q.iter_mut().zip(&self.boxes) {
-                    *v = lower + width * local.uniform();
+                if self.held.is_empty() {
+                    for (v, &(lower, width)) in q.iter_mut().zip(&self.boxes) {
+                        *v = lower + width * local.uniform();
+                    }
+                } else {
+                    for ((v, &(lower, width)), h) in q.iter_mut().zip(&self.boxes).zip(&self.held) {
+                        *v = match h {
+                            Some(at) => *at,
+                            None => lower + width * local.uniform(),
+                        };
+                    }
                 }
                 *rng = local;
             }
-            Sampler::Uniform => robot.random_configuration_into(rng, q),
+            Sampler::Uniform => {
+                robot.random_configuration_into(rng, q);
+                self.overwrite_held(q);
+            }
             Sampler::Halton => {
                 for (i, v) in q.iter_mut().enumerate() {
                     let u = match self.halton.get_mut(i) {
@@ -210,6 +259,7 @@ impl Draw {
                     let (lower, width) = self.boxes[i];
                     *v = lower + width * u;
                 }
+                self.overwrite_held(q);
             }
         }
     }
@@ -288,6 +338,62 @@ mod tests {
                 );
             }
         }
+    }
+
+    /// Held degrees of freedom keep their values in every sample (uniform and Halton, over the
+    /// box and near a node, with and without actuator strokes), the others still spread over
+    /// their box; a uniform draw takes one random number per moving degree of freedom only.
+    #[test]
+    fn held_dofs_keep_their_values_and_take_no_draws() {
+        let mut counted = 0;
+        for robot in [
+            embodied_models::builtin::two_irp6(),
+            embodied_models::builtin::polycrank(),
+            embodied_models::builtin::irp6_postument(),
+        ] {
+            let robot = robot.expect("built-in robot");
+            let n = robot.dof();
+            let moving: Vec<bool> = (0..n).map(|d| d % 3 != 1).collect();
+            let at: Vec<f64> = (0..n).map(|d| 0.01 * d as f64 - 0.02).collect();
+            for sampler in [Sampler::Uniform, Sampler::Halton] {
+                let mut rng = Rng::new(4);
+                let mut draw = Draw::new(sampler, &robot, &mut rng);
+                draw.hold(&moving, &at);
+                let node = robot.random_configuration(&mut rng);
+                let mut q = vec![0.0; n];
+                let (mut lo, mut hi) = (vec![f64::INFINITY; n], vec![f64::NEG_INFINITY; n]);
+                for k in 0..400 {
+                    if k % 2 == 0 {
+                        draw.next_into(&robot, &mut rng, &mut q);
+                    } else {
+                        draw.near_into(&robot, &mut rng, &node, 0.3, &mut q);
+                    }
+                    for d in 0..n {
+                        if moving[d] {
+                            (lo[d], hi[d]) = (lo[d].min(q[d]), hi[d].max(q[d]));
+                        } else {
+                            assert_eq!(q[d].to_bits(), at[d].to_bits(), "{} {sampler}: dof {d}", robot.name());
+                        }
+                    }
+                }
+                for d in (0..n).filter(|&d| moving[d]) {
+                    assert!(hi[d] - lo[d] > 0.1, "{} {sampler}: dof {d} spread {}..{}", robot.name(), lo[d], hi[d]);
+                }
+            }
+            if robot.actuators().is_empty() {
+                let (mut a, mut b) = (Rng::new(9), Rng::new(9));
+                let mut draw = Draw::new(Sampler::Uniform, &robot, &mut a);
+                draw.hold(&moving, &at);
+                let mut q = vec![0.0; n];
+                draw.next_into(&robot, &mut a, &mut q);
+                for _ in moving.iter().filter(|&&m| m) {
+                    b.uniform();
+                }
+                assert_eq!(a.next_u64(), b.next_u64(), "{}: one draw per moving dof", robot.name());
+                counted += 1;
+            }
+        }
+        assert!(counted > 0, "no robot without strokes");
     }
 
     /// Samples near a node stay within the span of each joint's width around it: clamped into
