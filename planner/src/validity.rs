@@ -266,6 +266,12 @@ pub(crate) struct Validity<'m, V: StateValidity> {
     memo: CertMemo,
     /// Segments answered from `memo` (not counted in `edges_checked`).
     pub edges_recalled: usize,
+    /// Shortcuts screened by [`Self::shortcut_free`], and those the screen refused.
+    pub screened: usize,
+    pub screened_out: usize,
+    /// [`Self::shortcut_free`] screens certificates of segments longer than this (C-space
+    /// distance); infinite: never.
+    screen_above: f64,
 }
 
 impl<'m, V: StateValidity> Validity<'m, V> {
@@ -292,7 +298,17 @@ impl<'m, V: StateValidity> Validity<'m, V> {
             }),
             memo: CertMemo::new(robot.dof()),
             edges_recalled: 0,
+            screened: 0,
+            screened_out: 0,
+            screen_above: f64::INFINITY,
         }
+    }
+
+    /// Screen the greedy shortcut pass's certificates of segments longer than `above` (see
+    /// [`Self::shortcut_free`]; NaN or infinite: never).
+    pub fn with_screen_above(mut self, above: f64) -> Self {
+        self.screen_above = if above.is_nan() { f64::INFINITY } else { above };
+        self
     }
 
     /// [`Robot::within_limits`] of `q`, from the bounds kept at construction where the robot
@@ -363,6 +379,50 @@ impl<'m, V: StateValidity> Validity<'m, V> {
         self.sampled(a, b, self.resolution)
     }
 
+    /// [`Self::segment_free`], screened first (with certificates, when the answer is not kept)
+    /// by a probe of `points` evenly spaced inner points: one of them in collision refuses the
+    /// segment (kept as refused) without its certificate. `a` is valid.
+    pub fn segment_free_screened(&mut self, a: &[f64], b: &[f64], points: usize) -> bool {
+        if self.certify.is_some() && points > 0 {
+            let key = self.memo.key(a, b);
+            if self.memo.get(key, a, b).is_none() {
+                self.space.deltas_into(a, b, &mut self.delta);
+                self.collision_checks += points as u64;
+                self.probe_checks += points as u64;
+                if self.model.probe_collides(a, None, &self.delta, points + 1, &mut self.scratch) {
+                    self.memo.put(key, a, b, false);
+                    return false;
+                }
+            }
+        }
+        self.segment_free(a, b)
+    }
+
+    /// [`Self::segment_free`] of a shortcut the greedy pass tries from a vertex `a` (valid) of its
+    /// path. With certificates, a segment longer than [`Self::with_screen_above`]'s length whose
+    /// answer is not kept is screened first by a probe of [`SCREEN_POINTS`] evenly spaced inner
+    /// points: one of them in collision refuses it (kept as refused) without its certificate.
+    /// The answer is the certificate's either way: a segment with a point in collision has no
+    /// certificate. Most long shortcuts are refused, and the probe's one batch of plain checks
+    /// costs a fraction of a certificate's first batch with its margins and set-up.
+    pub fn shortcut_free(&mut self, a: &[f64], b: &[f64]) -> bool {
+        if self.certify.is_some() && a.len() == b.len() && self.space.distance(a, b) > self.screen_above {
+            let key = self.memo.key(a, b);
+            if self.memo.get(key, a, b).is_none() {
+                self.space.deltas_into(a, b, &mut self.delta);
+                self.collision_checks += SCREEN_POINTS as u64;
+                self.probe_checks += SCREEN_POINTS as u64;
+                self.screened += 1;
+                if self.model.probe_collides(a, None, &self.delta, SCREEN_POINTS + 1, &mut self.scratch) {
+                    self.memo.put(key, a, b, false);
+                    self.screened_out += 1;
+                    return false;
+                }
+            }
+        }
+        self.segment_free(a, b)
+    }
+
     /// No sampled configuration of the segment `a`-`b` collides, at `resolution` (largest joint
     /// step), ends excluded; with `check_end`, the end `b` too (within the position limits and
     /// free). `a` is valid (a tree node): the model may take the bodies that do not move as
@@ -405,6 +465,9 @@ impl<'m, V: StateValidity> Validity<'m, V> {
         })
     }
 }
+
+/// Inner points of [`Validity::shortcut_free`]'s screen: one batch of vector lanes.
+pub const SCREEN_POINTS: usize = 8;
 
 /// Every value finite and within its bounds (no branch per value).
 #[inline(always)]
@@ -580,6 +643,58 @@ mod tests {
         assert!(!validity.segment_free(&segments[0].0[1..], &segments[0].1[1..]));
         assert!(!validity.segment_free(&segments[0].0[1..], &segments[0].1[1..]));
         assert_eq!(validity.edges_recalled, segments.len());
+    }
+
+    /// A screened shortcut gets its certificate's answer: a segment the screen refuses has a
+    /// point in collision, and is kept as refused (asked again: no new check); one it passes is
+    /// certified as unscreened. Short segments and an infinite length are never screened.
+    #[test]
+    fn screened_shortcuts_get_their_certificates_answer() {
+        let robot = ur5_without_touching_pairs();
+        let mut env = Environment::new();
+        env.add(Obstacle::new("wall", Isometry3::translation(0.4, 0.0, 0.3), Shape::cuboid(0.15, 0.4, 0.3)));
+        env.add(Obstacle::new("post", Isometry3::translation(-0.3, 0.4, 0.4), Shape::cuboid(0.08, 0.08, 0.4)));
+        let model = CollisionModel::new(&robot, env);
+        let certified = EdgeCheck::Certified { tolerance: 1e-3 };
+        let mut rng = Rng::new(5);
+        let mut segments = Vec::new();
+        while segments.len() < 60 {
+            let (a, b) = (robot.random_configuration(&mut rng), robot.random_configuration(&mut rng));
+            if !model.collides(&a) && !model.collides(&b) {
+                segments.push((a, b));
+            }
+        }
+        let mut screened = Validity::new(&model, 0.05).with_edge_check(certified).with_screen_above(0.5);
+        let mut never = Validity::new(&model, 0.05).with_edge_check(certified).with_screen_above(f64::INFINITY);
+        let (mut free, mut short, mut certificates) = (0, 0, 0);
+        for (a, b) in &segments {
+            let answer = model.motion_is_certified_free(a, b, 1e-3);
+            let (out, edges) = (screened.screened_out, screened.edges_checked);
+            assert_eq!(screened.shortcut_free(a, b), answer, "{a:?} -> {b:?}");
+            certificates += screened.edges_checked - edges;
+            assert_eq!(never.shortcut_free(a, b), answer);
+            if screened.screened_out > out {
+                assert_eq!(screened.edges_checked, edges, "a refused screen needs no certificate");
+                let checks = screened.collision_checks;
+                assert!(!screened.shortcut_free(a, b));
+                assert_eq!(screened.collision_checks, checks, "refused again without a check");
+            }
+            free += usize::from(answer);
+            // A short piece of the segment: never screened.
+            let near: Vec<f64> = a.iter().zip(b).map(|(x, y)| x + 0.05 * (y - x)).collect();
+            let before = screened.screened;
+            if screened.space.distance(a, &near) <= 0.5 {
+                screened.shortcut_free(a, &near);
+                assert_eq!(screened.screened, before, "a short segment was screened");
+                short += 1;
+            }
+        }
+        assert!(screened.screened_out > 3, "{} refused by the screen", screened.screened_out);
+        assert!(free > 3, "{free} free");
+        assert!(short > 3, "test setup: {short} short segments");
+        assert_eq!((never.screened, never.screened_out), (0, 0));
+        assert_eq!(never.edges_checked, segments.len());
+        assert_eq!(certificates + screened.screened_out, segments.len());
     }
 
     /// The end goes into the same batched query as the inner points: the answer is the

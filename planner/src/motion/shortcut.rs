@@ -109,7 +109,7 @@ pub(crate) fn farthest_visible<V: StateValidity>(
         if budget.spend(1, validity.collision_checks) {
             return Err(OutOfTime);
         }
-        if validity.segment_free(&path[i], &path[j]) {
+        if validity.shortcut_free(&path[i], &path[j]) {
             return Ok(Some(j));
         }
     }
