@@ -398,8 +398,8 @@ impl<'m, V: StateValidity> Validity<'m, V> {
         self.segment_free(a, b)
     }
 
-    /// [`Self::segment_free`] of a shortcut the greedy pass tries from a vertex `a` (valid) of its
-    /// path. With certificates, a segment longer than [`Self::with_screen_above`]'s length whose
+    /// [`Self::segment_free`] of a shortcut the greedy pass or a random shortcut attempt tries
+    /// from a point `a` of its path (valid: a vertex, or a point of a certified segment). With certificates, a segment longer than [`Self::with_screen_above`]'s length whose
     /// answer is not kept is screened first by a probe of [`SCREEN_POINTS`] evenly spaced inner
     /// points: one of them in collision refuses it (kept as refused) without its certificate.
     /// The answer is the certificate's either way: a segment with a point in collision has no

@@ -208,16 +208,18 @@ pub struct MotionSettings {
     /// a 1.4% shorter mean path (6.315 against 6.407 rad): the attempts to raise for shorter
     /// paths.
     pub shortcut_min_gain: f64,
-    /// With certified edges, the greedy shortcut pass screens each shortcut longer than this
-    /// (C-space distance, rad or m) by a probe of eight evenly spaced inner points before its
-    /// certificate: a point in collision refuses it at the cost of one batch of plain checks
-    /// (the same paths either way; see [`crate::validity::Validity::shortcut_free`]). Infinite:
-    /// never. Planning instructions (callgrind, one core) against no screen, 2 rad (the
-    /// default) / 1 rad: VAMP's Baxter problems (both arms, first 10 per family) -6.5% / -7.5%;
-    /// the spherized Panda's three families (30 problems each) -3.5% / -4.3%, the Fetch's
-    /// -4.6% / -4.4%; 160 generated UR5 problems (four families) -1.2% / -1.2%; the 90 public
-    /// MotionBenchMaker UR5 problems of `--limit 30` 0.0% / +0.7% (a refused UR5 certificate
-    /// costs about four probe batches, a Baxter one about seven).
+    /// With certified edges, the shortcuts (the greedy pass's and the random attempts') longer
+    /// than this (C-space distance, rad or m) are screened by a probe of eight evenly spaced
+    /// inner points before their certificate: a point in collision refuses one at the cost of
+    /// one batch of plain checks (the same paths either way; see
+    /// [`crate::validity::Validity::shortcut_free`]). Infinite: never. Planning instructions
+    /// (callgrind, one core, the greedy pass screened) against no screen, 2 rad (the default) /
+    /// 1 rad: VAMP's Baxter problems (both arms, first 10 per family) -6.5% / -7.5%; the
+    /// spherized Panda's three families (30 problems each) -3.5% / -4.3%, the Fetch's -4.6% /
+    /// -4.4%; 160 generated UR5 problems (four families) -1.2% / -1.2%; the 90 public
+    /// MotionBenchMaker UR5 problems of `--limit 30` 0.0% / +0.7% (a refused certificate's set-up
+    /// and first batch cost about four probe batches on the UR5, about seven on Baxter). The
+    /// random attempts screened too: Baxter -0.4%, public UR5 -0.2% more.
     pub shortcut_screen_above: f64,
     /// The search after the straight segment.
     pub planner: PlannerKind,

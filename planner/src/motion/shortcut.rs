@@ -56,7 +56,7 @@ pub(crate) fn shortcut<V: StateValidity>(
         if !ends_free {
             continue;
         }
-        if validity.segment_free(&p1, &p2) {
+        if validity.shortcut_free(&p1, &p2) {
             // Path: ..path[s1], p1, p2, path[s2+1]..
             let mut next = Vec::with_capacity(path.len());
             next.extend(path[..=s1].iter().cloned());
