@@ -379,25 +379,6 @@ impl<'m, V: StateValidity> Validity<'m, V> {
         self.sampled(a, b, self.resolution)
     }
 
-    /// [`Self::segment_free`], screened first (with certificates, when the answer is not kept)
-    /// by a probe of `points` evenly spaced inner points: one of them in collision refuses the
-    /// segment (kept as refused) without its certificate. `a` is valid.
-    pub fn segment_free_screened(&mut self, a: &[f64], b: &[f64], points: usize) -> bool {
-        if self.certify.is_some() && points > 0 {
-            let key = self.memo.key(a, b);
-            if self.memo.get(key, a, b).is_none() {
-                self.space.deltas_into(a, b, &mut self.delta);
-                self.collision_checks += points as u64;
-                self.probe_checks += points as u64;
-                if self.model.probe_collides(a, None, &self.delta, points + 1, &mut self.scratch) {
-                    self.memo.put(key, a, b, false);
-                    return false;
-                }
-            }
-        }
-        self.segment_free(a, b)
-    }
-
     /// [`Self::segment_free`] of a shortcut the greedy pass or a random shortcut attempt tries
     /// from a point `a` of its path (valid: a vertex, or a point of a certified segment). With certificates, a segment longer than [`Self::with_screen_above`]'s length whose
     /// answer is not kept is screened first by a probe of [`SCREEN_POINTS`] evenly spaced inner
