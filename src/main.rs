@@ -323,10 +323,10 @@ enum BenchCommand {
         /// any; the planner's default 0.01)
         #[arg(long)]
         shortcut_min_gain: Option<f64>,
-        /// Greedy-pass shortcuts longer than this (C-space distance) are screened by an
+        /// Shortcuts and straight segments longer than this (C-space distance) are screened by an
         /// eight-point probe before their certificate (`inf`: never; the planner's default 2)
         #[arg(long)]
-        shortcut_screen_above: Option<f64>,
+        screen_above: Option<f64>,
         /// Planners racing per problem: `auto` (the default) as many as the cores this process
         /// may run on, at most 2 (so 1 under `taskset -c 1`); 1: one planner; 2: two differently
         /// seeded planners, the second on a thread of its own; the first path wins and stops the
@@ -826,7 +826,7 @@ fn run(cli: Cli) -> Result<(), AppError> {
             resolution,
             shortcut_attempts,
             shortcut_min_gain,
-            shortcut_screen_above,
+            screen_above,
             threads,
             racer_look_ms,
             rrt_range,
@@ -903,13 +903,13 @@ fn run(cli: Cli) -> Result<(), AppError> {
                 }
                 args.shortcut_min_gain = g;
             }
-            if let Some(l) = shortcut_screen_above {
+            if let Some(l) = screen_above {
                 if l.is_nan() || l < 0.0 {
                     return Err(AppError::Usage(format!(
-                        "--shortcut-screen-above must be zero, a positive number or inf, got {l}"
+                        "--screen-above must be zero, a positive number or inf, got {l}"
                     )));
                 }
-                args.shortcut_screen_above = l;
+                args.screen_above = l;
             }
             args.deadline_ms = deadline_ms;
             args.limit = limit;

@@ -495,18 +495,18 @@ fn a_report_without_the_late_share_reads_as_one_share_throughout() {
 /// (JSON has no infinity), read back as infinite, as is a report written before the screen
 /// existed (none screened).
 #[test]
-fn the_shortcut_screen_length_reads_back_infinite_or_finite() {
+fn the_screen_length_reads_back_infinite_or_finite() {
     let dir = TempDir::new("batch-screen");
     let mut report = run_to(&mbm_args(), &dir.join("now.jsonl"));
-    assert_eq!(report.settings.shortcut_screen_above, 2.0);
+    assert_eq!(report.settings.screen_above, 2.0);
     let mut value = serde_json::to_value(&report.settings).unwrap();
-    assert_eq!(value["shortcut_screen_above"], serde_json::json!(2.0));
-    report.settings.shortcut_screen_above = f64::INFINITY;
+    assert_eq!(value["screen_above"], serde_json::json!(2.0));
+    report.settings.screen_above = f64::INFINITY;
     let never = serde_json::to_value(&report.settings).unwrap();
-    assert!(never["shortcut_screen_above"].is_null(), "{never}");
+    assert!(never["screen_above"].is_null(), "{never}");
     let back: embodied::mbm::MbmSettings = serde_json::from_value(never).expect("settings");
-    assert_eq!(back.shortcut_screen_above, f64::INFINITY);
-    assert!(value.as_object_mut().unwrap().remove("shortcut_screen_above").is_some());
+    assert_eq!(back.screen_above, f64::INFINITY);
+    assert!(value.as_object_mut().unwrap().remove("screen_above").is_some());
     let old: embodied::mbm::MbmSettings = serde_json::from_value(value).expect("an old report's settings");
-    assert_eq!(old.shortcut_screen_above, f64::INFINITY);
+    assert_eq!(old.screen_above, f64::INFINITY);
 }

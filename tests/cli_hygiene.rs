@@ -50,8 +50,8 @@ fn exit_status_0_success_1_not_succeeded_2_bad_input() {
     for (flag, says) in [
         ("--shortcut-min-gain=-0.1", "--shortcut-min-gain must be zero or a positive number"),
         ("--shortcut-min-gain=nan", "--shortcut-min-gain must be zero or a positive number"),
-        ("--shortcut-screen-above=-1", "--shortcut-screen-above must be zero, a positive number or inf"),
-        ("--shortcut-screen-above=nan", "--shortcut-screen-above must be zero, a positive number or inf"),
+        ("--screen-above=-1", "--screen-above must be zero, a positive number or inf"),
+        ("--screen-above=nan", "--screen-above must be zero, a positive number or inf"),
         ("--rrt-local-bias=1.5", "--rrt-local-bias must be a share in [0, 1]"),
         ("--rrt-local-bias=-0.1", "--rrt-local-bias must be a share in [0, 1]"),
         ("--rrt-local-bias=nan", "--rrt-local-bias must be a share in [0, 1]"),

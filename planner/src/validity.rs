@@ -266,11 +266,11 @@ pub(crate) struct Validity<'m, V: StateValidity> {
     memo: CertMemo,
     /// Segments answered from `memo` (not counted in `edges_checked`).
     pub edges_recalled: usize,
-    /// Shortcuts screened by [`Self::shortcut_free`], and those the screen refused.
+    /// Segments screened by [`Self::segment_free_screened`], and those the screen refused.
     pub screened: usize,
     pub screened_out: usize,
-    /// [`Self::shortcut_free`] screens certificates of segments longer than this (C-space
-    /// distance); infinite: never.
+    /// [`Self::segment_free_screened`] screens the certificates of segments longer than this
+    /// (C-space distance); infinite: never.
     screen_above: f64,
 }
 
@@ -304,8 +304,8 @@ impl<'m, V: StateValidity> Validity<'m, V> {
         }
     }
 
-    /// Screen the greedy shortcut pass's certificates of segments longer than `above` (see
-    /// [`Self::shortcut_free`]; NaN or infinite: never).
+    /// Screen the certificates of segments longer than `above` (see
+    /// [`Self::segment_free_screened`]; NaN or infinite: never).
     pub fn with_screen_above(mut self, above: f64) -> Self {
         self.screen_above = if above.is_nan() { f64::INFINITY } else { above };
         self
@@ -379,14 +379,16 @@ impl<'m, V: StateValidity> Validity<'m, V> {
         self.sampled(a, b, self.resolution)
     }
 
-    /// [`Self::segment_free`] of a shortcut the greedy pass or a random shortcut attempt tries
-    /// from a point `a` of its path (valid: a vertex, or a point of a certified segment). With certificates, a segment longer than [`Self::with_screen_above`]'s length whose
-    /// answer is not kept is screened first by a probe of [`SCREEN_POINTS`] evenly spaced inner
-    /// points: one of them in collision refuses it (kept as refused) without its certificate.
-    /// The answer is the certificate's either way: a segment with a point in collision has no
-    /// certificate. Most long shortcuts are refused, and the probe's one batch of plain checks
-    /// costs a fraction of a certificate's first batch with its margins and set-up.
-    pub fn shortcut_free(&mut self, a: &[f64], b: &[f64]) -> bool {
+    /// [`Self::segment_free`] of a segment from a valid point `a` that is likely refused: a
+    /// shortcut of the greedy pass or of a random attempt (from a vertex, or a point of a
+    /// certified segment), the straight segment to a goal, a leg's straight segment. With
+    /// certificates, a segment longer than [`Self::with_screen_above`]'s length whose answer is
+    /// not kept is screened first by a probe of [`SCREEN_POINTS`] evenly spaced inner points:
+    /// one of them in collision refuses it (kept as refused) without its certificate. The answer
+    /// is the certificate's either way: a segment with a point in collision has none. The
+    /// probe's one batch of plain checks costs a fraction of a certificate's set-up and first
+    /// batch with its margins.
+    pub fn segment_free_screened(&mut self, a: &[f64], b: &[f64]) -> bool {
         if self.certify.is_some() && a.len() == b.len() && self.space.distance(a, b) > self.screen_above {
             let key = self.memo.key(a, b);
             if self.memo.get(key, a, b).is_none() {
@@ -447,7 +449,7 @@ impl<'m, V: StateValidity> Validity<'m, V> {
     }
 }
 
-/// Inner points of [`Validity::shortcut_free`]'s screen: one batch of vector lanes.
+/// Inner points of [`Validity::segment_free_screened`]'s screen: one batch of vector lanes.
 pub const SCREEN_POINTS: usize = 8;
 
 /// Every value finite and within its bounds (no branch per value).
@@ -630,7 +632,7 @@ mod tests {
     /// point in collision, and is kept as refused (asked again: no new check); one it passes is
     /// certified as unscreened. Short segments and an infinite length are never screened.
     #[test]
-    fn screened_shortcuts_get_their_certificates_answer() {
+    fn screened_segments_get_their_certificates_answer() {
         let robot = ur5_without_touching_pairs();
         let mut env = Environment::new();
         env.add(Obstacle::new("wall", Isometry3::translation(0.4, 0.0, 0.3), Shape::cuboid(0.15, 0.4, 0.3)));
@@ -651,13 +653,13 @@ mod tests {
         for (a, b) in &segments {
             let answer = model.motion_is_certified_free(a, b, 1e-3);
             let (out, edges) = (screened.screened_out, screened.edges_checked);
-            assert_eq!(screened.shortcut_free(a, b), answer, "{a:?} -> {b:?}");
+            assert_eq!(screened.segment_free_screened(a, b), answer, "{a:?} -> {b:?}");
             certificates += screened.edges_checked - edges;
-            assert_eq!(never.shortcut_free(a, b), answer);
+            assert_eq!(never.segment_free_screened(a, b), answer);
             if screened.screened_out > out {
                 assert_eq!(screened.edges_checked, edges, "a refused screen needs no certificate");
                 let checks = screened.collision_checks;
-                assert!(!screened.shortcut_free(a, b));
+                assert!(!screened.segment_free_screened(a, b));
                 assert_eq!(screened.collision_checks, checks, "refused again without a check");
             }
             free += usize::from(answer);
@@ -665,7 +667,7 @@ mod tests {
             let near: Vec<f64> = a.iter().zip(b).map(|(x, y)| x + 0.05 * (y - x)).collect();
             let before = screened.screened;
             if screened.space.distance(a, &near) <= 0.5 {
-                screened.shortcut_free(a, &near);
+                screened.segment_free_screened(a, &near);
                 assert_eq!(screened.screened, before, "a short segment was screened");
                 short += 1;
             }

@@ -60,9 +60,9 @@ pub struct MbmArgs {
     /// The least share of the path's length a random shortcut must gain to be checked (the
     /// planner's default: 0.01).
     pub shortcut_min_gain: f64,
-    /// Greedy-pass shortcuts longer than this are screened by an eight-point probe before their
-    /// certificate (the planner's default: 2 rad; infinite: never).
-    pub shortcut_screen_above: f64,
+    /// Shortcuts and straight segments longer than this are screened by an eight-point probe
+    /// before their certificate (the planner's default: 2 rad; infinite: never).
+    pub screen_above: f64,
     /// The planner after the straight segment (default: RRT-Connect).
     pub algorithm: PlannerKind,
     /// RRT-Connect's largest step (rad).
@@ -119,7 +119,7 @@ impl MbmArgs {
             resolution: VERIFY_RESOLUTION,
             shortcut_attempts: MotionSettings::default().shortcut_attempts,
             shortcut_min_gain: MotionSettings::default().shortcut_min_gain,
-            shortcut_screen_above: MotionSettings::default().shortcut_screen_above,
+            screen_above: MotionSettings::default().screen_above,
             algorithm: PlannerKind::RrtConnect,
             rrt_range: MotionSettings::default().rrt_range,
             dynamic_domain: MotionSettings::default().rrt_dynamic_domain,
@@ -256,11 +256,11 @@ pub struct MbmSettings {
     /// (absent in reports written before it existed: read as 0).
     #[serde(default)]
     pub shortcut_min_gain: f64,
-    /// The length above which greedy-pass shortcuts were screened by a probe before their
-    /// certificate (absent in reports written before it existed, which screened none: read as
-    /// infinite; written as `null` when infinite).
+    /// The length above which shortcuts and straight segments were screened by a probe before
+    /// their certificate (absent in reports written before it existed, which screened none: read
+    /// as infinite; written as `null` when infinite).
     #[serde(default = "no_screen", with = "finite_or_null")]
-    pub shortcut_screen_above: f64,
+    pub screen_above: f64,
     /// The planner after the straight segment.
     pub algorithm: PlannerKind,
     /// RRT-Connect's largest step, rad.
@@ -320,7 +320,7 @@ fn one() -> usize {
     1
 }
 
-/// `MbmSettings::shortcut_screen_above` of a report written before it existed: no screen.
+/// `MbmSettings::screen_above` of a report written before it existed: no screen.
 fn no_screen() -> f64 {
     f64::INFINITY
 }
@@ -660,7 +660,7 @@ fn run_problem(args: &MbmArgs, loaded: &Loaded, p: &ProblemFiles, run: u32) -> R
         deadline: Deadline::after(budget),
         shortcut_attempts: args.shortcut_attempts,
         shortcut_min_gain: args.shortcut_min_gain,
-        shortcut_screen_above: args.shortcut_screen_above,
+        screen_above: args.screen_above,
         planner: args.algorithm,
         rrt_range: args.rrt_range,
         rrt_dynamic_domain: args.dynamic_domain,
@@ -819,7 +819,7 @@ fn settings_of(args: &MbmArgs, loaded: &Loaded) -> MbmSettings {
         resolution: args.resolution,
         shortcut_attempts: args.shortcut_attempts,
         shortcut_min_gain: args.shortcut_min_gain,
-        shortcut_screen_above: args.shortcut_screen_above,
+        screen_above: args.screen_above,
         algorithm: args.algorithm,
         rrt_range: args.rrt_range,
         dynamic_domain: args.dynamic_domain,

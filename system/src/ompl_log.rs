@@ -177,7 +177,7 @@ pub fn ompl_log(report: &MbmReport, family: &str, index: u32, machine: &Machine,
         ),
         format!("shortcut_attempts = {}", s.shortcut_attempts),
         format!("shortcut_min_gain = {}", s.shortcut_min_gain),
-        format!("shortcut_screen_above = {}", s.shortcut_screen_above),
+        format!("screen_above = {}", s.screen_above),
         format!("threads = {}", s.threads),
     ];
     line(format!("{} common properties", common.len()));

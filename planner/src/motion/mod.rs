@@ -208,19 +208,21 @@ pub struct MotionSettings {
     /// a 1.4% shorter mean path (6.315 against 6.407 rad): the attempts to raise for shorter
     /// paths.
     pub shortcut_min_gain: f64,
-    /// With certified edges, the shortcuts (the greedy pass's and the random attempts') longer
-    /// than this (C-space distance, rad or m) are screened by a probe of eight evenly spaced
-    /// inner points before their certificate: a point in collision refuses one at the cost of
-    /// one batch of plain checks (the same paths either way; see
-    /// [`crate::validity::Validity::shortcut_free`]). Infinite: never. Planning instructions
-    /// (callgrind, one core, the greedy pass screened) against no screen, 2 rad (the default) /
-    /// 1 rad: VAMP's Baxter problems (both arms, first 10 per family) -6.5% / -7.5%; the
-    /// spherized Panda's three families (30 problems each) -3.5% / -4.3%, the Fetch's -4.6% /
-    /// -4.4%; 160 generated UR5 problems (four families) -1.2% / -1.2%; the 90 public
-    /// MotionBenchMaker UR5 problems of `--limit 30` 0.0% / +0.7% (a refused certificate's set-up
-    /// and first batch cost about four probe batches on the UR5, about seven on Baxter). The
-    /// random attempts screened too: Baxter -0.4%, public UR5 -0.2% more.
-    pub shortcut_screen_above: f64,
+    /// With certified edges, segments likely refused that are longer than this (C-space
+    /// distance, rad or m) are screened by a probe of eight evenly spaced inner points before
+    /// their certificate: the shortcuts (the greedy pass's and the random attempts'), the
+    /// straight segment to a goal and the legs' straight segments. A point in collision refuses
+    /// one at the cost of one batch of plain checks (the same paths either way; see
+    /// [`crate::validity::Validity::segment_free_screened`]). Infinite: never. Planning
+    /// instructions (callgrind, one core, the greedy pass screened) against no screen, 2 rad
+    /// (the default) / 1 rad: VAMP's Baxter problems (both arms, first 10 per family) -6.5% /
+    /// -7.5%; the spherized Panda's three families (30 problems each) -3.5% / -4.3%, the
+    /// Fetch's -4.6% / -4.4%; 160 generated UR5 problems (four families) -1.2% / -1.2%; the 90
+    /// public MotionBenchMaker UR5 problems of `--limit 30` 0.0% / +0.7% (a refused
+    /// certificate's set-up and first batch cost about four probe batches on the UR5, about
+    /// seven on Baxter). The random attempts screened too: Baxter -0.4%, public UR5 -0.2% more;
+    /// the straight segments too: Baxter -0.6%, public UR5 -1.4% more.
+    pub screen_above: f64,
     /// The search after the straight segment.
     pub planner: PlannerKind,
     /// Lazy PRM: samples per batch.
@@ -339,7 +341,7 @@ impl Default for MotionSettings {
             shortcut: true,
             shortcut_attempts: 5,
             shortcut_min_gain: 0.01,
-            shortcut_screen_above: 2.0,
+            screen_above: 2.0,
             planner: PlannerKind::RrtConnect,
             batch_size: 200,
             k_neighbours: 10,
@@ -644,8 +646,8 @@ fn plan_alone<V: StateValidity>(
             ),
         });
     }
-    if settings.shortcut_screen_above.is_nan() {
-        return Err(PlanError::InvalidInput { message: "shortcut_screen_above must not be NaN".to_string() });
+    if settings.screen_above.is_nan() {
+        return Err(PlanError::InvalidInput { message: "screen_above must not be NaN".to_string() });
     }
     if settings.lazy_probe.is_nan() || settings.lazy_probe < 0.0 {
         return Err(PlanError::InvalidInput {
@@ -654,7 +656,7 @@ fn plan_alone<V: StateValidity>(
     }
     let mut validity = Validity::new(model, settings.resolution)
         .with_edge_check(settings.edge_check)
-        .with_screen_above(settings.shortcut_screen_above);
+        .with_screen_above(settings.screen_above);
     let mut rng = Rng::new(settings.seed);
     let goals = resolve_goals(model, start, goal, settings, &mut rng)?;
     let mut stats = MotionStats::default();
@@ -680,7 +682,7 @@ fn plan_alone<V: StateValidity>(
         order.clear();
     }
     for &i in &order {
-        if validity.segment_free(start, &goals[i]) {
+        if validity.segment_free_screened(start, &goals[i]) {
             raw = Some((vec![start.to_vec(), goals[i].clone()], "direct"));
             break;
         }
@@ -770,6 +772,9 @@ fn plan_alone<V: StateValidity>(
     Ok(MotionPlan { path, stats })
 }
 
+/// A path: its configurations in order.
+type Path = Vec<Vec<f64>>;
+
 /// Samples of one leg of [`by_groups`] before it gives the leg up (the search over every
 /// joint follows).
 const GROUP_LEG_SAMPLES: usize = 2_000;
@@ -795,7 +800,7 @@ fn by_groups<V: StateValidity>(
     settings: &MotionSettings,
     lazy: bool,
     stats: &mut MotionStats,
-) -> Option<Outcome<(Vec<Vec<f64>>, bool), ()>> {
+) -> Option<Outcome<(Path, bool), ()>> {
     let robot = validity.model.robot();
     let mut delta = vec![0.0; start.len()];
     validity.space.deltas_into(start, goal, &mut delta);
@@ -843,7 +848,7 @@ fn by_groups<V: StateValidity>(
             if budget.spend(1, validity.collision_checks) {
                 return Some(Outcome::OutOfTime { best: None, cause: budget.cause() });
             }
-            if validity.segment_free(&leg[0], &leg[1]) {
+            if validity.segment_free_screened(&leg[0], &leg[1]) {
                 legs.push(leg.to_vec());
                 continue;
             }

@@ -56,7 +56,7 @@ pub(crate) fn shortcut<V: StateValidity>(
         if !ends_free {
             continue;
         }
-        if validity.shortcut_free(&p1, &p2) {
+        if validity.segment_free_screened(&p1, &p2) {
             // Path: ..path[s1], p1, p2, path[s2+1]..
             let mut next = Vec::with_capacity(path.len());
             next.extend(path[..=s1].iter().cloned());
@@ -109,7 +109,7 @@ pub(crate) fn farthest_visible<V: StateValidity>(
         if budget.spend(1, validity.collision_checks) {
             return Err(OutOfTime);
         }
-        if validity.shortcut_free(&path[i], &path[j]) {
+        if validity.segment_free_screened(&path[i], &path[j]) {
             return Ok(Some(j));
         }
     }
