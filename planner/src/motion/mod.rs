@@ -257,10 +257,10 @@ pub struct MotionSettings {
     /// RRT-Connect on a robot of independent groups of joints (two arms on a fixed torso, see
     /// [`embodied_models::Robot::independent_dof_groups`]; two arms on a torso joint, which is
     /// held when it keeps its value and else moved in a leg of its own): before the search over
-    /// every joint,
-    /// a path that moves one group at a time, each leg searched in its group's joints alone (at
-    /// most 2,000 samples a leg; the search over every joint follows when no order of the groups
-    /// works), then the legs side by side when that motion certifies. On by default: on the
+    /// every joint, a path that moves one group at a time, each leg searched in its group's
+    /// joints alone (2,000 samples a search, in up to three rounds over both orders of the
+    /// groups; the search over every joint follows when none works), then the legs side by side
+    /// when that motion certifies. On by default: on the
     /// first 30 problems of each of VAMP's three Baxter families (both arms moving, 14 joints;
     /// `bench mbm`, one core), p50 4.4-4.9 -> 1.3-1.6 ms, p95 34-35 -> 4.4-5.7 ms, median path
     /// 9.39 -> 9.03 rad.
@@ -775,9 +775,16 @@ fn plan_alone<V: StateValidity>(
 /// A path: its configurations in order.
 type Path = Vec<Vec<f64>>;
 
-/// Samples of one leg of [`by_groups`] before it gives the leg up (the search over every
-/// joint follows).
+/// Samples of one leg's search in [`by_groups`] before it gives the search up (for this round,
+/// see [`GROUP_LEG_ROUNDS`]).
 const GROUP_LEG_SAMPLES: usize = 2_000;
+
+/// Rounds of [`by_groups`]: in each, every order whose waypoints are free searches the legs it
+/// lacks, with new trees, [`GROUP_LEG_SAMPLES`] samples each; the search over every joint
+/// follows when no round gave a path. With one round, one of VAMP's 1,470 Baxter problems
+/// (both arms) fell to the search over every joint in each of two builds, and took it 105,335
+/// samples (18-24 ms) in one; its legs need a few thousand.
+const GROUP_LEG_ROUNDS: usize = 3;
 
 /// On a robot of independent groups of joints ([`Robot::independent_dof_groups`]: two arms on a
 /// fixed torso), a path from `start` to `goal` that moves one group at a time: the groups that
@@ -821,10 +828,12 @@ fn by_groups<V: StateValidity>(
         vec![moving, reversed]
     };
     let mut mask = vec![false; start.len()];
-    'orders: for order in orders {
+    // Per order, its waypoints and the legs found so far (`None`: a waypoint in collision).
+    let mut found: Vec<Option<(Path, Vec<Path>)>> = Vec::with_capacity(orders.len());
+    for order in &orders {
         // The waypoints: each group in turn moved to the goal.
         let mut points = vec![start.to_vec()];
-        for group in &order {
+        for group in order {
             let mut q = points.last().cloned().unwrap_or_default();
             for &d in group.iter() {
                 q[d] = goal[d];
@@ -835,55 +844,75 @@ fn by_groups<V: StateValidity>(
             // The goal itself (its values, not a copy put together joint by joint).
             last.copy_from_slice(goal);
         }
+        let mut free = true;
         for q in &points[1..points.len() - 1] {
             if budget.spend(1, validity.collision_checks) {
                 return Some(Outcome::OutOfTime { best: None, cause: budget.cause() });
             }
             if !validity.config_free(q) {
-                continue 'orders;
+                free = false;
+                break;
             }
         }
-        let mut legs: Vec<Vec<Vec<f64>>> = Vec::with_capacity(order.len());
-        for (leg, group) in points.windows(2).zip(&order) {
-            if budget.spend(1, validity.collision_checks) {
-                return Some(Outcome::OutOfTime { best: None, cause: budget.cause() });
+        found.push(free.then(|| (points, Vec::with_capacity(order.len()))));
+    }
+    // A leg that runs out of samples is most often stuck rather than impossible: after the other
+    // order's turn, it is searched again with new trees (the random stream going on), up to
+    // `GROUP_LEG_ROUNDS` times, the legs found kept.
+    for _ in 0..GROUP_LEG_ROUNDS {
+        'orders: for (order, state) in orders.iter().zip(found.iter_mut()) {
+            let Some((points, legs)) = state else { continue };
+            for (leg, group) in points.windows(2).zip(order).skip(legs.len()) {
+                if budget.spend(1, validity.collision_checks) {
+                    return Some(Outcome::OutOfTime { best: None, cause: budget.cause() });
+                }
+                // (Asked again in a later round, the segment's answer is kept.)
+                if validity.segment_free_screened(&leg[0], &leg[1]) {
+                    legs.push(leg.to_vec());
+                    continue;
+                }
+                mask.iter_mut().for_each(|m| *m = false);
+                for &d in group.iter() {
+                    mask[d] = true;
+                }
+                let goals = [leg[1].clone()];
+                let search = rrt_connect::plan(
+                    validity,
+                    budget,
+                    rng,
+                    &leg[0],
+                    &goals,
+                    &leg_settings,
+                    (lazy, Some(&mask)),
+                    stats,
+                );
+                match search {
+                    Outcome::Solved(p) => legs.push(p),
+                    Outcome::OutOfTime { cause, .. } => return Some(Outcome::OutOfTime { best: None, cause }),
+                    Outcome::Infeasible => continue 'orders,
+                }
             }
-            if validity.segment_free_screened(&leg[0], &leg[1]) {
-                legs.push(leg.to_vec());
-                continue;
+            let legs = std::mem::take(legs);
+            // The legs side by side when that motion is free too (the groups only meet each
+            // other there: each moves among the obstacles as in its leg), else one after the
+            // other. With shortcuts, the greedy pass checks the side-by-side path: from each
+            // vertex the farthest one it sees, the next vertex's edge checked only when it sees
+            // none, so the edges it skips are never checked (as on a path of lazy RRT-Connect).
+            if legs.len() > 1 {
+                let together = side_by_side(&validity.space, start, &legs, order);
+                let mut checked = vec![false; together.len().saturating_sub(1)];
+                match rrt_connect::certify_path(together, &mut checked, validity, budget, settings.shortcut) {
+                    Certified::Path(p) => return Some(Outcome::Solved((p, settings.shortcut))),
+                    Certified::OutOfTime => return Some(Outcome::OutOfTime { best: None, cause: budget.cause() }),
+                    Certified::Blocked(_) => {}
+                }
             }
-            mask.iter_mut().for_each(|m| *m = false);
-            for &d in group.iter() {
-                mask[d] = true;
+            let mut path = vec![start.to_vec()];
+            for leg in legs {
+                path.extend(leg.into_iter().skip(1));
             }
-            let goals = [leg[1].clone()];
-            let found =
-                rrt_connect::plan(validity, budget, rng, &leg[0], &goals, &leg_settings, (lazy, Some(&mask)), stats);
-            match found {
-                Outcome::Solved(p) => legs.push(p),
-                Outcome::OutOfTime { cause, .. } => return Some(Outcome::OutOfTime { best: None, cause }),
-                Outcome::Infeasible => continue 'orders,
-            }
+            return Some(Outcome::Solved((path, false)));
         }
-        // The legs side by side when that motion is free too (the groups only meet each other
-        // there: each moves among the obstacles as in its leg), else one after the other. With
-        // shortcuts, the greedy pass checks the side-by-side path: from each vertex the
-        // farthest one it sees, the next vertex's edge checked only when it sees none, so the
-        // edges it skips are never checked (as on a path of lazy RRT-Connect).
-        if legs.len() > 1 {
-            let together = side_by_side(&validity.space, start, &legs, &order);
-            let mut checked = vec![false; together.len().saturating_sub(1)];
-            match rrt_connect::certify_path(together, &mut checked, validity, budget, settings.shortcut) {
-                Certified::Path(p) => return Some(Outcome::Solved((p, settings.shortcut))),
-                Certified::OutOfTime => return Some(Outcome::OutOfTime { best: None, cause: budget.cause() }),
-                Certified::Blocked(_) => {}
-            }
-        }
-        let mut path = vec![start.to_vec()];
-        for leg in legs {
-            path.extend(leg.into_iter().skip(1));
-        }
-        return Some(Outcome::Solved((path, false)));
     }
     Some(Outcome::Infeasible)
 }
