@@ -394,7 +394,6 @@ impl<'m, V: StateValidity> Validity<'m, V> {
             if self.memo.get(key, a, b).is_none() {
                 self.space.deltas_into(a, b, &mut self.delta);
                 self.collision_checks += SCREEN_POINTS as u64;
-                self.probe_checks += SCREEN_POINTS as u64;
                 self.screened += 1;
                 if self.model.probe_collides(a, None, &self.delta, SCREEN_POINTS + 1, &mut self.scratch) {
                     self.memo.put(key, a, b, false);
