@@ -583,6 +583,20 @@ mod tests {
         ur5
     }
 
+    /// `count` segments between random free configurations of `model`'s robot, drawn from `seed`.
+    fn free_ends(model: &CollisionModel, seed: u64, count: usize) -> Vec<(Vec<f64>, Vec<f64>)> {
+        let robot = model.robot();
+        let mut rng = Rng::new(seed);
+        let mut segments = Vec::new();
+        while segments.len() < count {
+            let (a, b) = (robot.random_configuration(&mut rng), robot.random_configuration(&mut rng));
+            if !model.collides(&a) && !model.collides(&b) {
+                segments.push((a, b));
+            }
+        }
+        segments
+    }
+
     /// A certified segment asked for again gets the answer of its certificate without a new
     /// one; a segment with other ends (reversed, or one value a bit apart) gets its own. The
     /// answers are the model's, free and refused segments both occur, and the counts add up.
@@ -593,14 +607,7 @@ mod tests {
         env.add(Obstacle::new("wall", Isometry3::translation(0.4, 0.0, 0.3), Shape::cuboid(0.15, 0.4, 0.3)));
         let model = CollisionModel::new(&robot, env);
         let mut validity = Validity::new(&model, 0.05).with_edge_check(EdgeCheck::Certified { tolerance: 1e-3 });
-        let mut rng = Rng::new(11);
-        let mut segments = Vec::new();
-        while segments.len() < 40 {
-            let (a, b) = (robot.random_configuration(&mut rng), robot.random_configuration(&mut rng));
-            if !model.collides(&a) && !model.collides(&b) {
-                segments.push((a, b));
-            }
-        }
+        let segments = free_ends(&model, 11, 40);
         let answers: Vec<bool> = segments.iter().map(|(a, b)| validity.segment_free(a, b)).collect();
         let (checked, checks) = (validity.edges_checked, validity.collision_checks);
         assert_eq!((checked, validity.edges_recalled), (segments.len(), 0));
@@ -638,14 +645,7 @@ mod tests {
         env.add(Obstacle::new("post", Isometry3::translation(-0.3, 0.4, 0.4), Shape::cuboid(0.08, 0.08, 0.4)));
         let model = CollisionModel::new(&robot, env);
         let certified = EdgeCheck::Certified { tolerance: 1e-3 };
-        let mut rng = Rng::new(5);
-        let mut segments = Vec::new();
-        while segments.len() < 60 {
-            let (a, b) = (robot.random_configuration(&mut rng), robot.random_configuration(&mut rng));
-            if !model.collides(&a) && !model.collides(&b) {
-                segments.push((a, b));
-            }
-        }
+        let segments = free_ends(&model, 5, 60);
         let mut screened = Validity::new(&model, 0.05).with_edge_check(certified).with_screen_above(0.5);
         let mut never = Validity::new(&model, 0.05).with_edge_check(certified).with_screen_above(f64::INFINITY);
         let (mut free, mut short, mut certificates) = (0, 0, 0);
