@@ -817,6 +817,19 @@ proptest! {
     }
 }
 
+/// The points an edge probe checks, in its order: `end` first when given, then the inner points
+/// `a + (i / n) delta` in bisection order (one row of the robot's values each).
+fn probe_points(a: &[f64], end: Option<&[f64]>, delta: &[f64], n: usize) -> Vec<f64> {
+    let mut points: Vec<f64> = end.map(<[f64]>::to_vec).unwrap_or_default();
+    let mut q = vec![0.0; a.len()];
+    embodied_models::cspace::bisection_order(n, |i| {
+        ConfigSpace::step_into(a, delta, i as f64 / n as f64, &mut q);
+        points.extend_from_slice(&q);
+        true
+    });
+    points
+}
+
 /// An edge probe (its end, then its inner points in bisection order, written into the lanes
 /// straight from the segment) answers as the same points built one by one and passed to
 /// `any_collides_settled` do, and as single checks: with and without its end, from 1 to 40
@@ -853,13 +866,7 @@ fn edge_probes_answer_as_their_points_do() {
                 space.deltas_into(&a, &b, &mut delta);
                 let n = 1 + (k * 7 + seed as usize) % 40;
                 for end in [None, Some(&b[..])] {
-                    let mut points: Vec<f64> = end.map(<[f64]>::to_vec).unwrap_or_default();
-                    let mut q = vec![0.0; dof];
-                    embodied_models::cspace::bisection_order(n, |i| {
-                        ConfigSpace::step_into(&a, &delta, i as f64 / n as f64, &mut q);
-                        points.extend_from_slice(&q);
-                        true
-                    });
+                    let points = probe_points(&a, end, &delta, n);
                     let expected = model.any_collides_settled(&points, &mut s);
                     assert_eq!(expected, points.chunks(dof).any(|q| model.collides_with(q, &mut s)));
                     let at = format!("robot {which}, seed {seed}, segment {k}, {n} steps, end {}", end.is_some());
@@ -961,13 +968,7 @@ fn probes_from_free_starts_skip_still_bodies_with_the_same_answer() {
                 space.deltas_into(&a, &b, &mut delta);
                 let n = 1 + (k * 5 + seed as usize) % 30;
                 for end in [None, Some(&b[..])] {
-                    let mut points: Vec<f64> = end.map(<[f64]>::to_vec).unwrap_or_default();
-                    let mut q = vec![0.0; dof];
-                    embodied_models::cspace::bisection_order(n, |i| {
-                        ConfigSpace::step_into(&a, &delta, i as f64 / n as f64, &mut q);
-                        points.extend_from_slice(&q);
-                        true
-                    });
+                    let points = probe_points(&a, end, &delta, n);
                     let expected = points.chunks(dof).any(|q| model.collides_with(q, &mut s));
                     let at = format!("robot {which}, seed {seed}, segment {k}, {n} steps, end {}", end.is_some());
                     assert_eq!(model.probe_collides(&a, end, &delta, n, &mut s), expected, "{at}");
@@ -1067,13 +1068,7 @@ fn consecutive_probes_holding_joints_answer_as_their_points_do() {
                 let mut delta = Vec::new();
                 space.deltas_into(&a, &b, &mut delta);
                 let n = 2 + (k * 3) % 20;
-                let mut points = b.clone();
-                let mut q = vec![0.0; dof];
-                embodied_models::cspace::bisection_order(n, |i| {
-                    ConfigSpace::step_into(&a, &delta, i as f64 / n as f64, &mut q);
-                    points.extend_from_slice(&q);
-                    true
-                });
+                let points = probe_points(&a, Some(&b), &delta, n);
                 let expected = points.chunks(dof).any(|q| model.collides_with(q, &mut s));
                 let at = format!("robot {which}, seed {seed}, probe {k}");
                 assert_eq!(model.probe_from_free_collides(&a, Some(&b), &delta, n, &mut s), expected, "{at}");
