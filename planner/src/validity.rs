@@ -363,20 +363,7 @@ impl<'m, V: StateValidity> Validity<'m, V> {
     /// greedy pass tries the start-goal segment the direct check has refused, and tries again,
     /// after a blocked edge is cut, the segments it certified or refused on the path before.
     pub fn segment_free(&mut self, a: &[f64], b: &[f64]) -> bool {
-        if let Some(tolerance) = self.certify {
-            let key = self.memo.key(a, b);
-            if let Some(free) = self.memo.get(key, a, b) {
-                self.edges_recalled += 1;
-                return free;
-            }
-            self.edges_checked += 1;
-            let (free, checks) = self.model.certify_motion(a, b, tolerance, false, &mut self.scratch);
-            self.collision_checks += u64::from(checks);
-            self.memo.put(key, a, b, free);
-            return free;
-        }
-        self.edges_checked += 1;
-        self.sampled(a, b, self.resolution)
+        self.segment_checked(a, b, false)
     }
 
     /// [`Self::segment_free`] of a segment from a valid point `a` that is likely refused: a
@@ -389,20 +376,35 @@ impl<'m, V: StateValidity> Validity<'m, V> {
     /// probe's one batch of plain checks costs a fraction of a certificate's set-up and first
     /// batch with its margins.
     pub fn segment_free_screened(&mut self, a: &[f64], b: &[f64]) -> bool {
-        if self.certify.is_some() && a.len() == b.len() && self.space.distance(a, b) > self.screen_above {
-            let key = self.memo.key(a, b);
-            if self.memo.get(key, a, b).is_none() {
-                self.space.deltas_into(a, b, &mut self.delta);
-                self.collision_checks += SCREEN_POINTS as u64;
-                self.screened += 1;
-                if self.model.probe_collides(a, None, &self.delta, SCREEN_POINTS + 1, &mut self.scratch) {
-                    self.memo.put(key, a, b, false);
-                    self.screened_out += 1;
-                    return false;
-                }
+        self.segment_checked(a, b, true)
+    }
+
+    /// [`Self::segment_free`], screened first when `screen` (see [`Self::segment_free_screened`]).
+    fn segment_checked(&mut self, a: &[f64], b: &[f64], screen: bool) -> bool {
+        let Some(tolerance) = self.certify else {
+            self.edges_checked += 1;
+            return self.sampled(a, b, self.resolution);
+        };
+        let key = self.memo.key(a, b);
+        if let Some(free) = self.memo.get(key, a, b) {
+            self.edges_recalled += 1;
+            return free;
+        }
+        if screen && a.len() == b.len() && self.space.distance(a, b) > self.screen_above {
+            self.space.deltas_into(a, b, &mut self.delta);
+            self.collision_checks += SCREEN_POINTS as u64;
+            self.screened += 1;
+            if self.model.probe_collides(a, None, &self.delta, SCREEN_POINTS + 1, &mut self.scratch) {
+                self.memo.put(key, a, b, false);
+                self.screened_out += 1;
+                return false;
             }
         }
-        self.segment_free(a, b)
+        self.edges_checked += 1;
+        let (free, checks) = self.model.certify_motion(a, b, tolerance, false, &mut self.scratch);
+        self.collision_checks += u64::from(checks);
+        self.memo.put(key, a, b, free);
+        free
     }
 
     /// No sampled configuration of the segment `a`-`b` collides, at `resolution` (largest joint
