@@ -829,39 +829,45 @@ fn by_groups<V: StateValidity>(
     };
     let mut mask = vec![false; start.len()];
     // Per order, its waypoints and the legs found so far (`None`: a waypoint in collision).
-    let mut found: Vec<Option<(Path, Vec<Path>)>> = Vec::with_capacity(orders.len());
-    for order in &orders {
-        // The waypoints: each group in turn moved to the goal.
-        let mut points = vec![start.to_vec()];
-        for group in order {
-            let mut q = points.last().cloned().unwrap_or_default();
-            for &d in group.iter() {
-                q[d] = goal[d];
+    // Per order, its waypoints, whether they were found free (checked at the order's first turn)
+    // and the legs found so far (`None`: a waypoint in collision).
+    let mut found: Vec<Option<(Path, bool, Vec<Path>)>> = orders
+        .iter()
+        .map(|order| {
+            // The waypoints: each group in turn moved to the goal.
+            let mut points = vec![start.to_vec()];
+            for group in order {
+                let mut q = points.last().cloned().unwrap_or_default();
+                for &d in group.iter() {
+                    q[d] = goal[d];
+                }
+                points.push(q);
             }
-            points.push(q);
-        }
-        if let Some(last) = points.last_mut() {
-            // The goal itself (its values, not a copy put together joint by joint).
-            last.copy_from_slice(goal);
-        }
-        let mut free = true;
-        for q in &points[1..points.len() - 1] {
-            if budget.spend(1, validity.collision_checks) {
-                return Some(Outcome::OutOfTime { best: None, cause: budget.cause() });
+            if let Some(last) = points.last_mut() {
+                // The goal itself (its values, not a copy put together joint by joint).
+                last.copy_from_slice(goal);
             }
-            if !validity.config_free(q) {
-                free = false;
-                break;
-            }
-        }
-        found.push(free.then(|| (points, Vec::with_capacity(order.len()))));
-    }
+            Some((points, false, Vec::with_capacity(order.len())))
+        })
+        .collect();
     // A leg that runs out of samples is most often stuck rather than impossible: after the other
     // order's turn, it is searched again with new trees (the random stream going on), up to
     // `GROUP_LEG_ROUNDS` times, the legs found kept.
     for _ in 0..GROUP_LEG_ROUNDS {
         'orders: for (order, state) in orders.iter().zip(found.iter_mut()) {
-            let Some((points, legs)) = state else { continue };
+            let Some((points, checked, legs)) = state else { continue };
+            if !*checked {
+                *checked = true;
+                for q in &points[1..points.len() - 1] {
+                    if budget.spend(1, validity.collision_checks) {
+                        return Some(Outcome::OutOfTime { best: None, cause: budget.cause() });
+                    }
+                    if !validity.config_free(q) {
+                        *state = None;
+                        continue 'orders;
+                    }
+                }
+            }
             for (leg, group) in points.windows(2).zip(order).skip(legs.len()) {
                 if budget.spend(1, validity.collision_checks) {
                     return Some(Outcome::OutOfTime { best: None, cause: budget.cause() });
