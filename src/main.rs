@@ -362,6 +362,10 @@ enum BenchCommand {
         /// joints (two arms on a fixed torso), instead of first one group at a time.
         #[arg(long)]
         no_by_groups: bool,
+        /// With `--threads` above 1, a plan by groups of joints races seeds of the whole plan
+        /// instead of searching its legs two at a time (one on each thread; the default).
+        #[arg(long)]
+        serial_legs: bool,
         /// RRT-Connect swaps its trees every iteration instead of growing the smaller one while
         /// the other has twice its nodes (the default).
         #[arg(long)]
@@ -836,6 +840,7 @@ fn run(cli: Cli) -> Result<(), AppError> {
             rrt_local_span,
             no_dynamic_domain,
             no_by_groups,
+            serial_legs,
             no_balance,
             sampler,
             shard,
@@ -859,6 +864,7 @@ fn run(cli: Cli) -> Result<(), AppError> {
             args.threads = threads;
             args.dynamic_domain = !no_dynamic_domain;
             args.by_groups = !no_by_groups;
+            args.parallel_legs = !serial_legs;
             args.balance = !no_balance;
             args.sampler = sampler;
             if let Some(r) = rrt_range {

@@ -193,6 +193,9 @@ pub(crate) struct Budget<'d> {
     hand_over: Option<(&'d dyn Fn(), Duration)>,
     /// The hand-over waits (see [`Self::hold_hand_over`]).
     hand_over_held: bool,
+    /// The hand-over waits whatever [`Self::hold_hand_over`] says (see
+    /// [`Self::suspend_hand_over`]).
+    hand_over_suspended: bool,
     /// The deadline's expansion and check budgets (`u64::MAX`: none).
     max_work: u64,
     max_checks: u64,
@@ -213,6 +216,7 @@ impl<'d> Budget<'d> {
             stopped: None,
             hand_over: None,
             hand_over_held: false,
+            hand_over_suspended: false,
             max_work: deadline.max_expansions.unwrap_or(u64::MAX),
             max_checks: deadline.max_checks.unwrap_or(u64::MAX),
         }
@@ -231,6 +235,13 @@ impl<'d> Budget<'d> {
     /// search from nothing, and handing it over costs this one a clone and a queue push.
     pub fn hold_hand_over(&mut self, hold: bool) {
         self.hand_over_held = hold;
+    }
+
+    /// Suspend the hand-over (`true`) through stages that hold and let it go themselves (see
+    /// [`Self::hold_hand_over`]), or end the suspension (`false`): a plan whose legs take the
+    /// racer thread two at a time hands no racer over meanwhile.
+    pub fn suspend_hand_over(&mut self, suspend: bool) {
+        self.hand_over_suspended = suspend;
     }
 
     /// Count `units` of work, `checks` being the collision checks made so far; true when
@@ -261,6 +272,7 @@ impl<'d> Budget<'d> {
         }
         if read_clock
             && !self.hand_over_held
+            && !self.hand_over_suspended
             && let Some((f, after)) = self.hand_over
             && self.started.elapsed() >= after
         {

@@ -99,6 +99,12 @@ pub struct MotionStats {
     /// RRT-Connect: attempts started again with new trees after one drew its `max_samples`
     /// samples without a path (see `MotionSettings::rrt_restarts`).
     pub restarts: usize,
+    /// Legs of a plan by groups of joints searched on a racer thread beside the caller's (see
+    /// `MotionSettings::parallel_legs`).
+    pub legs_on_racer: usize,
+    /// Legs of such a plan whose path came from the caller's thread racing a leg the racer
+    /// thread was still searching (from another random stream).
+    pub legs_raced: usize,
 }
 
 /// Rewrite continuous joints so that each waypoint differs from the previous by the short way.

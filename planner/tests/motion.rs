@@ -972,3 +972,44 @@ fn arms_that_block_each_other_fall_back_and_a_still_arm_stays() {
         assert_eq!(q[..7], start[..7], "the still arm moved: {q:?}");
     }
 }
+
+/// A plan by groups with a racer thread free searches its legs two at a time, one of them on
+/// the racer thread, and returns the path of one thread unless the caller's race of a leg gave
+/// it (each leg draws from a stream of its own); every plan is verified. With a check budget
+/// (whose count would depend on the threads) the legs stay on the caller's thread, and seeds
+/// race.
+#[test]
+fn legs_two_at_a_time_give_the_path_of_one_thread() {
+    for (seed, want) in [(3, [true, true]), (4, [false, true]), (5, [true, false]), (6, [true, true])] {
+        let (model, start, goal) = two_arm_problem(seed, want);
+        let goal = Goal::Configuration(goal);
+        for plan_seed in 0..4 {
+            let one = MotionSettings { seed: plan_seed, ..settings(PlannerKind::RrtConnect) };
+            let two = MotionSettings { racers: 2, ..one.clone() };
+            let alone = plan_motion(&model, &start, &goal, &one).unwrap_or_else(|e| panic!("{want:?}: {e}"));
+            assert_eq!((alone.stats.legs_on_racer, alone.stats.legs_raced), (0, 0));
+            let both = plan_motion(&model, &start, &goal, &two).unwrap_or_else(|e| panic!("{want:?}: {e}"));
+            assert_eq!(both.stats.planner, "rrt-connect-groups+shortcut", "{want:?}");
+            assert_plan_ok(&model, &start, goal_q(&goal), &both.path);
+            if both.stats.legs_raced == 0 {
+                assert_eq!(both.path, alone.path, "{want:?}, seed {plan_seed}");
+            }
+            let budgeted = MotionSettings { deadline: Deadline::none().and_checks(1_000_000), ..two.clone() };
+            let counted = plan_motion(&model, &start, &goal, &budgeted).expect("a plan within the budget");
+            assert_eq!(
+                counted.stats.legs_on_racer + counted.stats.legs_raced,
+                0,
+                "{want:?}: legs beside a check budget"
+            );
+            assert_plan_ok(&model, &start, goal_q(&goal), &counted.path);
+        }
+    }
+}
+
+/// The configuration of a configuration goal.
+fn goal_q(goal: &Goal) -> &[f64] {
+    match goal {
+        Goal::Configuration(q) => q,
+        other => panic!("not a configuration goal: {other:?}"),
+    }
+}

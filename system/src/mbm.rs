@@ -71,6 +71,9 @@ pub struct MbmArgs {
     pub dynamic_domain: bool,
     /// RRT-Connect first one independent group of joints at a time (two arms on a fixed torso).
     pub by_groups: bool,
+    /// With more than one thread, the legs of a plan by groups searched two at a time instead
+    /// of racing seeds (the planner's default: on; see `MotionSettings::parallel_legs`).
+    pub parallel_legs: bool,
     /// RRT-Connect grows the smaller tree while the other has twice its nodes.
     pub balance: bool,
     /// How RRT-Connect draws samples.
@@ -124,6 +127,7 @@ impl MbmArgs {
             rrt_range: MotionSettings::default().rrt_range,
             dynamic_domain: MotionSettings::default().rrt_dynamic_domain,
             by_groups: MotionSettings::default().rrt_by_groups,
+            parallel_legs: MotionSettings::default().parallel_legs,
             balance: MotionSettings::default().rrt_balance,
             sampler: MotionSettings::default().sampler,
             rrt_local_bias: MotionSettings::default().rrt_local_bias,
@@ -271,6 +275,11 @@ pub struct MbmSettings {
     /// reports written before it existed, which did not: read as false).
     #[serde(default)]
     pub by_groups: bool,
+    /// Whether, with more than one thread, a plan by groups searched its legs two at a time
+    /// instead of racing seeds (absent in reports written before it existed, which raced: read
+    /// as false).
+    #[serde(default)]
+    pub parallel_legs: bool,
     /// Whether the smaller tree was grown while the other had twice its nodes.
     pub balance: bool,
     /// How RRT-Connect drew its samples.
@@ -665,6 +674,7 @@ fn run_problem(args: &MbmArgs, loaded: &Loaded, p: &ProblemFiles, run: u32) -> R
         rrt_range: args.rrt_range,
         rrt_dynamic_domain: args.dynamic_domain,
         rrt_by_groups: args.by_groups,
+        parallel_legs: args.parallel_legs,
         rrt_balance: args.balance,
         sampler: args.sampler,
         rrt_local_bias: args.rrt_local_bias,
@@ -824,6 +834,7 @@ fn settings_of(args: &MbmArgs, loaded: &Loaded) -> MbmSettings {
         rrt_range: args.rrt_range,
         dynamic_domain: args.dynamic_domain,
         by_groups: args.by_groups,
+        parallel_legs: args.parallel_legs,
         balance: args.balance,
         sampler: args.sampler,
         rrt_local_bias: args.rrt_local_bias,

@@ -7,6 +7,7 @@
 //! segment checks use the robot's [`embodied_models::ConfigSpace`], so continuous joints take
 //! the short way round (Polycrank going from 3.0 to -3.0 rad moves 0.28 rad, across +-pi).
 
+mod legs;
 mod racers;
 pub(crate) mod rrt_connect;
 pub mod sampler;
@@ -265,6 +266,14 @@ pub struct MotionSettings {
     /// `bench mbm`, one core), p50 4.4-4.9 -> 1.3-1.6 ms, p95 34-35 -> 4.4-5.7 ms, median path
     /// 9.39 -> 9.03 rad.
     pub rrt_by_groups: bool,
+    /// With [`Self::racers`] above 1, a plan by groups of joints (see [`Self::rrt_by_groups`])
+    /// searches its legs two at a time, one on the calling thread and one on a racer thread,
+    /// instead of racing another seed of the whole plan (a racer is still handed over when the
+    /// plan falls back to the search over every joint, or only one group moves). Each leg
+    /// draws from a random stream of its own, so the path is the one of a single thread. Not
+    /// with an expansion or check budget (their counts would depend on the threads). On by
+    /// default.
+    pub parallel_legs: bool,
     /// RRT-Connect: keep growing the smaller tree while the other has twice its nodes (instead
     /// of swapping the trees every iteration). On by default (see
     /// [`MotionSettings::rrt_dynamic_domain`]).
@@ -350,6 +359,7 @@ impl Default for MotionSettings {
             lazy_probe: DEFAULT_LAZY_PROBE,
             rrt_dynamic_domain: true,
             rrt_by_groups: true,
+            parallel_legs: true,
             rrt_balance: true,
             sampler: Sampler::Uniform,
             rrt_local_bias: 0.5,
@@ -393,7 +403,7 @@ pub fn plan_motion_with<V: StateValidity>(
             None => race(model, start, goal, settings),
         };
     }
-    plan_alone(model, start, goal, settings, Stages::All, None)
+    plan_alone(model, start, goal, settings, Stages::All, None, false)
 }
 
 /// How long racer 0 of a race within the call ([`race`]) plans alone before the others are
@@ -494,7 +504,7 @@ fn race_detached(
                 }
                 let (model, start, goal) = &*shared;
                 let outcome = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-                    plan_alone(model, start, goal, &racer, Stages::Search, None)
+                    plan_alone(model, start, goal, &racer, Stages::Search, None, false)
                 }));
                 if matches!(outcome, Ok(Ok(_))) {
                     flag.store(true, Ordering::Relaxed);
@@ -510,7 +520,10 @@ fn race_detached(
     // the public MotionBenchMaker UR5 problems that took under 150 µs on one core 9% with two,
     // with no racer handed over at all: interleaved, each problem's fastest of ten runs.)
     let racer = racer_settings(settings, 0, &flag);
-    let first = plan_alone(model, start, goal, &racer, Stages::All, Some((&hand_over, DETACHED_HEAD_START)));
+    let legs = settings.parallel_legs
+        && settings.deadline.expansion_budget().is_none()
+        && settings.deadline.check_budget().is_none();
+    let first = plan_alone(model, start, goal, &racer, Stages::All, Some((&hand_over, DETACHED_HEAD_START)), legs);
     let mut results = Vec::with_capacity(settings.racers);
     if first.is_ok() {
         flag.store(true, Ordering::Relaxed);
@@ -557,7 +570,7 @@ fn race<V: StateValidity>(
     let run = |k: usize, hand_over: Option<(&dyn Fn(), Duration)>| {
         let racer = racer_settings(settings, k, &flag);
         let stages = if k == 0 { Stages::All } else { Stages::Search };
-        let result = plan_alone(model, start, goal, &racer, stages, hand_over);
+        let result = plan_alone(model, start, goal, &racer, stages, hand_over, false);
         if result.is_ok() {
             flag.store(true, Ordering::Relaxed);
         }
@@ -616,6 +629,7 @@ fn plan_alone<V: StateValidity>(
     settings: &MotionSettings,
     stages: Stages,
     hand_over: Option<(&dyn Fn(), Duration)>,
+    legs_helper: bool,
 ) -> Result<MotionPlan, PlanError> {
     let robot = model.robot();
     if !(settings.resolution.is_finite() && settings.resolution > 0.0) {
@@ -698,7 +712,9 @@ fn plan_alone<V: StateValidity>(
     if let (None, PlannerKind::RrtConnect, Some(goal), true) = (&raw, settings.planner, nearest, settings.rrt_by_groups)
     {
         budget.hold_hand_over(false);
-        match by_groups(&mut validity, &mut budget, &mut rng, start, goal, settings, lazy, &mut stats) {
+        let found = by_groups(&mut validity, &mut budget, start, goal, settings, lazy, legs_helper, &mut stats);
+        budget.suspend_hand_over(false);
+        match found {
             Some(Outcome::Solved((p, greedy))) => {
                 raw = Some((p, "rrt-connect-groups"));
                 greedy_done = greedy;
@@ -775,6 +791,10 @@ fn plan_alone<V: StateValidity>(
 /// A path: its configurations in order.
 type Path = Vec<Vec<f64>>;
 
+/// An order of [`by_groups`]: its waypoints, whether they were found free, and its legs
+/// (`None`: not found yet).
+type OrderState = (Path, bool, Vec<Option<Path>>);
+
 /// Samples of one leg's search in [`by_groups`] before it gives the search up (for this round,
 /// see [`GROUP_LEG_ROUNDS`]).
 const GROUP_LEG_SAMPLES: usize = 2_000;
@@ -801,11 +821,11 @@ const GROUP_LEG_ROUNDS: usize = 3;
 fn by_groups<V: StateValidity>(
     validity: &mut Validity<'_, V>,
     budget: &mut Budget<'_>,
-    rng: &mut Rng,
     start: &[f64],
     goal: &[f64],
     settings: &MotionSettings,
     lazy: bool,
+    parallel: bool,
     stats: &mut MotionStats,
 ) -> Option<Outcome<(Path, bool), ()>> {
     let robot = validity.model.robot();
@@ -820,6 +840,10 @@ fn by_groups<V: StateValidity>(
     if moving.is_empty() {
         return None;
     }
+    // Two legs or more at a time on the racer thread: no racer is handed over meanwhile (the
+    // caller ends the suspension).
+    let parallel = parallel && moving.len() > 1;
+    budget.suspend_hand_over(parallel);
     let leg_settings = MotionSettings { max_samples: GROUP_LEG_SAMPLES, ..settings.clone() };
     let orders: Vec<Vec<&Vec<usize>>> = if moving.len() == 1 {
         vec![moving]
@@ -827,11 +851,9 @@ fn by_groups<V: StateValidity>(
         let reversed = moving.iter().rev().copied().collect();
         vec![moving, reversed]
     };
-    let mut mask = vec![false; start.len()];
-    // Per order, its waypoints and the legs found so far (`None`: a waypoint in collision).
     // Per order, its waypoints, whether they were found free (checked at the order's first turn)
-    // and the legs found so far (`None`: a waypoint in collision).
-    let mut found: Vec<Option<(Path, bool, Vec<Path>)>> = orders
+    // and its legs (`None`: not found yet), or `None` when a waypoint is in collision.
+    let mut found: Vec<Option<OrderState>> = orders
         .iter()
         .map(|order| {
             // The waypoints: each group in turn moved to the goal.
@@ -847,14 +869,15 @@ fn by_groups<V: StateValidity>(
                 // The goal itself (its values, not a copy put together joint by joint).
                 last.copy_from_slice(goal);
             }
-            Some((points, false, Vec::with_capacity(order.len())))
+            Some((points, false, vec![None; order.len()]))
         })
         .collect();
     // A leg that runs out of samples is most often stuck rather than impossible: after the other
-    // order's turn, it is searched again with new trees (the random stream going on), up to
-    // `GROUP_LEG_ROUNDS` times, the legs found kept.
-    for _ in 0..GROUP_LEG_ROUNDS {
-        'orders: for (order, state) in orders.iter().zip(found.iter_mut()) {
+    // order's turn, it is searched again with new trees (a stream of its own for the round),
+    // up to `GROUP_LEG_ROUNDS` times, the legs found kept. Every leg an order lacks is searched
+    // in its turn, two at a time with `parallel` (the paths are the same either way).
+    for round in 0..GROUP_LEG_ROUNDS {
+        'orders: for (o, (order, state)) in orders.iter().zip(found.iter_mut()).enumerate() {
             let Some((points, checked, legs)) = state else { continue };
             if !*checked {
                 *checked = true;
@@ -868,37 +891,29 @@ fn by_groups<V: StateValidity>(
                     }
                 }
             }
-            for (leg, group) in points.windows(2).zip(order).skip(legs.len()) {
-                if budget.spend(1, validity.collision_checks) {
-                    return Some(Outcome::OutOfTime { best: None, cause: budget.cause() });
+            let missing: Vec<usize> = (0..legs.len()).filter(|&i| legs[i].is_none()).collect();
+            let jobs = missing
+                .iter()
+                .map(|&i| legs::LegJob {
+                    from: points[i].clone(),
+                    to: points[i + 1].clone(),
+                    group: order[i].clone(),
+                    seed: legs::leg_seed(settings.seed, round, o, i),
+                })
+                .collect();
+            let helper = if parallel { validity.model.collision_model() } else { None };
+            match legs::search_legs(validity, budget, jobs, &leg_settings, lazy, stats, helper) {
+                Ok(paths) => {
+                    for (&i, path) in missing.iter().zip(paths) {
+                        legs[i] = path;
+                    }
                 }
-                // (Asked again in a later round, the segment's answer is kept.)
-                if validity.segment_free_screened(&leg[0], &leg[1]) {
-                    legs.push(leg.to_vec());
-                    continue;
-                }
-                mask.iter_mut().for_each(|m| *m = false);
-                for &d in group.iter() {
-                    mask[d] = true;
-                }
-                let goals = [leg[1].clone()];
-                let search = rrt_connect::plan(
-                    validity,
-                    budget,
-                    rng,
-                    &leg[0],
-                    &goals,
-                    &leg_settings,
-                    (lazy, Some(&mask)),
-                    stats,
-                );
-                match search {
-                    Outcome::Solved(p) => legs.push(p),
-                    Outcome::OutOfTime { cause, .. } => return Some(Outcome::OutOfTime { best: None, cause }),
-                    Outcome::Infeasible => continue 'orders,
-                }
+                Err(cause) => return Some(Outcome::OutOfTime { best: None, cause }),
             }
-            let legs = std::mem::take(legs);
+            if legs.iter().any(Option::is_none) {
+                continue 'orders;
+            }
+            let legs: Vec<Path> = std::mem::take(legs).into_iter().flatten().collect();
             // The legs side by side when that motion is free too (the groups only meet each
             // other there: each moves among the obstacles as in its leg), else one after the
             // other. With shortcuts, the greedy pass checks the side-by-side path: from each
@@ -1259,6 +1274,7 @@ mod tests {
                     &settings,
                     Stages::All,
                     Some((&count, Duration::ZERO)),
+                    false,
                 )
                 .expect("a straight segment");
                 assert_eq!(plan.path.len(), 2, "the straight segment to the tenth goal");
@@ -1273,6 +1289,7 @@ mod tests {
                     &settings,
                     Stages::All,
                     Some((&count, Duration::ZERO)),
+                    false,
                 )
                 .expect("a path");
                 if plan.stats.samples >= 16 {
