@@ -281,8 +281,14 @@ impl std::fmt::Debug for ProgramId {
 #[derive(Debug, Clone)]
 pub(crate) struct Solids32 {
     solids: Vec<Solid32>,
-    /// Per solid, a sphere holding it: centre, radius (tested before the solid itself).
-    bound: Vec<([f32; 3], f32)>,
+    /// Per solid, a sphere holding it (tested before the solid itself): its centre in every
+    /// lane, so that a batch's test reads it as it is (broadcast in the obstacle loop, three
+    /// instructions a group and solid), and its radius.
+    bound_c: Vec<[F8; 3]>,
+    bound_r: Vec<f32>,
+    /// This set's number: a scratch keeps thresholds derived from it under this number (see
+    /// [`Grown`]; a clone carries the number of what it copies).
+    id: ProgramId,
     /// The largest obstacle coordinate and size (`T + H` of the module documentation).
     scale: f64,
     /// How far the spheres of the robot's world-fixed body (the links no joint moves) are from
@@ -348,7 +354,16 @@ impl Solids32 {
         let mut both: Vec<(Solid32, ([f32; 3], f32))> = out.into_iter().zip(bound).collect();
         both.sort_by(|a, b| (b.1).1.total_cmp(&(a.1).1));
         let (out, bound): (Vec<Solid32>, Vec<([f32; 3], f32)>) = both.into_iter().unzip();
-        scale.is_finite().then_some(Solids32 { solids: out, bound, scale, fixed_clear: f64::NEG_INFINITY })
+        let bound_c = bound.iter().map(|(c, _)| c.map(|v| F8([v; LANES]))).collect();
+        let bound_r = bound.iter().map(|&(_, r)| r).collect();
+        scale.is_finite().then_some(Solids32 {
+            solids: out,
+            bound_c,
+            bound_r,
+            scale,
+            fixed_clear: f64::NEG_INFINITY,
+            id: ProgramId::next(),
+        })
     }
 
     /// Work out how far the spheres of `geom`'s world-fixed body are from `solids` (the
@@ -476,8 +491,8 @@ const ALONG_K: f32 = 1.0 + 1.0 / 65_536.0;
 #[derive(Debug, Clone)]
 struct Grown {
     /// What they were derived from: the robot's [`Lanes::id`], the margin's bits and the
-    /// obstacles' scale (bits); `None` when nothing is kept.
-    key: Option<(ProgramId, u64, u64)>,
+    /// obstacles' [`Solids32::id`]; `None` when nothing is kept.
+    key: Option<(ProgramId, u64, ProgramId)>,
     /// The rounding allowance `√3 η` of the module documentation.
     grow: f64,
     /// The margin plus the allowance, rounded up: every link's and every self pair's.
@@ -486,6 +501,11 @@ struct Grown {
     group: Vec<f32>,
     /// Per group pair, the threshold of its two group spheres.
     group_pair: Vec<f32>,
+    /// Per group and solid (the solids of a group in a row), the threshold of the group's
+    /// sphere against the solid's bounding sphere: worked out in the obstacle loop of every
+    /// batch, four operations of each of its tests (public MotionBenchMaker planning spends
+    /// most of its obstacle tests there).
+    solid: Vec<f32>,
 }
 
 /// The answer of a batch: bit `i` for lane `i`.
@@ -644,6 +664,9 @@ pub(crate) struct LaneScratch {
     link_g: Vec<f32>,
     /// The thresholds of the last uniform margin.
     grown: Grown,
+    /// Per solid, a group's threshold against its bounding sphere, for a batch whose margins
+    /// are not uniform (derived anew for each group).
+    solid_t: Vec<f32>,
     /// The straight motion of the batches with [`LaneMargins::along`].
     motion: LaneMotion,
     /// Per body, its twist `ω`, `ν` (see [`LaneMotion`]) in the batch `twisted` (marked as
@@ -682,7 +705,15 @@ impl LaneScratch {
             cols: Vec::new(),
             batch: 0,
             link_g: Vec::new(),
-            grown: Grown { key: None, grow: 0.0, margin: 0.0, group: Vec::new(), group_pair: Vec::new() },
+            solid_t: Vec::new(),
+            grown: Grown {
+                key: None,
+                grow: 0.0,
+                margin: 0.0,
+                group: Vec::new(),
+                group_pair: Vec::new(),
+                solid: Vec::new(),
+            },
             motion: LaneMotion {
                 ready: None,
                 seg: 0,
@@ -753,6 +784,7 @@ struct Work<'a> {
     reach: &'a mut [u32],
     link_g: &'a [f32],
     grown: &'a Grown,
+    solid_t: &'a mut [f32],
     motion: &'a mut LaneMotion,
     omega: &'a mut [[F8; 3]],
     nu: &'a mut [[F8; 3]],
@@ -783,6 +815,7 @@ impl LaneScratch {
             reach: &mut self.reach,
             link_g: &self.link_g,
             grown: &self.grown,
+            solid_t: &mut self.solid_t,
             motion: &mut self.motion,
             omega: &mut self.omega,
             nu: &mut self.nu,
@@ -1234,8 +1267,12 @@ impl SphereGeom {
         out.group.extend(self.groups.iter().map(|g| up(g.r + m + grow)));
         out.group_pair.clear();
         out.group_pair.extend(self.group_pairs.iter().map(|gp| thr(up(gp.rr + m + grow), 0.0, 0.0)));
+        out.solid.clear();
+        for &gg in &out.group {
+            out.solid.extend(obstacles.bound_r.iter().map(|&br| thr(gg, br, 0.0)));
+        }
         out.margin = up(m + grow);
-        out.key = Some((self.lanes.id, m.to_bits(), obstacles.scale.to_bits()));
+        out.key = Some((self.lanes.id, m.to_bits(), obstacles.id));
         true
     }
 }
@@ -1429,7 +1466,7 @@ impl SphereGeom {
         // kept from the last batch with the same (see `Grown`), otherwise derived here.
         let grow = match uniform {
             Some(m) => {
-                let key = Some((lanes.id, m.to_bits(), obstacles.scale.to_bits()));
+                let key = Some((lanes.id, m.to_bits(), obstacles.id));
                 if s.grown.key != key && !self.grow_uniform(obstacles, m, &mut s.grown) {
                     return none;
                 }
@@ -1479,7 +1516,13 @@ impl SphereGeom {
         // Edge probes (no `along`) with still groups keep those groups' frames from batch to
         // batch while their joints' values stay.
         let keep = (STILL && !ALONG).then_some(still);
+        let n_ob = obstacles.solids.len();
+        if s.solid_t.len() < n_ob {
+            s.solid_t.resize(n_ob, 0.0);
+        }
         let Some(mut w) = self.pose_lanes(o, qs, dof, keep, s) else { return none };
+        let grown_solid: &[f32] = &w.grown.solid;
+        let ob_buf = std::mem::take(&mut w.solid_t);
         let s = &mut w;
         let mut live: u32 = (1 << LANES) - 1;
         // Against obstacles: group, link, sphere; the groups farthest down the chain first
@@ -1502,9 +1545,32 @@ impl SphereGeom {
                 up(g.r + links.iter().map(|&l| link_m[l as usize]).fold(0.0, f64::max) + grow)
             };
             let tg = thr(gg, 0.0, 0.0);
-            for (ob, (bc, br)) in obstacles.solids.iter().zip(&obstacles.bound) {
+            // Per solid, the threshold against its bounding sphere (kept with a uniform margin,
+            // else worked out for this group first) or, in the batches along a motion (whose
+            // margins are never uniform), the bounding radius, the threshold worked out in the
+            // loop (a buffer filled first cost their planning more than it saved).
+            let per_solid: &[f32] = if ALONG {
+                &obstacles.bound_r
+            } else {
+                match grown_solid.get(gi * n_ob..(gi + 1) * n_ob) {
+                    Some(t) if kept => t,
+                    _ => {
+                        let Some(buf) = ob_buf.get_mut(..n_ob) else { return none };
+                        for (t, &br) in buf.iter_mut().zip(&obstacles.bound_r) {
+                            *t = thr(gg, br, 0.0);
+                        }
+                        buf
+                    }
+                }
+            };
+            // Every solid is met (one left out could leave a lane called free).
+            if per_solid.len() != n_ob || obstacles.bound_c.len() != n_ob {
+                return none;
+            }
+            for ((ob, bc), &x) in obstacles.solids.iter().zip(&obstacles.bound_c).zip(per_solid) {
+                let tb = if ALONG { thr(gg, x, 0.0) } else { x };
                 // The spheres around the group and the solid first.
-                if live & within(dist2(&gc, &splat3(o, bc)), thr(gg, *br, 0.0)) == 0 {
+                if live & within(dist2(&gc, &load(o, bc)), tb) == 0 {
                     continue;
                 }
                 let mg = live & within(gap2(o, ob, &gc), tg);
@@ -2024,13 +2090,15 @@ mod tests {
             env.add(Obstacle::new(format!("o{k}"), at, shape));
         }
         let sorted = Solids32::new(&solids).expect("closed forms");
-        let radii: Vec<f32> = sorted.bound.iter().map(|b| b.1).collect();
+        let radii = sorted.bound_r.clone();
         assert!(radii.windows(2).all(|w| w[0] >= w[1]), "largest first: {radii:?}");
         // The order given, as `new` found it before sorting.
         let mut given = sorted.clone();
         given.solids.reverse();
-        given.bound.reverse();
-        assert!(given.bound.windows(2).any(|w| w[0].1 < w[1].1), "test setup: an unsorted order");
+        given.bound_c.reverse();
+        given.bound_r.reverse();
+        given.id = ProgramId::next();
+        assert!(given.bound_r.windows(2).any(|w| w[0] < w[1]), "test setup: an unsorted order");
         let model = CollisionModel::new(&robot, env);
         let margins = LaneMargins {
             link: &[],
