@@ -65,6 +65,16 @@ pub(super) fn search_leg<V: StateValidity>(
     rrt_connect::plan(validity, budget, &mut rng, &job.from, &goals, settings, (lazy, Some(&mask)), stats)
 }
 
+/// What [`search_legs`] hands the racer thread.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct Helper<'m> {
+    /// The caller's model, which the racer thread plans with a clone of.
+    pub model: &'m CollisionModel,
+    /// The caller lets the racer thread take the first job before it takes one (the tests' way
+    /// to have the racer thread search a leg on a busy machine; planning passes `false`).
+    pub first: bool,
+}
+
 /// What a leg's search on the racer thread counted, added to the caller's counters.
 #[derive(Debug, Default, Clone, Copy)]
 struct Counted {
@@ -157,12 +167,12 @@ fn raced_seed(seed: u64) -> u64 {
 /// for a leg that ran out of samples), or `Err` with the cause when planning is out of time.
 /// The counts of every search are added to `validity`'s and `stats`.
 ///
-/// With `helper` (the caller's model as a [`CollisionModel`]) and a racer thread, the thread
-/// takes jobs in turn with the caller, each searching the next one not yet taken. When none is
-/// left and the racer thread is still searching one, the caller races it: it searches the same
-/// leg from another random stream ([`raced_seed`]), and the first path found is the leg's (the
-/// other search stops at its next unit of work). A leg's paths are then either its own
-/// stream's, as one thread finds them, or the raced stream's.
+/// With `helper` and a racer thread, the thread takes jobs in turn with the caller, each
+/// searching the next one not yet taken. When none is left and the racer thread is still
+/// searching one, the caller races it: it searches the same leg from another random stream
+/// ([`raced_seed`]), and the first path found is the leg's (the other search stops at its next
+/// unit of work). A leg's paths are then either its own stream's, as one thread finds them, or
+/// the raced stream's.
 pub(super) fn search_legs<V: StateValidity>(
     validity: &mut Validity<'_, V>,
     budget: &mut Budget<'_>,
@@ -170,27 +180,11 @@ pub(super) fn search_legs<V: StateValidity>(
     settings: &MotionSettings,
     lazy: bool,
     stats: &mut MotionStats,
-    helper: Option<&CollisionModel>,
-) -> Result<Vec<Option<Path>>, Interrupt> {
-    search_legs_with(validity, budget, jobs, settings, lazy, stats, helper, false)
-}
-
-/// [`search_legs`]; with `helper_first`, the caller lets the racer thread take the first job
-/// before it takes one (the tests' way to have the racer thread search a leg on a busy machine).
-#[allow(clippy::too_many_arguments)]
-fn search_legs_with<V: StateValidity>(
-    validity: &mut Validity<'_, V>,
-    budget: &mut Budget<'_>,
-    jobs: Vec<LegJob>,
-    settings: &MotionSettings,
-    lazy: bool,
-    stats: &mut MotionStats,
-    helper: Option<&CollisionModel>,
-    helper_first: bool,
+    helper: Option<Helper<'_>>,
 ) -> Result<Vec<Option<Path>>, Interrupt> {
     let mut found: Vec<Option<Path>> = vec![None; jobs.len()];
-    let racers = if jobs.len() > 1 { helper.and_then(|m| racers::Racers::get().map(|r| (m, r))) } else { None };
-    let Some((model, racers)) = racers else {
+    let racers = if jobs.len() > 1 { helper.and_then(|h| racers::Racers::get().map(|r| (h, r))) } else { None };
+    let Some((Helper { model, first: helper_first }, racers)) = racers else {
         for (job, slot) in jobs.iter().zip(found.iter_mut()) {
             match search_leg(validity, budget, job, settings, lazy, stats) {
                 Outcome::Solved(p) => *slot = Some(p),
@@ -396,18 +390,10 @@ mod tests {
             let alone = search_legs(&mut v1, &mut Budget::new(&deadline), jobs.clone(), &settings, true, &mut s1, None)
                 .expect("no deadline");
             let (mut v2, mut s2) = (validity(), MotionStats::default());
-            let helper = Some(&model);
-            let both = search_legs_with(
-                &mut v2,
-                &mut Budget::new(&deadline),
-                jobs.clone(),
-                &settings,
-                true,
-                &mut s2,
-                helper,
-                true,
-            )
-            .expect("no deadline");
+            let helper = Some(Helper { model: &model, first: true });
+            let both =
+                search_legs(&mut v2, &mut Budget::new(&deadline), jobs.clone(), &settings, true, &mut s2, helper)
+                    .expect("no deadline");
             assert_eq!((s1.legs_on_racer, s1.legs_raced), (0, 0));
             // The racer thread took the first leg (and the second too if it was done before the
             // caller took one): its path, or the race's.

@@ -901,7 +901,11 @@ fn by_groups<V: StateValidity>(
                     seed: legs::leg_seed(settings.seed, round, o, i),
                 })
                 .collect();
-            let helper = if parallel { validity.model.collision_model() } else { None };
+            let helper = if parallel {
+                validity.model.collision_model().map(|model| legs::Helper { model, first: false })
+            } else {
+                None
+            };
             match legs::search_legs(validity, budget, jobs, &leg_settings, lazy, stats, helper) {
                 Ok(paths) => {
                     for (&i, path) in missing.iter().zip(paths) {

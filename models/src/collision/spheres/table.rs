@@ -534,6 +534,19 @@ mod tests {
         }
     }
 
+    /// Table `k` of a test at `level`: over one to three of six joints (`1 + k % 3`), its
+    /// cells proven at random, densely for even `k` and sparsely for odd (a corner left out
+    /// would change the answer of some).
+    fn random_table(rng: &mut Rng, k: usize, level: u32) -> CellTable {
+        let n = 1 + k % 3;
+        let cells = 1usize << (level as usize * n);
+        let proven = (0..cells.div_ceil(64))
+            .map(|_| if k.is_multiple_of(2) { rng.next_u64() | rng.next_u64() } else { rng.next_u64() })
+            .collect();
+        let joints: Vec<usize> = (0..n).map(|d| (d * 2 + k) % 6).collect();
+        CellTable { joints, level, scale: (1u64 << level) as f64 / TAU, proven, corners: Vec::new() }
+    }
+
     /// The lanes' box proof answers as the row-by-row one, lane by lane: on tables of one to
     /// three joints with random proven cells, on values anywhere in a few turns, on cell edges,
     /// with steps that span one, two and more cells, and on values that are NaN or too large,
@@ -544,15 +557,8 @@ mod tests {
         let mut rng = Rng::new(31);
         let mut proven_lanes = 0;
         for k in 0..3000 {
-            let n = 1 + k % 3;
             let level = [2u32, 3, 5][k % 3];
-            let cells = 1usize << (level as usize * n);
-            // Dense and sparse tables (a corner left out would change the answer of some).
-            let proven = (0..cells.div_ceil(64))
-                .map(|_| if k % 2 == 0 { rng.next_u64() | rng.next_u64() } else { rng.next_u64() })
-                .collect();
-            let joints: Vec<usize> = (0..n).map(|d| (d * 2 + k) % 6).collect();
-            let mut t = CellTable { joints, level, scale: (1u64 << level) as f64 / TAU, proven, corners: Vec::new() };
+            let mut t = random_table(&mut rng, k, level);
             // Half the tables answer through their dilated cells.
             if k % 4 < 2 {
                 t.dilate();
@@ -594,14 +600,8 @@ mod tests {
         let mut rng = Rng::new(37);
         let mut proven_lanes = 0;
         for k in 0..3000 {
-            let n = 1 + k % 3;
             let level = [2u32, 3, 5, 8][k % 4];
-            let cells = 1usize << (level as usize * n);
-            let proven = (0..cells.div_ceil(64))
-                .map(|_| if k % 2 == 0 { rng.next_u64() | rng.next_u64() } else { rng.next_u64() })
-                .collect();
-            let joints: Vec<usize> = (0..n).map(|d| (d * 2 + k) % 6).collect();
-            let t = CellTable { joints, level, scale: (1u64 << level) as f64 / TAU, proven, corners: Vec::new() };
+            let t = random_table(&mut rng, k, level);
             let w = TAU / (1u64 << level) as f64;
             let mut cols = [[0.0; LANES]; 6];
             for (j, col) in cols.iter_mut().enumerate() {
