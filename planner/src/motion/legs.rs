@@ -4,7 +4,8 @@
 //! Each leg is a problem of its own, known before any is searched: one group's joints from one
 //! waypoint to the next, the other groups held. Its search draws from a random stream of its own
 //! ([`LegJob::seed`]), so a leg's path is the same whichever thread searches it and whichever leg
-//! was searched first: a plan with its legs side by side on two cores is the plan of one core.
+//! was searched first: a plan whose legs go two at a time is the plan of one core, unless the
+//! caller's race of a leg (see [`search_legs`]) gave that leg's path.
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
@@ -186,11 +187,7 @@ pub(super) fn search_legs<V: StateValidity>(
     let racers = if jobs.len() > 1 { helper.and_then(|h| racers::Racers::get().map(|r| (h, r))) } else { None };
     let Some((Helper { model, first: helper_first }, racers)) = racers else {
         for (job, slot) in jobs.iter().zip(found.iter_mut()) {
-            match search_leg(validity, budget, job, settings, lazy, stats) {
-                Outcome::Solved(p) => *slot = Some(p),
-                Outcome::OutOfTime { cause, .. } => return Err(cause),
-                Outcome::Infeasible => {}
-            }
+            keep(search_leg(validity, budget, job, settings, lazy, stats), slot)?;
         }
         return Ok(found);
     };
@@ -223,11 +220,7 @@ pub(super) fn search_legs<V: StateValidity>(
             break;
         }
         answered[k] = true;
-        match search_leg(validity, budget, &shared.jobs[k], settings, lazy, stats) {
-            Outcome::Solved(p) => found[k] = Some(p),
-            Outcome::OutOfTime { cause, .. } => return Err(cause),
-            Outcome::Infeasible => {}
-        }
+        keep(search_leg(validity, budget, &shared.jobs[k], settings, lazy, stats), &mut found[k])?;
     }
     // The racer thread's answers: those it sent; then the leg it is still searching, if any
     // (it searches one at a time), raced.
@@ -239,24 +232,27 @@ pub(super) fn search_legs<V: StateValidity>(
         let raced = LegJob { seed: raced_seed(job.seed), ..job.clone() };
         let deadline = settings.deadline.clone().with_race_flag(Arc::clone(&shared.sent[k]));
         let mut race_budget = Budget::new(&deadline);
-        match search_leg(validity, &mut race_budget, &raced, settings, lazy, stats) {
+        let mine = search_leg(validity, &mut race_budget, &raced, settings, lazy, stats);
+        let theirs_first = shared.sent[k].load(Ordering::Acquire);
+        match mine {
             // First: the racer thread's search stops (`stop` raised as this call returns).
-            Outcome::Solved(p) if !shared.sent[k].load(Ordering::Acquire) => {
+            Outcome::Solved(p) if !theirs_first => {
                 stats.legs_raced += 1;
                 found[k] = Some(p);
                 answered[k] = true;
             }
-            // The racer thread answered (or it is the only one left searching): its answer.
-            Outcome::Solved(_) | Outcome::Infeasible => {
+            Outcome::OutOfTime { cause, .. } if !theirs_first => return Err(cause),
+            // The racer thread answered first, or this search gave up while it goes on: its
+            // answer, unless it found no path where this search did.
+            mine => {
                 let Ok(done) = receiver.recv() else { break };
-                take(done, &mut found, &mut answered, validity, stats)?;
-            }
-            Outcome::OutOfTime { cause, .. } => {
-                if !shared.sent[k].load(Ordering::Acquire) {
-                    return Err(cause);
+                let theirs = take(done, &mut found, &mut answered, validity, stats);
+                if let (None, Outcome::Solved(p)) = (&found[k], mine) {
+                    stats.legs_raced += 1;
+                    found[k] = Some(p);
+                    continue;
                 }
-                let Ok(done) = receiver.recv() else { break };
-                take(done, &mut found, &mut answered, validity, stats)?;
+                theirs?;
             }
         }
     }
@@ -274,15 +270,19 @@ fn take<V: StateValidity>(
     let (k, outcome, counted) = done;
     counted.add_to(validity, stats);
     answered[k] = true;
-    match outcome.unwrap_or_else(|panic| std::panic::resume_unwind(panic)) {
-        Outcome::Solved(p) => {
-            stats.legs_on_racer += 1;
-            found[k] = Some(p);
-            Ok(())
-        }
-        Outcome::OutOfTime { cause, .. } => Err(cause),
-        Outcome::Infeasible => Ok(()),
+    let outcome = outcome.unwrap_or_else(|panic| std::panic::resume_unwind(panic));
+    stats.legs_on_racer += usize::from(matches!(outcome, Outcome::Solved(_)));
+    keep(outcome, &mut found[k])
+}
+
+/// A leg's search's outcome kept: its path in `slot` when solved; out of time, the cause.
+fn keep(outcome: Outcome<Path, ()>, slot: &mut Option<Path>) -> Result<(), Interrupt> {
+    match outcome {
+        Outcome::Solved(p) => *slot = Some(p),
+        Outcome::OutOfTime { cause, .. } => return Err(cause),
+        Outcome::Infeasible => {}
     }
+    Ok(())
 }
 
 /// The racer thread's side of [`search_legs`]: the next job not yet taken, until none is left.

@@ -270,7 +270,8 @@ pub struct MotionSettings {
     /// searches its legs two at a time, one on the calling thread and one on a racer thread,
     /// instead of racing another seed of the whole plan (a racer is still handed over when the
     /// plan falls back to the search over every joint, or only one group moves). Each leg
-    /// draws from a random stream of its own, so the path is the one of a single thread. Not
+    /// draws from a random stream of its own, so the path is the one of a single thread unless
+    /// the caller, out of legs, raced the racer thread's leg from another stream and won. Not
     /// with an expansion or check budget (their counts would depend on the threads). On by
     /// default.
     pub parallel_legs: bool,
@@ -875,7 +876,8 @@ fn by_groups<V: StateValidity>(
     // A leg that runs out of samples is most often stuck rather than impossible: after the other
     // order's turn, it is searched again with new trees (a stream of its own for the round),
     // up to `GROUP_LEG_ROUNDS` times, the legs found kept. Every leg an order lacks is searched
-    // in its turn, two at a time with `parallel` (the paths are the same either way).
+    // in its turn, two at a time with `parallel` (each leg's path that of one thread unless
+    // raced, see `legs::search_legs`).
     for round in 0..GROUP_LEG_ROUNDS {
         'orders: for (o, (order, state)) in orders.iter().zip(found.iter_mut()).enumerate() {
             let Some((points, checked, legs)) = state else { continue };

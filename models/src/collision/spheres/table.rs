@@ -547,6 +547,18 @@ mod tests {
         CellTable { joints, level, scale: (1u64 << level) as f64 / TAU, proven, corners: Vec::new() }
     }
 
+    /// Six joints' values over the lanes, lane `i` of joint `j` drawn by `value(rng, i + j)`
+    /// (lane by lane within a joint, joint after joint).
+    fn lane_columns(rng: &mut Rng, mut value: impl FnMut(&mut Rng, usize) -> f64) -> [[f64; super::LANES]; 6] {
+        let mut cols = [[0.0; super::LANES]; 6];
+        for (j, col) in cols.iter_mut().enumerate() {
+            for (i, v) in col.iter_mut().enumerate() {
+                *v = value(rng, i + j);
+            }
+        }
+        cols
+    }
+
     /// The lanes' box proof answers as the row-by-row one, lane by lane: on tables of one to
     /// three joints with random proven cells, on values anywhere in a few turns, on cell edges,
     /// with steps that span one, two and more cells, and on values that are NaN or too large,
@@ -564,17 +576,12 @@ mod tests {
                 t.dilate();
             }
             let w = TAU / (1u64 << level) as f64;
-            let mut cols = [[0.0; LANES]; 6];
-            for (j, col) in cols.iter_mut().enumerate() {
-                for (i, v) in col.iter_mut().enumerate() {
-                    *v = match (i + j + k) % 7 {
-                        0 => (rng.below(40) as f64 - 20.0) * w,
-                        1 => f64::NAN,
-                        2 => 1500.0,
-                        _ => rng.range(-10.0, 10.0),
-                    };
-                }
-            }
+            let cols = lane_columns(&mut rng, |rng, at| match (at + k) % 7 {
+                0 => (rng.below(40) as f64 - 20.0) * w,
+                1 => f64::NAN,
+                2 => 1500.0,
+                _ => rng.range(-10.0, 10.0),
+            });
             let step: Vec<f64> = (0..6).map(|j| [0.0, 0.3 * w, 0.9 * w, 2.5 * w, 0.6 * w][(j + k / 3) % 5]).collect();
             let lanes = rng.next_u64() as u32 & 0xff;
             let by_lanes = t.proves_box_lanes(&cols, &step, lanes);
@@ -603,18 +610,13 @@ mod tests {
             let level = [2u32, 3, 5, 8][k % 4];
             let t = random_table(&mut rng, k, level);
             let w = TAU / (1u64 << level) as f64;
-            let mut cols = [[0.0; LANES]; 6];
-            for (j, col) in cols.iter_mut().enumerate() {
-                for (i, v) in col.iter_mut().enumerate() {
-                    *v = match (i + j + k) % 9 {
-                        0 => (rng.below(40) as f64 - 20.0) * w,
-                        1 => f64::NAN,
-                        2 => [1500.0, -1500.0, f64::INFINITY, 999.0][rng.below(4)],
-                        3 => rng.range(-900.0, 900.0),
-                        _ => rng.range(-10.0, 10.0),
-                    };
-                }
-            }
+            let cols = lane_columns(&mut rng, |rng, at| match (at + k) % 9 {
+                0 => (rng.below(40) as f64 - 20.0) * w,
+                1 => f64::NAN,
+                2 => [1500.0, -1500.0, f64::INFINITY, 999.0][rng.below(4)],
+                3 => rng.range(-900.0, 900.0),
+                _ => rng.range(-10.0, 10.0),
+            });
             let lanes = rng.next_u64() as u32 & 0xff;
             let by_lanes = t.proves_lanes(&cols, lanes);
             for i in 0..LANES {
