@@ -268,6 +268,9 @@ fn plan_one_moveit(
         Err(e @ embodied_planner::moveit::MoveitError::Parse { .. }) => return Err(from_moveit(e)),
         Err(e) => return Ok(failed(name, None, e.to_string())),
     };
+    for w in &problem.resolved.warnings {
+        eprintln!("{w}");
+    }
     let seconds = deadline_ms
         .map(|ms| ms / 1000.0)
         .unwrap_or_else(|| req.allowed_planning_time.filter(|t| t.is_finite() && *t > 0.0).unwrap_or(5.0));

@@ -86,6 +86,9 @@ pub fn plan_moveit(
     let scene = load_scene(&args.scene).map_err(from_moveit)?;
     let request = load_request(&args.request).map_err(from_moveit)?;
     let problem = moveit_problem(&robot, &srdf, &scene, &request).map_err(from_moveit)?;
+    for w in &problem.resolved.warnings {
+        eprintln!("{w}");
+    }
     let seconds = match args.deadline_ms {
         Some(ms) if ms.is_finite() && ms >= 0.0 => ms / 1000.0,
         Some(ms) => return Err(AppError::Usage(format!("--deadline-ms must be a non-negative number, got {ms}"))),

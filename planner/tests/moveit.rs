@@ -213,3 +213,47 @@ fn errors_carry_file_line_column_and_what_was_expected() {
     assert_eq!((line, column), (4, 9));
     assert!(message.contains("constraint_region"), "{message}");
 }
+
+/// A joint the start state names and the robot does not have (MotionBenchMaker's Fetch requests
+/// name the wheels, which VAMP's spherized Fetch drops) is ignored with a warning at the name,
+/// while the group's joints keep the values given; with a group joint left without a value, the
+/// unknown name is taken for that joint misspelt: an error at the name.
+#[test]
+fn start_joints_the_robot_lacks_are_ignored_with_a_warning_unless_a_group_joint_has_no_value() {
+    let (robot, srdf_path) = ur5();
+    let srdf = load_srdf(&srdf_path).expect("srdf");
+    let arm =
+        ["shoulder_pan_joint", "shoulder_lift_joint", "elbow_joint", "wrist_1_joint", "wrist_2_joint", "wrist_3_joint"];
+    let goal: String =
+        arm.iter().map(|j| format!("      - {{joint_name: {j}, position: 0.5}}\n")).collect::<Vec<_>>().concat();
+    let request_with = |names: &[&str]| {
+        let values = vec!["0.25"; names.len()].join(", ");
+        format!(
+            "group_name: manipulator\ngoal_constraints:\n  - joint_constraints:\n{goal}start_state:\n  joint_state:\n    name: [{}]\n    position: [{values}]\n",
+            names.join(", ")
+        )
+    };
+    let mut names = vec!["l_wheel_joint"];
+    names.extend(arm);
+    names.push("r_wheel_joint");
+    let request = parse_request(&request_with(&names), Path::new("wheels.yaml")).expect("parses");
+    let resolved = request.resolve(&robot, &srdf, None).expect("unknown start joints are ignored");
+    assert_eq!(resolved.start, vec![0.25; 6]);
+    assert_eq!(resolved.joint_names, arm);
+    let warned: Vec<String> = resolved.warnings.iter().map(|w| w.to_string()).collect();
+    assert_eq!(warned.len(), 2, "{warned:?}");
+    assert!(warned[0].starts_with("wheels.yaml:12:12: warning: start state names joint `l_wheel_joint`"), "{warned:?}");
+    assert!(warned[0].ends_with("does not have; ignored"), "{warned:?}");
+    assert!(warned[1].contains("`r_wheel_joint`"), "{warned:?}");
+
+    // Every name known: no warning.
+    let request = parse_request(&request_with(&arm), Path::new("arm.yaml")).expect("parses");
+    assert!(request.resolve(&robot, &srdf, None).expect("resolves").warnings.is_empty());
+
+    // `elbow_joint` misspelt: the group's joint has no value, so the name is an error.
+    let typo: Vec<&str> = arm.iter().map(|&j| if j == "elbow_joint" { "elbow_jiont" } else { j }).collect();
+    let request = parse_request(&request_with(&typo), Path::new("typo.yaml")).expect("parses");
+    let (file, line, column, message) = parse_error(request.resolve(&robot, &srdf, None).expect_err("a typo"));
+    assert_eq!((file.as_path(), line, column), (Path::new("typo.yaml"), 12, 53), "{message}");
+    assert!(message.contains("`elbow_jiont`") && message.contains("no value for `elbow_joint`"), "{message}");
+}

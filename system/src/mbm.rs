@@ -18,7 +18,7 @@ use std::time::{Duration, Instant};
 use embodied_models::collision::{disable_always_colliding, disable_never_colliding};
 use embodied_models::srdf::{Srdf, load_srdf};
 use embodied_models::urdf::load_urdf;
-use embodied_models::{CollisionModel, ConfigSpace, Robot};
+use embodied_models::{CollisionModel, ConfigSpace, Robot, Warning};
 use embodied_planner::PlanError;
 use embodied_planner::deadline::Deadline;
 use embodied_planner::motion::{CERTIFY_TOLERANCE, EdgeCheck, Goal, MotionSettings, PlannerKind, Sampler, plan_motion};
@@ -624,7 +624,41 @@ pub fn sample_problems(args: &MbmArgs, n: usize) -> Result<Vec<MbmProblem>, AppE
     Ok(out)
 }
 
-fn run_problem(args: &MbmArgs, loaded: &Loaded, p: &ProblemFiles, run: u32) -> Result<ProblemResult, AppError> {
+/// Warnings of the problems' files, each message written to standard error once (with the
+/// first file and place it came from), then how many more problems gave it.
+#[derive(Default)]
+struct Warned {
+    /// Each message, in the order first seen, with how many times it came.
+    seen: Vec<(String, usize)>,
+}
+
+impl Warned {
+    fn note(&mut self, warnings: &[Warning]) {
+        for w in warnings {
+            match self.seen.iter_mut().find(|(m, _)| *m == w.message) {
+                Some((_, n)) => *n += 1,
+                None => {
+                    eprintln!("{w}");
+                    self.seen.push((w.message.clone(), 1));
+                }
+            }
+        }
+    }
+
+    fn finish(&self) {
+        for (message, n) in self.seen.iter().filter(|(_, n)| *n > 1) {
+            eprintln!("warning: {} more problems: {message}", n - 1);
+        }
+    }
+}
+
+fn run_problem(
+    args: &MbmArgs,
+    loaded: &Loaded,
+    p: &ProblemFiles,
+    run: u32,
+    warned: &mut Warned,
+) -> Result<ProblemResult, AppError> {
     let scene = load_scene(&p.scene).map_err(from_moveit)?;
     let request = load_request(&p.request).map_err(from_moveit)?;
     scene.check_frames(&loaded.robot).map_err(from_moveit)?;
@@ -632,6 +666,9 @@ fn run_problem(args: &MbmArgs, loaded: &Loaded, p: &ProblemFiles, run: u32) -> R
     let mut robot = loaded.robot.clone();
     scene.apply_allowed_collisions(&mut robot);
     let resolved = request.resolve(&robot, &loaded.srdf, scene.robot_state.as_ref()).map_err(from_moveit)?;
+    if run == 0 {
+        warned.note(&resolved.warnings);
+    }
     let arm = resolved.planning_robot(&robot)?;
     let model = CollisionModel::new(&arm, scene.environment());
     let mut result = ProblemResult {
@@ -766,9 +803,10 @@ pub fn run_mbm_to(
     let total = mine.len() * args.runs;
     on_progress(0, total);
     let mut results = Vec::with_capacity(total);
+    let mut warned = Warned::default();
     for (i, p) in mine {
         for run in 0..args.runs {
-            let result = run_problem(args, &loaded, p, run as u32)?;
+            let result = run_problem(args, &loaded, p, run as u32, &mut warned)?;
             if let Some(out) = jsonl.as_deref_mut() {
                 out.line(&with_ordinal(i, &result)?)?;
             }
@@ -776,6 +814,7 @@ pub fn run_mbm_to(
             on_progress(results.len(), total);
         }
     }
+    warned.finish();
     let shard = (args.shard != Shard::ALL).then_some(args.shard);
     Ok(assemble(crate::generator(), shard, settings, results))
 }

@@ -41,7 +41,7 @@ use nalgebra::{Isometry3, Point3, Quaternion, Translation3, UnitQuaternion, Vect
 
 use super::srdf::Srdf;
 use crate::collision::{Environment, Obstacle};
-use crate::error::ModelError;
+use crate::error::{ModelError, Warning};
 use crate::geometry::Shape;
 use crate::robot::Robot;
 use saphyr::{ScalarOwned, YamlDataOwned};
@@ -208,6 +208,8 @@ pub struct ResolvedRequest {
     pub goals: Vec<ResolvedGoal>,
     /// Every degree of freedom of the robot outside the group, with the value it keeps.
     pub frozen: Vec<(String, f64)>,
+    /// What was ignored: joints the start state names that the robot does not have.
+    pub warnings: Vec<Warning>,
 }
 
 /// A goal alternative of a request made concrete.
@@ -603,21 +605,49 @@ impl MotionRequest {
                 format!("group `{}` has no movable joints in robot `{}`", self.group_name, robot.name()),
             ));
         }
-        // Every joint the request names must exist in the robot (fixed joints are accepted: a
-        // spherized model may have fixed the gripper joints a full model moves).
-        for (name, at) in self.start.names.iter().zip(&self.start.locations) {
-            if robot.joint_index(name).is_none() {
-                return Err(self.err_at(
-                    *at,
-                    format!("start state names joint `{name}`, which robot `{}` does not have", robot.name()),
-                ));
-            }
-        }
+        // A joint the start state names and the robot does not have is ignored with a warning
+        // (MotionBenchMaker's requests list every joint of the full model, which a spherized
+        // model may have dropped: the Fetch's wheels), as long as every joint of the group still
+        // has a value from the request or the scene. Otherwise the unknown name is most likely
+        // that joint misspelt: an error at the name. (Fixed joints are known joints: a spherized
+        // model may have fixed the gripper joints a full model moves.)
+        let unknown: Vec<(&String, Location)> = self
+            .start
+            .names
+            .iter()
+            .zip(&self.start.locations)
+            .filter(|(name, _)| robot.joint_index(name).is_none())
+            .map(|(name, at)| (name, *at))
+            .collect();
         let names = robot.joint_names();
         let home = robot.home();
-        let value_of = |i: usize, name: &str| -> f64 {
-            self.start.get(name).or_else(|| scene_state.and_then(|s| s.get(name))).unwrap_or(home[i])
-        };
+        let given = |name: &str| self.start.get(name).or_else(|| scene_state.and_then(|s| s.get(name)));
+        if let Some(&(name, at)) = unknown.first()
+            && let Some(missing) = names.iter().find(|n| group_joints.contains(n) && given(n).is_none())
+        {
+            return Err(self.err_at(
+                at,
+                format!(
+                    "start state names joint `{name}`, which robot `{}` does not have, and gives no value for \
+                         `{missing}` of group `{}`",
+                    robot.name(),
+                    self.group_name
+                ),
+            ));
+        }
+        let warnings = unknown
+            .iter()
+            .map(|&(name, at)| Warning {
+                file: self.file.clone(),
+                line: u32::try_from(at.line).unwrap_or(u32::MAX),
+                column: u32::try_from(at.column).unwrap_or(u32::MAX),
+                message: format!(
+                    "start state names joint `{name}`, which robot `{}` does not have; ignored",
+                    robot.name()
+                ),
+            })
+            .collect();
+        let value_of = |i: usize, name: &str| -> f64 { given(name).unwrap_or(home[i]) };
         let mut joint_names = Vec::new();
         let mut start = Vec::new();
         let mut frozen = Vec::new();
@@ -637,7 +667,7 @@ impl MotionRequest {
             Some(ResolvedGoal::Configuration(q)) => q.clone(),
             _ => Vec::new(),
         };
-        Ok(ResolvedRequest { joint_names, start, goal, goals, frozen })
+        Ok(ResolvedRequest { joint_names, start, goal, goals, frozen, warnings })
     }
 }
 
