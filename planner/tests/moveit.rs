@@ -257,3 +257,45 @@ fn start_joints_the_robot_lacks_are_ignored_with_a_warning_unless_a_group_joint_
     assert_eq!((file.as_path(), line, column), (Path::new("typo.yaml"), 12, 53), "{message}");
     assert!(message.contains("`elbow_jiont`") && message.contains("no value for `elbow_joint`"), "{message}");
 }
+
+/// A start or goal value past a joint's limit by no more than the limit's rounding
+/// (`LIMIT_ROUNDING`), or than the goal's tolerance that side, is taken at the limit with a
+/// warning at the value's name; one farther is kept, so the problem stays invalid.
+#[test]
+fn values_past_a_limit_by_its_rounding_or_the_tolerance_are_taken_at_the_limit() {
+    let (robot, srdf_path) = ur5();
+    let srdf = load_srdf(&srdf_path).expect("srdf");
+    let upper = robot.limits()[0].upper;
+    let request = |pan_goal: f64, below: f64, pan_start: f64| {
+        format!(
+            "group_name: manipulator\ngoal_constraints:\n  - joint_constraints:\n      - {{joint_name: shoulder_pan_joint, position: {pan_goal}, tolerance_below: {below}}}\n{}start_state:\n  joint_state:\n    name: [shoulder_pan_joint]\n    position: [{pan_start}]\n",
+            ["shoulder_lift_joint", "elbow_joint", "wrist_1_joint", "wrist_2_joint", "wrist_3_joint"]
+                .iter()
+                .map(|j| format!("      - {{joint_name: {j}, position: 0.5}}\n"))
+                .collect::<String>()
+        )
+    };
+    let resolve = |text: String| {
+        parse_request(&text, Path::new("limits.yaml")).expect("parses").resolve(&robot, &srdf, None).expect("resolves")
+    };
+    // Past by half the rounding: at the limit, both ends, one warning each.
+    let past = upper + 0.5 * embodied_planner::moveit::LIMIT_ROUNDING;
+    let r = resolve(request(past, 0.0, -past));
+    assert_eq!((r.goal[0], r.start[0]), (upper, -upper));
+    let warned: Vec<String> = r.warnings.iter().map(|w| w.to_string()).collect();
+    assert_eq!(warned.len(), 2, "{warned:?}");
+    assert!(warned[0].starts_with("limits.yaml:12:12: warning: start joint `shoulder_pan_joint`"), "{warned:?}");
+    assert!(warned[1].starts_with("limits.yaml:4:22: warning: goal joint `shoulder_pan_joint`"), "{warned:?}");
+    assert!(robot.check_configuration(&[r.goal[0], 0.5, 0.5, 0.5, 0.5, 0.5]).is_ok());
+    // Past by more: kept, no warning, and out of the limits.
+    let r = resolve(request(upper + 1e-3, 0.0, 0.0));
+    assert_eq!(r.goal[0], upper + 1e-3);
+    assert!(r.warnings.is_empty());
+    assert!(robot.check_configuration(&r.goal).is_err());
+    // The goal's tolerance below reaches back within the limit: at the limit.
+    let r = resolve(request(upper + 1e-3, 2e-3, 0.0));
+    assert_eq!((r.goal[0], r.warnings.len()), (upper, 1));
+    // Within the limits: untouched.
+    let r = resolve(request(upper - 1e-3, 0.0, 0.0));
+    assert_eq!((r.goal[0], r.warnings.len()), (upper - 1e-3, 0));
+}

@@ -47,6 +47,11 @@ use crate::robot::Robot;
 use saphyr::{ScalarOwned, YamlDataOwned};
 
 pub use super::yaml::Location;
+
+/// How far past a joint's position limit a request's start or goal value may lie and be taken at
+/// the limit (rad or m): a limit written with six significant digits, such as 3.14159 for pi in
+/// VAMP's spherized Fetch, is this close to the value it stands for.
+pub const LIMIT_ROUNDING: f64 = 1e-5;
 use super::yaml::{Doc, Node, YamlError, describe, is_null};
 
 /// What can go wrong reading a MoveIt scene or request.
@@ -460,16 +465,52 @@ impl MotionRequest {
         MoveitError::Parse { file: self.file.clone(), line: at.line, column: at.column, message }
     }
 
+    /// `value` of degree of freedom `d` of `robot`, taken at its limit when past it by at most
+    /// [`LIMIT_ROUNDING`] or by at most the constraint's `tolerance` (below, above) that side (the
+    /// nearest value MoveIt's joint-constraint sampler would draw): then with a warning at `at`.
+    /// Any other value is kept as it is (a value past a limit makes the problem invalid).
+    fn onto_limits(
+        &self,
+        robot: &Robot,
+        d: usize,
+        value: f64,
+        (below, above): (f64, f64),
+        (what, at): (&str, Location),
+        warnings: &mut Vec<Warning>,
+    ) -> f64 {
+        let joint = robot.dof_joint(d);
+        let (lo, hi) = (joint.limits.lower, joint.limits.upper);
+        let onto = if value > hi && value - hi <= LIMIT_ROUNDING.max(below) {
+            hi
+        } else if value < lo && lo - value <= LIMIT_ROUNDING.max(above) {
+            lo
+        } else {
+            return value;
+        };
+        warnings.push(Warning {
+            file: self.file.clone(),
+            line: u32::try_from(at.line).unwrap_or(u32::MAX),
+            column: u32::try_from(at.column).unwrap_or(u32::MAX),
+            message: format!(
+                "{what} joint `{}` value {value} is past its limit {onto} by {:.3e}; taken at the limit",
+                joint.name,
+                (value - onto).abs()
+            ),
+        });
+        onto
+    }
+
     /// Entry `k` of the goal constraints over the group's joints: a configuration when it
     /// constrains joints only (every joint of the group), else a [`PoseGoal`] in the world frame.
+    /// Joint values past a limit by at most [`LIMIT_ROUNDING`] are taken at the limit, with a
+    /// warning in `warnings`.
     fn resolve_goal(
         &self,
         robot: &Robot,
         k: usize,
         entry: &GoalConstraints,
-        joint_names: &[String],
-        start: &[f64],
-        frozen: &[(String, f64)],
+        (joint_names, start, frozen): (&[String], &[f64], &[(String, f64)]),
+        warnings: &mut Vec<Warning>,
     ) -> Result<ResolvedGoal, MoveitError> {
         for g in &entry.joints {
             if !joint_names.contains(&g.joint) {
@@ -488,7 +529,15 @@ impl MotionRequest {
             let mut goal = Vec::with_capacity(joint_names.len());
             for name in joint_names {
                 match entry.joints.iter().find(|g| &g.joint == name) {
-                    Some(g) => goal.push(g.position),
+                    Some(g) => {
+                        let Some(d) = robot.joint_names().iter().position(|j| j == name) else {
+                            return Err(
+                                self.err_at(g.location, format!("robot `{}` has no joint `{name}`", robot.name()))
+                            );
+                        };
+                        let tolerance = (g.tolerance_below, g.tolerance_above);
+                        goal.push(self.onto_limits(robot, d, g.position, tolerance, ("goal", g.location), warnings));
+                    }
                     None => {
                         return Err(self.err_at(
                             entry.location,
@@ -648,20 +697,27 @@ impl MotionRequest {
             })
             .collect();
         let value_of = |i: usize, name: &str| -> f64 { given(name).unwrap_or(home[i]) };
+        let mut warnings = warnings;
         let mut joint_names = Vec::new();
         let mut start = Vec::new();
         let mut frozen = Vec::new();
         for (i, name) in names.iter().enumerate() {
             if group_joints.contains(name) {
+                let at = self
+                    .start
+                    .names
+                    .iter()
+                    .position(|n| n == name)
+                    .map_or(self.group_location, |k| self.start.locations[k]);
                 joint_names.push(name.clone());
-                start.push(value_of(i, name));
+                start.push(self.onto_limits(robot, i, value_of(i, name), (0.0, 0.0), ("start", at), &mut warnings));
             } else {
                 frozen.push((name.clone(), value_of(i, name)));
             }
         }
         let mut goals = Vec::with_capacity(self.goals.len());
         for (k, entry) in self.goals.iter().enumerate() {
-            goals.push(self.resolve_goal(robot, k, entry, &joint_names, &start, &frozen)?);
+            goals.push(self.resolve_goal(robot, k, entry, (&joint_names, &start, &frozen), &mut warnings)?);
         }
         let goal = match goals.first() {
             Some(ResolvedGoal::Configuration(q)) => q.clone(),
