@@ -60,13 +60,17 @@ struct Tree {
     kd: Option<KdIndex>,
 }
 
-/// The k-d tree of a [`Tree`]: node 0 is its root.
+/// The k-d tree of a [`Tree`]: node 0 is its root until the first rebuild ([`KdIndex::rebuild`]).
 struct KdIndex {
     /// Which joints wrap (split on the angle in [-pi, pi)).
     wraps: Vec<bool>,
     /// Whether any does.
     any_wrap: bool,
     nodes: Vec<KdNode>,
+    /// The root node.
+    root: u32,
+    /// The tree's size at which it is next rebuilt balanced.
+    rebuild_at: usize,
     /// Search stack (node, lower bound of the squared distance), reused between queries.
     stack: Vec<(u32, f64)>,
 }
@@ -83,6 +87,57 @@ impl KdIndex {
     /// The coordinate joint `s` splits on: its angle in [-pi, pi) when it wraps.
     fn key(&self, s: usize, x: f64) -> f64 {
         if self.wraps[s] { wrap_angle(x) } else { x }
+    }
+
+    /// The tree rebuilt over the living nodes of `coords` (`dof` joints each), balanced: each
+    /// cell split at its median node along the joint (its key) whose nodes spread widest. Nodes
+    /// are inserted one by one as they come (each below the leaf its descent ends at, the
+    /// split joint cycling), which leaves the tree as deep as RRT-Connect's chains of steps are
+    /// long: on a hard Fetch cage problem (31,789 samples) the queries took 76% of the planning
+    /// instructions. Rebuilt each time the tree doubles, it costs O(log n) per node.
+    fn rebuild(&mut self, coords: &[f64], alive: &[bool], dof: usize) {
+        let mut order: Vec<u32> = (0..alive.len() as u32).filter(|&i| alive[i as usize]).collect();
+        self.root = self.build(&mut order, coords, dof);
+    }
+
+    /// The balanced subtree of the nodes `idx`, returning its root (`NONE` when empty). Its
+    /// left side holds the nodes whose key along the split is below the root's, its right side
+    /// the others (the descents' rule), whatever ties there are.
+    fn build(&mut self, idx: &mut [u32], coords: &[f64], dof: usize) -> u32 {
+        if idx.is_empty() {
+            return NONE;
+        }
+        let key = |i: u32, s: usize| self.key(s, coords[i as usize * dof + s]);
+        let mut split = 0;
+        let mut widest = f64::NEG_INFINITY;
+        for s in 0..dof {
+            let (lo, hi) = idx.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &i| {
+                let k = key(i, s);
+                (lo.min(k), hi.max(k))
+            });
+            if hi - lo > widest {
+                (widest, split) = (hi - lo, s);
+            }
+        }
+        let mid = idx.len() / 2;
+        idx.select_nth_unstable_by(mid, |&a, &b| key(a, split).total_cmp(&key(b, split)));
+        // The nodes before `mid` are at or below the median's key: those equal to it go after
+        // the ones below, and the first of them is the root.
+        let pivot = key(idx[mid], split);
+        let mut below = 0;
+        for k in 0..mid {
+            if key(idx[k], split) < pivot {
+                idx.swap(below, k);
+                below += 1;
+            }
+        }
+        let root = idx[below];
+        let (left, rest) = idx.split_at_mut(below);
+        let right = &mut rest[1..];
+        let l = self.build(left, coords, dof);
+        let r = self.build(right, coords, dof);
+        self.nodes[root as usize] = KdNode { child: [l, r], split: split as u32 };
+        root
     }
 
     /// The living node of `coords` nearest to `q` as (squared distance, index), ties to the
@@ -105,7 +160,7 @@ impl KdIndex {
         let q = &q[..dof];
         // The scan's answer when no living node is nearer than infinity.
         let mut best = (f64::INFINITY, 0);
-        if coords.is_empty() {
+        if coords.is_empty() || self.root == NONE {
             return best;
         }
         // Branch and bound over the cells of the tree; a cell's bound is its largest gap to `q`
@@ -113,7 +168,7 @@ impl KdIndex {
         // only while their bound can still tie the best.
         let stack = &mut self.stack;
         stack.clear();
-        let (mut n, mut bound) = (0usize, 0.0f64);
+        let (mut n, mut bound) = (self.root as usize, 0.0f64);
         loop {
             loop {
                 let p = &coords[n * dof..(n + 1) * dof];
@@ -289,6 +344,8 @@ impl Tree {
                 wraps: (0..dof).map(|i| space.wraps(i)).collect(),
                 any_wrap: (0..dof).any(|i| space.wraps(i)),
                 nodes: Vec::with_capacity(NODES),
+                root: 0,
+                rebuild_at: SCAN_BELOW,
                 stack: Vec::with_capacity(NODES),
             }),
         }
@@ -303,8 +360,11 @@ impl Tree {
         let i = self.len();
         if let Some(kd) = &mut self.kd {
             let mut split = 0;
-            if i > 0 {
-                let mut n = 0usize;
+            if kd.root == NONE {
+                // Every node was cut when the tree was last rebuilt.
+                kd.root = i as u32;
+            } else if i > 0 {
+                let mut n = kd.root as usize;
                 loop {
                     let s = kd.nodes[n].split as usize;
                     let go_right = kd.key(s, q[s]) >= kd.key(s, self.coords[n * self.dof + s]);
@@ -331,6 +391,12 @@ impl Tree {
         self.certified.push(certified);
         self.alive.push(true);
         self.radius.push(f64::INFINITY);
+        if let Some(kd) = &mut self.kd
+            && i + 1 >= kd.rebuild_at
+        {
+            kd.rebuild(&self.coords, &self.alive, self.dof);
+            kd.rebuild_at = 2 * (i + 1);
+        }
         i
     }
     /// Cut node `i` off with its descendants (children are pushed after their parents).
@@ -710,6 +776,37 @@ mod tests {
         kd_tree_matches_scan(vec![true; 3], PI);
     }
 
+    /// A tree rebuilt when most of its nodes are cut (they are left out) answers as the scan.
+    #[test]
+    fn kd_tree_rebuilt_over_cut_nodes_answers_what_the_scan_does() {
+        let space = ConfigSpace::from_wraps(vec![false; 3]);
+        let mut rng = Rng::new(3);
+        let (mut scan, mut kd) = (Tree::new(&space, false), Tree::new(&space, true));
+        let mut q = vec![0.0; 3];
+        for i in 0..600usize {
+            for v in q.iter_mut() {
+                *v = rng.range(-3.0, 3.0);
+            }
+            let parent = if i == 0 || i == 200 { ROOT } else { i as u32 - 1 };
+            scan.push(&q, parent, false);
+            kd.push(&q, parent, false);
+            // Everything so far (a chain from node 0) is cut; the next rebuild, at 256 nodes,
+            // takes only the new chain from node 200 (until then the cut root stays the root).
+            if i == 199 {
+                scan.cut(0);
+                kd.cut(0);
+            }
+            if i >= 150 {
+                let query: Vec<f64> = (0..3).map(|_| rng.range(-4.0, 4.0)).collect();
+                assert_eq!(
+                    scan.nearest_with_distance(&space, &query),
+                    kd.nearest_with_distance(&space, &query),
+                    "after {i}"
+                );
+            }
+        }
+    }
+
     /// Random trees (clustered, collinear, duplicate and seam points; cut subtrees): the k-d
     /// tree, and where no joint wraps the block scan, give the scan's (distance, index) for
     /// every query.
@@ -731,6 +828,12 @@ mod tests {
             // A copy of an earlier node now and then: equal distances, to the lower index.
             if i % 11 == 5 {
                 q.copy_from_slice(scan.node(rng.below(i)));
+            }
+            // Runs of steps along a line, as RRT-Connect's connections lay them.
+            if i % 100 >= 60 && i % 100 < 90 {
+                for (v, &x) in q.iter_mut().zip(scan.node(i - 1)) {
+                    *v = x + 0.05;
+                }
             }
             let parent = if i == 0 { ROOT } else { rng.below(i) as u32 };
             scan.push(&q, parent, false);
