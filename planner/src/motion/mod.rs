@@ -7,6 +7,7 @@
 //! segment checks use the robot's [`embodied_models::ConfigSpace`], so continuous joints take
 //! the short way round (Polycrank going from 3.0 to -3.0 rad moves 0.28 rad, across +-pi).
 
+mod buckets;
 mod legs;
 mod racers;
 pub(crate) mod rrt_connect;

@@ -14,6 +14,7 @@ use std::f64::consts::PI;
 use embodied_models::{ConfigSpace, Rng, wrap_angle};
 
 use super::MotionSettings;
+use super::buckets::Buckets;
 use super::sampler::Draw;
 use super::shortcut::{OutOfTime, farthest_visible};
 use crate::deadline::Budget;
@@ -58,6 +59,9 @@ struct Tree {
     /// k-d tree children (`NONE` when absent) and split joint of each node; empty when the
     /// tree answers by linear scan.
     kd: Option<KdIndex>,
+    /// Where no joint wraps, the k-d tree of buckets answering from [`SCAN_BELOW`] nodes
+    /// (`kd` is then `None`).
+    buckets: Option<Buckets>,
 }
 
 /// The k-d tree of a [`Tree`]: node 0 is its root until the first rebuild ([`KdIndex::rebuild`]).
@@ -245,7 +249,7 @@ fn dist2_below(p: &[f64], q: &[f64], limit: f64) -> f64 {
 const SCAN_BELOW: usize = 256;
 
 /// Nodes per block of [`Tree::blocks`].
-const BLOCK: usize = 4;
+pub(crate) const BLOCK: usize = 4;
 
 /// The living node of `blocks` (see [`Tree::blocks`]; `q.len()` joints) nearest to `q` as
 /// (squared distance, index), ties to the lowest index: exactly [`KdIndex::nearest`]'s answer
@@ -342,7 +346,8 @@ impl Tree {
             alive: Vec::with_capacity(NODES),
             blocks: Vec::with_capacity(NODES / BLOCK * dof),
             radius: Vec::with_capacity(NODES),
-            kd: (kd && dof > 0).then(|| KdIndex {
+            buckets: (kd && dof > 0 && !(0..dof).any(|i| space.wraps(i))).then(|| Buckets::new(dof)),
+            kd: (kd && dof > 0 && (0..dof).any(|i| space.wraps(i))).then(|| KdIndex {
                 wraps: (0..dof).map(|i| space.wraps(i)).collect(),
                 any_wrap: (0..dof).any(|i| space.wraps(i)),
                 nodes: Vec::with_capacity(NODES),
@@ -393,6 +398,12 @@ impl Tree {
         self.certified.push(certified);
         self.alive.push(true);
         self.radius.push(f64::INFINITY);
+        if let Some(b) = &mut self.buckets
+            && i + 1 >= SCAN_BELOW
+            && b.stale(i + 1)
+        {
+            b.rebuild(&self.coords, &self.alive, i + 1);
+        }
         if let Some(kd) = &mut self.kd
             && i + 1 >= kd.rebuild_at
         {
@@ -414,6 +425,9 @@ impl Tree {
     /// Node `k` is no longer alive: its lanes of the scan's blocks hold infinity.
     fn hide(&mut self, k: usize) {
         self.alive[k] = false;
+        if let Some(b) = &mut self.buckets {
+            b.hide(k);
+        }
         let b = k / BLOCK * self.dof;
         for lanes in &mut self.blocks[b..b + self.dof] {
             lanes[k % BLOCK] = f64::INFINITY;
@@ -427,17 +441,14 @@ impl Tree {
     /// index.
     fn nearest_with_distance(&mut self, space: &ConfigSpace, q: &[f64]) -> (f64, usize) {
         let mut best = (f64::INFINITY, 0);
-        if self.len() < SCAN_BELOW
-            && let Some(kd) = &self.kd
-            && !kd.any_wrap
-        {
+        if self.buckets.is_some() {
             return match q.len() {
-                6 => scan::<6>(&self.blocks, q),
-                7 => scan::<7>(&self.blocks, q),
-                8 => scan::<8>(&self.blocks, q),
-                12 => scan::<12>(&self.blocks, q),
-                14 => scan::<14>(&self.blocks, q),
-                _ => scan::<0>(&self.blocks, q),
+                6 => self.nearest_in_buckets::<6>(q),
+                7 => self.nearest_in_buckets::<7>(q),
+                8 => self.nearest_in_buckets::<8>(q),
+                12 => self.nearest_in_buckets::<12>(q),
+                14 => self.nearest_in_buckets::<14>(q),
+                _ => self.nearest_in_buckets::<0>(q),
             };
         }
         let Some(kd) = &mut self.kd else {
@@ -463,6 +474,16 @@ impl Tree {
             (false, 14) => kd.nearest::<false, 14>(coords, alive, space, q),
             (false, _) => kd.nearest::<false, 0>(coords, alive, space, q),
         }
+    }
+    /// [`Self::nearest_with_distance`] with buckets: the nodes added since they were built by
+    /// the block scan (every node while the tree has fewer than [`SCAN_BELOW`]), then the
+    /// buckets, which answer a node as near only when its index is lower.
+    fn nearest_in_buckets<const DOF: usize>(&mut self, q: &[f64]) -> (f64, usize) {
+        let Some(b) = &mut self.buckets else { return (f64::INFINITY, 0) };
+        let (d, i) = scan::<DOF>(&self.blocks[b.built / BLOCK * self.dof..], q);
+        let best = b.nearest::<DOF>(q, (d, i + b.built));
+        // The scan's answer when no living node is nearer than infinity.
+        if best.0 == f64::INFINITY { (f64::INFINITY, 0) } else { best }
     }
     /// Root-to-node node indices.
     fn chain_to(&self, i: usize) -> Vec<usize> {
