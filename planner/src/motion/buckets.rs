@@ -112,16 +112,7 @@ impl Buckets {
             return at;
         }
         let x = |i: u32, s: usize| coords[i as usize * dof + s];
-        let (mut split, mut widest) = (0, f64::NEG_INFINITY);
-        for s in 0..dof {
-            let (lo, hi) = idx.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &i| {
-                let v = x(i, s);
-                (lo.min(v), hi.max(v))
-            });
-            if hi - lo > widest {
-                (widest, split) = (hi - lo, s);
-            }
-        }
+        let split = widest_joint(idx, dof, x);
         let mid = idx.len() / 2;
         idx.select_nth_unstable_by(mid, |&a, &b| x(a, split).total_cmp(&x(b, split)));
         // Below `mid` at most the value, from `mid` at least.
@@ -210,6 +201,22 @@ impl Buckets {
         }
         best
     }
+}
+
+/// The joint (of `dof`) along which the nodes `idx` spread widest, by their coordinates `x(node,
+/// joint)`; the first of equals.
+pub(crate) fn widest_joint(idx: &[u32], dof: usize, x: impl Fn(u32, usize) -> f64) -> usize {
+    let (mut split, mut widest) = (0, f64::NEG_INFINITY);
+    for s in 0..dof {
+        let (lo, hi) = idx.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &i| {
+            let v = x(i, s);
+            (lo.min(v), hi.max(v))
+        });
+        if hi - lo > widest {
+            (widest, split) = (hi - lo, s);
+        }
+    }
+    split
 }
 
 /// [`Buckets::nearest_in`] compiled for AVX2.

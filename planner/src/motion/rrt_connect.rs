@@ -14,7 +14,7 @@ use std::f64::consts::PI;
 use embodied_models::{ConfigSpace, Rng, wrap_angle};
 
 use super::MotionSettings;
-use super::buckets::Buckets;
+use super::buckets::{Buckets, widest_joint};
 use super::sampler::Draw;
 use super::shortcut::{OutOfTime, farthest_visible};
 use crate::deadline::Budget;
@@ -112,17 +112,7 @@ impl KdIndex {
             return NONE;
         }
         let key = |i: u32, s: usize| self.key(s, coords[i as usize * dof + s]);
-        let mut split = 0;
-        let mut widest = f64::NEG_INFINITY;
-        for s in 0..dof {
-            let (lo, hi) = idx.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &i| {
-                let k = key(i, s);
-                (lo.min(k), hi.max(k))
-            });
-            if hi - lo > widest {
-                (widest, split) = (hi - lo, s);
-            }
-        }
+        let split = widest_joint(idx, dof, key);
         let mid = idx.len() / 2;
         idx.select_nth_unstable_by(mid, |&a, &b| key(a, split).total_cmp(&key(b, split)));
         // The nodes before `mid` are at or below the median's key: those equal to it go after
