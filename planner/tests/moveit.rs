@@ -256,6 +256,13 @@ fn start_joints_the_robot_lacks_are_ignored_with_a_warning_unless_a_group_joint_
     let (file, line, column, message) = parse_error(request.resolve(&robot, &srdf, None).expect_err("a typo"));
     assert_eq!((file.as_path(), line, column), (Path::new("typo.yaml"), 12, 53), "{message}");
     assert!(message.contains("`elbow_jiont`") && message.contains("no value for `elbow_joint`"), "{message}");
+    // With a wheel named too, the error lists every name the robot lacks, at the first.
+    let mut both = vec!["l_wheel_joint"];
+    both.extend(&typo);
+    let request = parse_request(&request_with(&both), Path::new("both.yaml")).expect("parses");
+    let (_, line, column, message) = parse_error(request.resolve(&robot, &srdf, None).expect_err("a typo"));
+    assert_eq!((line, column), (12, 12), "{message}");
+    assert!(message.contains("names `l_wheel_joint`, `elbow_jiont`, which robot"), "{message}");
 }
 
 /// A start or goal value past a joint's limit by no more than the limit's rounding

@@ -47,12 +47,12 @@ use crate::robot::Robot;
 use saphyr::{ScalarOwned, YamlDataOwned};
 
 pub use super::yaml::Location;
+use super::yaml::{Doc, Node, YamlError, describe, is_null};
 
 /// How far past a joint's position limit a request's start or goal value may lie and be taken at
 /// the limit (rad or m): a limit written with six significant digits, such as 3.14159 for pi in
 /// VAMP's spherized Fetch, is this close to the value it stands for.
 pub const LIMIT_ROUNDING: f64 = 1e-5;
-use super::yaml::{Doc, Node, YamlError, describe, is_null};
 
 /// What can go wrong reading a MoveIt scene or request.
 pub type MoveitError = YamlError;
@@ -213,7 +213,8 @@ pub struct ResolvedRequest {
     pub goals: Vec<ResolvedGoal>,
     /// Every degree of freedom of the robot outside the group, with the value it keeps.
     pub frozen: Vec<(String, f64)>,
-    /// What was ignored: joints the start state names that the robot does not have.
+    /// What was ignored or changed: joints the start state names that the robot does not have,
+    /// start and goal values taken at a limit they were just past (see [`LIMIT_ROUNDING`]).
     pub warnings: Vec<Warning>,
 }
 
@@ -465,6 +466,11 @@ impl MotionRequest {
         MoveitError::Parse { file: self.file.clone(), line: at.line, column: at.column, message }
     }
 
+    fn warn_at(&self, at: Location, message: String) -> Warning {
+        let line = u32::try_from(at.line).unwrap_or(u32::MAX);
+        Warning { file: self.file.clone(), line, column: u32::try_from(at.column).unwrap_or(u32::MAX), message }
+    }
+
     /// `value` of degree of freedom `d` of `robot`, taken at its limit when past it by at most
     /// [`LIMIT_ROUNDING`] or by at most the constraint's `tolerance` (below, above) that side (the
     /// nearest value MoveIt's joint-constraint sampler would draw): then with a warning at `at`.
@@ -487,29 +493,28 @@ impl MotionRequest {
         } else {
             return value;
         };
-        warnings.push(Warning {
-            file: self.file.clone(),
-            line: u32::try_from(at.line).unwrap_or(u32::MAX),
-            column: u32::try_from(at.column).unwrap_or(u32::MAX),
-            message: format!(
+        warnings.push(self.warn_at(
+            at,
+            format!(
                 "{what} joint `{}` value {value} is past its limit {onto} by {:.3e}; taken at the limit",
                 joint.name,
                 (value - onto).abs()
             ),
-        });
+        ));
         onto
     }
 
     /// Entry `k` of the goal constraints over the group's joints: a configuration when it
     /// constrains joints only (every joint of the group), else a [`PoseGoal`] in the world frame.
-    /// Joint values past a limit by at most [`LIMIT_ROUNDING`] are taken at the limit, with a
-    /// warning in `warnings`.
+    /// `dofs` holds the robot's index of each of `joint_names`. Joint values past a limit by at
+    /// most [`LIMIT_ROUNDING`] are taken at the limit, with a warning in `warnings`.
     fn resolve_goal(
         &self,
         robot: &Robot,
         k: usize,
         entry: &GoalConstraints,
-        (joint_names, start, frozen): (&[String], &[f64], &[(String, f64)]),
+        (joint_names, dofs): (&[String], &[usize]),
+        (start, frozen): (&[f64], &[(String, f64)]),
         warnings: &mut Vec<Warning>,
     ) -> Result<ResolvedGoal, MoveitError> {
         for g in &entry.joints {
@@ -527,14 +532,9 @@ impl MotionRequest {
         }
         if entry.positions.is_empty() && entry.orientations.is_empty() {
             let mut goal = Vec::with_capacity(joint_names.len());
-            for name in joint_names {
+            for (name, &d) in joint_names.iter().zip(dofs) {
                 match entry.joints.iter().find(|g| &g.joint == name) {
                     Some(g) => {
-                        let Some(d) = robot.joint_names().iter().position(|j| j == name) else {
-                            return Err(
-                                self.err_at(g.location, format!("robot `{}` has no joint `{name}`", robot.name()))
-                            );
-                        };
                         let tolerance = (g.tolerance_below, g.tolerance_above);
                         goal.push(self.onto_limits(robot, d, g.position, tolerance, ("goal", g.location), warnings));
                     }
@@ -671,34 +671,33 @@ impl MotionRequest {
         let names = robot.joint_names();
         let home = robot.home();
         let given = |name: &str| self.start.get(name).or_else(|| scene_state.and_then(|s| s.get(name)));
-        if let Some(&(name, at)) = unknown.first()
+        if let Some(&(_, at)) = unknown.first()
             && let Some(missing) = names.iter().find(|n| group_joints.contains(n) && given(n).is_none())
         {
+            let unknown: Vec<String> = unknown.iter().map(|(name, _)| format!("`{name}`")).collect();
             return Err(self.err_at(
                 at,
                 format!(
-                    "start state names joint `{name}`, which robot `{}` does not have, and gives no value for \
-                         `{missing}` of group `{}`",
+                    "start state names {}, which robot `{}` does not have, and gives no value for `{missing}` of \
+                     group `{}`",
+                    unknown.join(", "),
                     robot.name(),
                     self.group_name
                 ),
             ));
         }
-        let warnings = unknown
+        let mut warnings: Vec<Warning> = unknown
             .iter()
-            .map(|&(name, at)| Warning {
-                file: self.file.clone(),
-                line: u32::try_from(at.line).unwrap_or(u32::MAX),
-                column: u32::try_from(at.column).unwrap_or(u32::MAX),
-                message: format!(
-                    "start state names joint `{name}`, which robot `{}` does not have; ignored",
-                    robot.name()
-                ),
+            .map(|&(name, at)| {
+                self.warn_at(
+                    at,
+                    format!("start state names joint `{name}`, which robot `{}` does not have; ignored", robot.name()),
+                )
             })
             .collect();
         let value_of = |i: usize, name: &str| -> f64 { given(name).unwrap_or(home[i]) };
-        let mut warnings = warnings;
         let mut joint_names = Vec::new();
+        let mut dofs = Vec::new();
         let mut start = Vec::new();
         let mut frozen = Vec::new();
         for (i, name) in names.iter().enumerate() {
@@ -710,6 +709,7 @@ impl MotionRequest {
                     .position(|n| n == name)
                     .map_or(self.group_location, |k| self.start.locations[k]);
                 joint_names.push(name.clone());
+                dofs.push(i);
                 start.push(self.onto_limits(robot, i, value_of(i, name), (0.0, 0.0), ("start", at), &mut warnings));
             } else {
                 frozen.push((name.clone(), value_of(i, name)));
@@ -717,7 +717,7 @@ impl MotionRequest {
         }
         let mut goals = Vec::with_capacity(self.goals.len());
         for (k, entry) in self.goals.iter().enumerate() {
-            goals.push(self.resolve_goal(robot, k, entry, (&joint_names, &start, &frozen), &mut warnings)?);
+            goals.push(self.resolve_goal(robot, k, entry, (&joint_names, &dofs), (&start, &frozen), &mut warnings)?);
         }
         let goal = match goals.first() {
             Some(ResolvedGoal::Configuration(q)) => q.clone(),
