@@ -56,8 +56,8 @@ struct Tree {
     /// Dynamic domain: samples farther than this from the node are not extended from it
     /// (infinite until an extension from the node fails).
     radius: Vec<f64>,
-    /// k-d tree children (`NONE` when absent) and split joint of each node; empty when the
-    /// tree answers by linear scan.
+    /// Where a joint wraps, the k-d tree of nodes: each node's children (`NONE` when absent)
+    /// and split joint; `None` with buckets, or when the tree answers by linear scan.
     kd: Option<KdIndex>,
     /// Where no joint wraps, the k-d tree of buckets answering from [`SCAN_BELOW`] nodes
     /// (`kd` is then `None`).
@@ -68,8 +68,6 @@ struct Tree {
 struct KdIndex {
     /// Which joints wrap (split on the angle in [-pi, pi)).
     wraps: Vec<bool>,
-    /// Whether any does.
-    any_wrap: bool,
     nodes: Vec<KdNode>,
     /// The root node.
     root: u32,
@@ -135,23 +133,15 @@ impl KdIndex {
     }
 
     /// The living node of `coords` nearest to `q` as (squared distance, index), ties to the
-    /// lowest index; `WRAP` must be `any_wrap` (compiled apart so that a robot without a
-    /// wrapping joint pays nothing for them). `DOF`, when not 0, is `q.len()`: compiled for
-    /// six- and seven-joint arms, the distance loop is unrolled and its bounds checks go (the
-    /// 10 cage problems' nearest-neighbour instructions 62.8 M -> 49.7 M, the 296 public UR5
-    /// problems' 17.1 M -> 14.1 M). Kept: the largest-gap bound; Arya and Mount's sum of
-    /// squared gaps, each far side's gaps kept on a stack beside it and summed in joint order
-    /// (so as exact as the distance), cost 62.8 M -> 100.7 M on the cage problems and
-    /// 17.1 M -> 26.6 M on the public ones.
-    fn nearest<const WRAP: bool, const DOF: usize>(
-        &mut self,
-        coords: &[f64],
-        alive: &[bool],
-        space: &ConfigSpace,
-        q: &[f64],
-    ) -> (f64, usize) {
-        let dof = if DOF == 0 { q.len() } else { DOF };
-        let q = &q[..dof];
+    /// lowest index. Only trees over a wrapping joint have this index (the others have
+    /// [`Buckets`]); unrolled for six and seven joints over plain ones, it saved the 10 cage
+    /// problems' nearest-neighbour instructions 62.8 M -> 49.7 M. Kept: the largest-gap bound;
+    /// Arya and Mount's sum of squared gaps, each far side's gaps kept on a stack beside it and
+    /// summed in joint order (so as exact as the distance), cost 62.8 M -> 100.7 M on the cage
+    /// problems and 17.1 M -> 26.6 M on the public ones, and 329 M -> 332 M on the Fetch's cage
+    /// problem 5.
+    fn nearest(&mut self, coords: &[f64], alive: &[bool], space: &ConfigSpace, q: &[f64]) -> (f64, usize) {
+        let dof = q.len();
         // The scan's answer when no living node is nearer than infinity.
         let mut best = (f64::INFINITY, 0);
         if coords.is_empty() || self.root == NONE {
@@ -167,18 +157,18 @@ impl KdIndex {
             loop {
                 let p = &coords[n * dof..(n + 1) * dof];
                 if alive[n] {
-                    let d = if WRAP { space.distance_squared(p, q) } else { dist2_below(p, q, best.0) };
+                    let d = space.distance_squared(p, q);
                     if d < best.0 || (d == best.0 && n < best.1) {
                         best = (d, n);
                     }
                 }
                 let node = &self.nodes[n];
                 let s = node.split as usize;
-                let (qs, ps) = if WRAP && self.wraps[s] { (wrap_angle(q[s]), wrap_angle(p[s])) } else { (q[s], p[s]) };
+                let (qs, ps) = if self.wraps[s] { (wrap_angle(q[s]), wrap_angle(p[s])) } else { (q[s], p[s]) };
                 let right = qs >= ps;
                 let far = node.child[usize::from(!right)];
                 if far != NONE {
-                    let gap = if WRAP && self.wraps[s] {
+                    let gap = if self.wraps[s] {
                         // Far side: the arc [-pi, ps) or [ps, pi); the shorter way round to it, less a
                         // margin over the rounding of the wrapped differences the distance sums.
                         let around = if right { (qs - ps).min(PI - qs) } else { (ps - qs).min(qs + PI) };
@@ -208,22 +198,6 @@ impl KdIndex {
     }
 }
 
-/// The squared Euclidean distance of `p` and `q` (what `ConfigSpace::distance_squared` gives
-/// where no joint wraps, the same sum in the same order), or any value above `limit` as soon
-/// as a partial sum exceeds it (squares only add, so the sum would too).
-#[inline(always)]
-fn dist2_below(p: &[f64], q: &[f64], limit: f64) -> f64 {
-    let mut s = 0.0;
-    for (a, b) in p.iter().zip(q) {
-        let d = b - a;
-        s += d * d;
-        if s > limit {
-            return s;
-        }
-    }
-    s
-}
-
 /// Trees with fewer nodes than this answer nearest-neighbour queries by a scan of every node
 /// (where no joint wraps), the k-d tree above. RRT-Connect's trees stay small where dynamic
 /// domain turns most samples away: on the 100 generated cage problems, 65 nodes in both trees
@@ -242,7 +216,7 @@ const SCAN_BELOW: usize = 256;
 pub(crate) const BLOCK: usize = 4;
 
 /// The living node of `blocks` (see [`Tree::blocks`]; `q.len()` joints) nearest to `q` as
-/// (squared distance, index), ties to the lowest index: exactly [`KdIndex::nearest`]'s answer
+/// (squared distance, index), ties to the lowest index: exactly [`Buckets::nearest`]'s answer
 /// where no joint wraps (the same sums, in the same order, and the same tie rule). `DOF`, when
 /// not 0, is `q.len()`; `q` is not empty (a tree over no joints has no k-d tree and never comes
 /// here).
@@ -339,7 +313,6 @@ impl Tree {
             buckets: (kd && dof > 0 && !(0..dof).any(|i| space.wraps(i))).then(|| Buckets::new(dof)),
             kd: (kd && dof > 0 && (0..dof).any(|i| space.wraps(i))).then(|| KdIndex {
                 wraps: (0..dof).map(|i| space.wraps(i)).collect(),
-                any_wrap: (0..dof).any(|i| space.wraps(i)),
                 nodes: Vec::with_capacity(NODES),
                 root: 0,
                 rebuild_at: SCAN_BELOW,
@@ -453,17 +426,7 @@ impl Tree {
             }
             return best;
         };
-        let (coords, alive) = (&self.coords[..], &self.alive[..]);
-        match (kd.any_wrap, q.len()) {
-            (true, _) => kd.nearest::<true, 0>(coords, alive, space, q),
-            (false, 6) => kd.nearest::<false, 6>(coords, alive, space, q),
-            (false, 7) => kd.nearest::<false, 7>(coords, alive, space, q),
-            // An arm on a lift (the Fetch), two six- and two seven-joint arms planned together.
-            (false, 8) => kd.nearest::<false, 8>(coords, alive, space, q),
-            (false, 12) => kd.nearest::<false, 12>(coords, alive, space, q),
-            (false, 14) => kd.nearest::<false, 14>(coords, alive, space, q),
-            (false, _) => kd.nearest::<false, 0>(coords, alive, space, q),
-        }
+        kd.nearest(&self.coords, &self.alive, space, q)
     }
     /// [`Self::nearest_with_distance`] with buckets: the nodes added since they were built by
     /// the block scan (every node while the tree has fewer than [`SCAN_BELOW`]), then the
@@ -803,8 +766,8 @@ mod tests {
             let parent = if i == 0 || i == 200 { ROOT } else { i as u32 - 1 };
             scan.push(&q, parent, false);
             kd.push(&q, parent, false);
-            // Everything so far (a chain from node 0) is cut; the next rebuild, at 256 nodes,
-            // takes only the new chain from node 200 (until then the cut root stays the root).
+            // Everything so far (a chain from node 0) is cut; the buckets, first built at 256
+            // nodes, take only the new chain from node 200.
             if i == 199 {
                 scan.cut(0);
                 kd.cut(0);
@@ -873,7 +836,7 @@ mod tests {
                 }
                 let (a, b) = (scan.nearest_with_distance(&space, &q), kd.nearest_with_distance(&space, &q));
                 assert_eq!(a, b, "query {q:?} after {i} nodes");
-                // The block scan on the whole tree too (the k-d tree answers from 256 nodes).
+                // The block scan on the whole tree too (the buckets answer from 256 nodes).
                 if !(0..dof).any(|j| space.wraps(j)) {
                     assert_eq!(super::scan::<0>(&kd.blocks, &q), a, "block scan, query {q:?} after {i} nodes");
                     // And on the baseline's instructions (the dispatch takes AVX2 where it can).
