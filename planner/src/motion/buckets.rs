@@ -1,5 +1,5 @@
-//! Nearest neighbours of a large RRT-Connect tree over joints that do not wrap: a k-d tree of
-//! buckets, rebuilt as the tree grows, its leaves scanned four nodes at a time.
+//! Nearest neighbours of a large RRT-Connect tree: a k-d tree of buckets, rebuilt as the tree
+//! grows, its leaves scanned four nodes at a time.
 //!
 //! A k-d tree with a node per configuration visits, in seven or eight joints, most of its nodes
 //! for a query far from the tree (a uniform sample, most of which dynamic domain then turns
@@ -27,6 +27,11 @@
 //! noise. With ε 0 (the tests) the answer is exactly the scan's (`rrt_connect::scan`): every
 //! distance is the same sum in the same order and ties go to the lowest index. Either way the
 //! answer is deterministic: the same tree and query give the same node.
+//!
+//! *Wrapping joints* hold their angles in [-pi, pi) (as the tree's blocks do): a split on one
+//! cuts the circle at its value and at pi, and a far side's gap is the shorter way round to
+//! its arc, less [`WRAP_MARGIN`] for the rounding of the wrapped differences; the leaves take
+//! each difference the shorter way round (`rrt_connect::gap2`).
 
 /// Most nodes in a leaf.
 const LEAF: usize = 16;
@@ -38,7 +43,13 @@ const PENDING: usize = 32;
 /// most `1 + ε` times as far as the nearest.
 pub(crate) const APPROX: f64 = 0.5;
 
-use super::rrt_connect::BLOCK;
+use std::f64::consts::PI;
+
+use super::rrt_connect::{BLOCK, gap2};
+
+/// Slack on a wrapped joint's bound (rad): the wrapped differences the distances sum round by
+/// far less, so a far side is never pruned for a rounding.
+const WRAP_MARGIN: f64 = 1e-9;
 
 const NONE: u32 = u32::MAX;
 
@@ -93,9 +104,9 @@ impl Buckets {
         len - self.built >= PENDING.max(self.built / 4) + BLOCK
     }
 
-    /// Rebuilt over the living nodes of `coords` among the first `len` rounded down to a whole
-    /// block.
-    pub(crate) fn rebuild(&mut self, coords: &[f64], alive: &[bool], len: usize) {
+    /// Rebuilt over the living nodes among the first `len` rounded down to a whole block, their
+    /// values read from the tree's `blocks` (`rrt_connect::Tree::blocks`).
+    pub(crate) fn rebuild(&mut self, blocks: &[[f64; BLOCK]], alive: &[bool], len: usize) {
         let dof = self.dof;
         self.built = len / BLOCK * BLOCK;
         self.cells.clear();
@@ -107,10 +118,11 @@ impl Buckets {
         if order.is_empty() {
             return;
         }
-        let _ = self.build(&mut order, coords, dof);
+        let _ = self.build(&mut order, blocks, dof);
     }
 
-    fn build(&mut self, idx: &mut [u32], coords: &[f64], dof: usize) -> u32 {
+    fn build(&mut self, idx: &mut [u32], blocks: &[[f64; BLOCK]], dof: usize) -> u32 {
+        let x = |i: u32, s: usize| blocks[i as usize / BLOCK * dof + s][i as usize % BLOCK];
         let at = self.cells.len() as u32;
         self.cells.push(Cell { split: 0, value: 0.0, child: [NONE; 2], first: 0, blocks: 0 });
         if idx.len() <= LEAF {
@@ -123,7 +135,7 @@ impl Buckets {
             for (k, &i) in idx.iter().enumerate() {
                 let (b, l) = (first + k / BLOCK, k % BLOCK);
                 for j in 0..dof {
-                    self.leaves[b * dof + j][l] = coords[i as usize * dof + j];
+                    self.leaves[b * dof + j][l] = x(i, j);
                 }
                 self.ids[b * BLOCK + l] = i;
                 self.lane[i as usize] = (b * BLOCK + l) as u32;
@@ -132,15 +144,14 @@ impl Buckets {
             self.cells[at as usize].blocks = blocks as u32;
             return at;
         }
-        let x = |i: u32, s: usize| coords[i as usize * dof + s];
         let split = widest_joint(idx, dof, x);
         let mid = idx.len() / 2;
         idx.select_nth_unstable_by(mid, |&a, &b| x(a, split).total_cmp(&x(b, split)));
         // Below `mid` at most the value, from `mid` at least.
         let value = x(idx[mid], split);
         let (left, right) = idx.split_at_mut(mid);
-        let l = self.build(left, coords, dof);
-        let r = self.build(right, coords, dof);
+        let l = self.build(left, blocks, dof);
+        let r = self.build(right, blocks, dof);
         self.cells[at as usize] = Cell { split: split as u32, value, child: [l, r], first: 0, blocks: 0 };
         at
     }
@@ -161,19 +172,32 @@ impl Buckets {
     /// is nearer (ties to the lowest index; `best`'s index is above every node here), within
     /// the approximation (module documentation). Compiled for AVX2 where the CPU has it, as the
     /// scan.
-    pub(crate) fn nearest<const DOF: usize>(&mut self, q: &[f64], best: (f64, usize)) -> (f64, usize) {
+    /// With `WRAP`, `q`'s wrapping joints (finite `period`) are in [-pi, pi) and their
+    /// differences go the shorter way round.
+    pub(crate) fn nearest<const DOF: usize, const WRAP: bool>(
+        &mut self,
+        q: &[f64],
+        best: (f64, usize),
+        period: &[f64],
+    ) -> (f64, usize) {
         #[cfg(target_arch = "x86_64")]
         if let Some(v3) = pulp::x86::V3::try_new() {
-            return pulp::Simd::vectorize(v3, NearestV3::<DOF> { buckets: self, q, best });
+            return pulp::Simd::vectorize(v3, NearestV3::<DOF, WRAP> { buckets: self, q, best, period });
         }
-        self.nearest_in::<DOF>(q, best)
+        self.nearest_in::<DOF, WRAP>(q, best, period)
     }
 
     /// [`Self::nearest`] on the instruction set of its caller.
     #[inline(always)]
-    fn nearest_in<const DOF: usize>(&mut self, q: &[f64], mut best: (f64, usize)) -> (f64, usize) {
+    fn nearest_in<const DOF: usize, const WRAP: bool>(
+        &mut self,
+        q: &[f64],
+        mut best: (f64, usize),
+        period: &[f64],
+    ) -> (f64, usize) {
         let dof = if DOF == 0 { q.len() } else { DOF };
         let q = &q[..dof];
+        let period = if WRAP { &period[..dof] } else { &[][..] };
         if self.cells.is_empty() {
             return best;
         }
@@ -192,10 +216,10 @@ impl Buckets {
                     for b in first..first + cell.blocks as usize {
                         let block = &self.leaves[b * dof..(b + 1) * dof];
                         let mut s = [0.0f64; BLOCK];
-                        for (&qj, lanes) in q.iter().zip(block) {
+                        for (j, (&qj, lanes)) in q.iter().zip(block).enumerate() {
+                            let pj = if WRAP { period[j] } else { 0.0 };
                             for (s, &p) in s.iter_mut().zip(lanes) {
-                                let d = qj - p;
-                                *s += d * d;
+                                *s += gap2::<WRAP>(qj, p, pj);
                             }
                         }
                         // Most blocks hold no node as near as the best: one test for the four.
@@ -215,7 +239,15 @@ impl Buckets {
                 let diff = q[s] - cell.value;
                 let (near, far) =
                     if diff < 0.0 { (cell.child[0], cell.child[1]) } else { (cell.child[1], cell.child[0]) };
-                let far_bound = bound.max(diff * diff);
+                let gap = if WRAP && period[s].is_finite() {
+                    // The far side is the arc [value, pi) below the split's value, [-pi, value)
+                    // at or above it: the shorter way round to it.
+                    let around = if diff < 0.0 { (-diff).min(q[s] + PI) } else { diff.min(PI - q[s]) };
+                    (around - WRAP_MARGIN).max(0.0)
+                } else {
+                    diff
+                };
+                let far_bound = bound.max(gap * gap);
                 if far_bound * loose <= best.0 {
                     stack.push((far, far_bound));
                 }
@@ -228,7 +260,7 @@ impl Buckets {
 
 /// The joint (of `dof`) along which the nodes `idx` spread widest, by their coordinates `x(node,
 /// joint)`; the first of equals.
-pub(crate) fn widest_joint(idx: &[u32], dof: usize, x: impl Fn(u32, usize) -> f64) -> usize {
+fn widest_joint(idx: &[u32], dof: usize, x: impl Fn(u32, usize) -> f64) -> usize {
     let (mut split, mut widest) = (0, f64::NEG_INFINITY);
     for s in 0..dof {
         let (lo, hi) = idx.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &i| {
@@ -244,17 +276,18 @@ pub(crate) fn widest_joint(idx: &[u32], dof: usize, x: impl Fn(u32, usize) -> f6
 
 /// [`Buckets::nearest_in`] compiled for AVX2.
 #[cfg(target_arch = "x86_64")]
-struct NearestV3<'a, const DOF: usize> {
+struct NearestV3<'a, const DOF: usize, const WRAP: bool> {
     buckets: &'a mut Buckets,
     q: &'a [f64],
     best: (f64, usize),
+    period: &'a [f64],
 }
 
 #[cfg(target_arch = "x86_64")]
-impl<const DOF: usize> pulp::WithSimd for NearestV3<'_, DOF> {
+impl<const DOF: usize, const WRAP: bool> pulp::WithSimd for NearestV3<'_, DOF, WRAP> {
     type Output = (f64, usize);
     #[inline(always)]
     fn with_simd<S: pulp::Simd>(self, _: S) -> (f64, usize) {
-        self.buckets.nearest_in::<DOF>(self.q, self.best)
+        self.buckets.nearest_in::<DOF, WRAP>(self.q, self.best, self.period)
     }
 }

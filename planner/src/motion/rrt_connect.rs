@@ -9,12 +9,10 @@
 //! passing edge against 2 per failing one). An edge whose certificate fails is cut off with its
 //! subtree and the search goes on, so every returned path is certified.
 
-use std::f64::consts::PI;
-
 use embodied_models::{ConfigSpace, Rng, wrap_angle};
 
 use super::MotionSettings;
-use super::buckets::{APPROX, Buckets, widest_joint};
+use super::buckets::{APPROX, Buckets};
 use super::sampler::Draw;
 use super::shortcut::{OutOfTime, farthest_visible};
 use crate::deadline::Budget;
@@ -30,19 +28,18 @@ const DD_MIN_RADIUS: f64 = 1.0;
 /// and shrinks by it when one fails again.
 const DD_ALPHA: f64 = 1e-4;
 
-/// A tree of configurations stored flat (`dof` values per node), with parent links, and a
-/// k-d tree over the same nodes for nearest-neighbour queries.
+/// A tree of configurations stored flat (`dof` values per node), with parent links, and the
+/// index its nearest-neighbour queries run on.
 ///
-/// Where a joint wraps, the k-d tree of nodes is built by insertion (each node splits on joint
-/// `depth mod dof`; rebuilt balanced as the tree doubles) and answers exactly what a linear
-/// scan does, ties going to the lowest index, so paths do not depend on which search ran.
-/// Where none wraps, the k-d tree of buckets answers within `1 + ε` of the nearest distance
-/// (`buckets::APPROX`), deterministically. A joint that wraps splits on its angle brought
-/// into [-pi, pi): the far side of a split is then an arc of the circle, and its lower bound
-/// is the shorter way round to that arc. On three narrow-passage MotionBenchMaker UR5 problems
-/// (bookshelf_small 13, 81, 85; up to 4,770 samples) the linear scan was 63% of the planner's
-/// instructions; on a campaign run of a six-joint arm with four wrapping joints that ran to
-/// its 50,000 samples, 85%.
+/// The nodes are kept again in blocks of [`BLOCK`] joint by joint, a wrapping joint's value
+/// brought into [-pi, pi): below [`SCAN_BELOW`] nodes a query scans them all, four at a time
+/// (exactly: the least distance, ties to the lowest index); from there a k-d tree of buckets
+/// ([`Buckets`]) answers for the nodes it was built over, within `1 + ε` of the nearest
+/// distance (`buckets::APPROX`), deterministically, and the nodes added since are scanned.
+/// Wrapping joints take the shorter way round in the scans and in the buckets' bounds. The
+/// k-d tree of nodes this replaced for robots with a wrapping joint spent 77% of the planning
+/// instructions on the Fetch's first 10 MotionBenchMaker cage problems with its three roll
+/// joints made continuous (12.67 G), most of them in `fmod` (`wrap_angle` of every difference).
 struct Tree {
     dof: usize,
     coords: Vec<f64>,
@@ -52,164 +49,34 @@ struct Tree {
     /// False for nodes cut off by an edge whose certificate failed, and their descendants.
     alive: Vec<bool>,
     /// The living nodes again, in blocks of [`BLOCK`] nodes joint by joint (block `b`, joint
-    /// `j` at `b * dof + j`), for the scan; a lane past the last node or of a cut node holds
-    /// infinity, so no distance to it is ever below another.
+    /// `j` at `b * dof + j`), a wrapping joint's value as its angle in [-pi, pi), for the scan
+    /// and the buckets; a lane past the last node or of a cut node holds infinity, so no
+    /// distance to it is ever below another.
     blocks: Vec<[f64; BLOCK]>,
+    /// Per joint, its period: `TAU` where it wraps, infinity where not (empty when none wraps).
+    period: Vec<f64>,
+    /// Some joint wraps.
+    any_wrap: bool,
+    /// A query's values, wrapping joints brought into [-pi, pi).
+    query: Vec<f64>,
     /// Dynamic domain: samples farther than this from the node are not extended from it
     /// (infinite until an extension from the node fails).
     radius: Vec<f64>,
-    /// Where a joint wraps, the k-d tree of nodes: each node's children (`NONE` when absent)
-    /// and split joint; `None` with buckets, or when the tree answers by linear scan.
-    kd: Option<KdIndex>,
-    /// Where no joint wraps, the k-d tree of buckets answering from [`SCAN_BELOW`] nodes
-    /// (`kd` is then `None`).
+    /// The k-d tree of buckets answering from [`SCAN_BELOW`] nodes; `None` when the tree
+    /// answers by a plain scan of its nodes (the tests' reference).
     buckets: Option<Buckets>,
 }
 
-/// The k-d tree of a [`Tree`]: node 0 is its root until the first rebuild ([`KdIndex::rebuild`]).
-struct KdIndex {
-    /// Which joints wrap (split on the angle in [-pi, pi)).
-    wraps: Vec<bool>,
-    nodes: Vec<KdNode>,
-    /// The root node.
-    root: u32,
-    /// The tree's size at which it is next rebuilt balanced.
-    rebuild_at: usize,
-    /// Search stack (node, lower bound of the squared distance), reused between queries.
-    stack: Vec<(u32, f64)>,
-}
-
-/// A k-d tree node: its children (left: below the split, right: at or above; `NONE` when
-/// absent) and the joint it splits on.
-#[derive(Clone, Copy)]
-struct KdNode {
-    child: [u32; 2],
-    split: u32,
-}
-
-impl KdIndex {
-    /// The coordinate joint `s` splits on: its angle in [-pi, pi) when it wraps.
-    fn key(&self, s: usize, x: f64) -> f64 {
-        if self.wraps[s] { wrap_angle(x) } else { x }
-    }
-
-    /// The tree rebuilt over the living nodes of `coords` (`dof` joints each), balanced: each
-    /// cell split at its median node along the joint (its key) whose nodes spread widest. Nodes
-    /// are inserted one by one as they come (each below the leaf its descent ends at, the
-    /// split joint cycling), which leaves the tree as deep as RRT-Connect's chains of steps are
-    /// long: on a hard Fetch cage problem (31,789 samples) the queries took 76% of the planning
-    /// instructions. Rebuilt each time the tree doubles, it costs O(log n) per node.
-    fn rebuild(&mut self, coords: &[f64], alive: &[bool], dof: usize) {
-        let mut order: Vec<u32> = (0..alive.len() as u32).filter(|&i| alive[i as usize]).collect();
-        self.root = self.build(&mut order, coords, dof);
-    }
-
-    /// The balanced subtree of the nodes `idx`, returning its root (`NONE` when empty). Its
-    /// left side holds the nodes whose key along the split is below the root's, its right side
-    /// the others (the descents' rule), whatever ties there are.
-    fn build(&mut self, idx: &mut [u32], coords: &[f64], dof: usize) -> u32 {
-        if idx.is_empty() {
-            return NONE;
-        }
-        let key = |i: u32, s: usize| self.key(s, coords[i as usize * dof + s]);
-        let split = widest_joint(idx, dof, key);
-        let mid = idx.len() / 2;
-        idx.select_nth_unstable_by(mid, |&a, &b| key(a, split).total_cmp(&key(b, split)));
-        // The nodes before `mid` are at or below the median's key: those equal to it go after
-        // the ones below, and the first of them is the root.
-        let pivot = key(idx[mid], split);
-        let mut below = 0;
-        for k in 0..mid {
-            if key(idx[k], split) < pivot {
-                idx.swap(below, k);
-                below += 1;
-            }
-        }
-        let root = idx[below];
-        let (left, rest) = idx.split_at_mut(below);
-        let right = &mut rest[1..];
-        let l = self.build(left, coords, dof);
-        let r = self.build(right, coords, dof);
-        self.nodes[root as usize] = KdNode { child: [l, r], split: split as u32 };
-        root
-    }
-
-    /// The living node of `coords` nearest to `q` as (squared distance, index), ties to the
-    /// lowest index. Only trees over a wrapping joint have this index (the others have
-    /// [`Buckets`]); unrolled for six and seven joints over plain ones, it saved the 10 cage
-    /// problems' nearest-neighbour instructions 62.8 M -> 49.7 M. Kept: the largest-gap bound;
-    /// Arya and Mount's sum of squared gaps, each far side's gaps kept on a stack beside it and
-    /// summed in joint order (so as exact as the distance), cost 62.8 M -> 100.7 M on the cage
-    /// problems and 17.1 M -> 26.6 M on the public ones, and 329 M -> 332 M on the Fetch's cage
-    /// problem 5.
-    fn nearest(&mut self, coords: &[f64], alive: &[bool], space: &ConfigSpace, q: &[f64]) -> (f64, usize) {
-        let dof = q.len();
-        // The scan's answer when no living node is nearer than infinity.
-        let mut best = (f64::INFINITY, 0);
-        if coords.is_empty() || self.root == NONE {
-            return best;
-        }
-        // Branch and bound over the cells of the tree; a cell's bound is its largest gap to `q`
-        // along one joint. The near side is walked down in place; far sides go on the stack
-        // only while their bound can still tie the best.
-        let stack = &mut self.stack;
-        stack.clear();
-        let (mut n, mut bound) = (self.root as usize, 0.0f64);
-        loop {
-            loop {
-                let p = &coords[n * dof..(n + 1) * dof];
-                if alive[n] {
-                    let d = space.distance_squared(p, q);
-                    if d < best.0 || (d == best.0 && n < best.1) {
-                        best = (d, n);
-                    }
-                }
-                let node = &self.nodes[n];
-                let s = node.split as usize;
-                let (qs, ps) = if self.wraps[s] { (wrap_angle(q[s]), wrap_angle(p[s])) } else { (q[s], p[s]) };
-                let right = qs >= ps;
-                let far = node.child[usize::from(!right)];
-                if far != NONE {
-                    let gap = if self.wraps[s] {
-                        // Far side: the arc [-pi, ps) or [ps, pi); the shorter way round to it, less a
-                        // margin over the rounding of the wrapped differences the distance sums.
-                        let around = if right { (qs - ps).min(PI - qs) } else { (ps - qs).min(qs + PI) };
-                        (around - WRAP_MARGIN).max(0.0)
-                    } else {
-                        qs - ps
-                    };
-                    let far_bound = bound.max(gap * gap);
-                    if far_bound <= best.0 {
-                        stack.push((far, far_bound));
-                    }
-                }
-                let near = node.child[usize::from(right)];
-                if near == NONE || bound > best.0 {
-                    break;
-                }
-                n = near as usize;
-            }
-            loop {
-                let Some((m, b)) = stack.pop() else { return best };
-                if b <= best.0 {
-                    (n, bound) = (m as usize, b);
-                    break;
-                }
-            }
-        }
-    }
-}
-
-/// Trees with fewer nodes than this answer nearest-neighbour queries by a scan of every node
-/// (where no joint wraps), the k-d tree above. RRT-Connect's trees stay small where dynamic
+/// Trees with fewer nodes than this answer nearest-neighbour queries by a scan of every node,
+/// the k-d tree of buckets above. RRT-Connect's trees stay small where dynamic
 /// domain turns most samples away: on the 100 generated cage problems, 65 nodes in both trees
 /// at the median when a path is found (219 at most), on the 296 public MotionBenchMaker UR5
-/// problems 12 (107 at most), where the k-d tree's descent and bookkeeping cost more than the
-/// distances they save. Planning instructions on 10 cage problems: 234.1 M with the k-d tree
+/// problems 12 (107 at most), where a k-d tree's descent and bookkeeping cost more than the
+/// distances they save. Planning instructions on 10 cage problems: 234.1 M with a k-d tree
 /// throughout, 216.2 M scanning below 32 nodes, 207.4 M below 128 (and below 256, and always).
 /// Measured again with the block scan ([`scan`]), in time: below 512 and 1,024 nodes, per-problem
 /// ratios 0.992 and 1.009 on the cage problems against 128 (the slow problems' trees are larger,
-/// and there the k-d tree wins). With the k-d tree rebuilt balanced as it doubles, planning
+/// and there the k-d tree wins). With a k-d tree rebuilt balanced as it doubles, planning
 /// instructions on the first 30 MotionBenchMaker cage problems: Panda 254.5 M below 64 nodes,
 /// 231.2 M below 128, 225.2 M below 256; UR5 84.2 / 84.0 / 84.0 M.
 const SCAN_BELOW: usize = 256;
@@ -219,9 +86,11 @@ pub(crate) const BLOCK: usize = 4;
 
 /// The living node of `blocks` (see [`Tree::blocks`]; `q.len()` joints) nearest to `q` as
 /// (squared distance, index), ties to the lowest index: exactly [`Buckets::nearest`]'s answer
-/// where no joint wraps (the same sums, in the same order, and the same tie rule). `DOF`, when
-/// not 0, is `q.len()`; `q` is not empty (a tree over no joints has no k-d tree and never comes
-/// here).
+/// with no approximation (the same sums, in the same order, and the same tie rule). `DOF`, when
+/// not 0, is `q.len()`; `q` is not empty (a tree over no joints has no index and never comes
+/// here). With `WRAP`, each joint's difference `d` is taken the shorter way round its
+/// `period` (`q` and the blocks hold wrapping joints' values in [-pi, pi)): `min(|d|, period -
+/// |d|)`, which is `|d|` where the period is infinite; without, `period` is not read.
 ///
 /// Block by block with no branch per node or block: the four distances at once (each lane's
 /// sum in joint order, a multiply and an add, never fused, so the scalar sum to the bit), each
@@ -232,27 +101,45 @@ pub(crate) const BLOCK: usize = 4;
 /// 256-bit operation per step instead of two SSE2 ones, the 10 cage problems' nearest-neighbour
 /// instructions 15.5 M -> 8.1 M (`wide`'s four lanes in the AVX2 function: 10.9 M; on the
 /// baseline these plain arrays and `wide` cost the same).
-fn scan<const DOF: usize>(blocks: &[[f64; BLOCK]], q: &[f64]) -> (f64, usize) {
+fn scan<const DOF: usize, const WRAP: bool>(blocks: &[[f64; BLOCK]], q: &[f64], period: &[f64]) -> (f64, usize) {
     #[cfg(target_arch = "x86_64")]
     if let Some(v3) = pulp::x86::V3::try_new() {
-        return pulp::Simd::vectorize(v3, ScanV3::<DOF> { blocks, q });
+        return pulp::Simd::vectorize(v3, ScanV3::<DOF, WRAP> { blocks, q, period });
     }
-    scan_lanes::<DOF>(blocks, q)
+    scan_lanes::<DOF, WRAP>(blocks, q, period)
 }
 
 /// [`scan_lanes`] compiled for AVX2.
 #[cfg(target_arch = "x86_64")]
-struct ScanV3<'a, const DOF: usize> {
+struct ScanV3<'a, const DOF: usize, const WRAP: bool> {
     blocks: &'a [[f64; BLOCK]],
     q: &'a [f64],
+    period: &'a [f64],
 }
 
 #[cfg(target_arch = "x86_64")]
-impl<const DOF: usize> pulp::WithSimd for ScanV3<'_, DOF> {
+impl<const DOF: usize, const WRAP: bool> pulp::WithSimd for ScanV3<'_, DOF, WRAP> {
     type Output = (f64, usize);
     #[inline(always)]
     fn with_simd<S: pulp::Simd>(self, _: S) -> (f64, usize) {
-        scan_lanes::<DOF>(self.blocks, self.q)
+        scan_lanes::<DOF, WRAP>(self.blocks, self.q, self.period)
+    }
+}
+
+/// The squared difference of a joint whose values (in [-pi, pi) where it wraps) are `q` and
+/// `p`: with `WRAP`, the shorter way round `period` (infinite: the plain difference). A lane
+/// of infinity gives infinity either way (`period - |d|` is then minus infinity or not a
+/// number, and the comparison keeps `|d|` for the latter).
+#[inline(always)]
+pub(crate) fn gap2<const WRAP: bool>(q: f64, p: f64, period: f64) -> f64 {
+    let d = q - p;
+    if WRAP {
+        let a = d.abs();
+        let around = period - a;
+        let w = if around < a { around } else { a };
+        w * w
+    } else {
+        d * d
     }
 }
 
@@ -260,17 +147,18 @@ impl<const DOF: usize> pulp::WithSimd for ScanV3<'_, DOF> {
 /// block) with a strict `<`, so its earliest block among equals, without a branch; the four are
 /// then reduced to the least distance, ties to the lowest node index.
 #[inline(always)]
-fn scan_lanes<const DOF: usize>(blocks: &[[f64; BLOCK]], q: &[f64]) -> (f64, usize) {
+fn scan_lanes<const DOF: usize, const WRAP: bool>(blocks: &[[f64; BLOCK]], q: &[f64], period: &[f64]) -> (f64, usize) {
     let dof = if DOF == 0 { q.len() } else { DOF };
     let q = &q[..dof];
+    let period = if WRAP { &period[..dof] } else { &[][..] };
     let mut best = [f64::INFINITY; BLOCK];
     let mut at = [0u64; BLOCK];
     for (b, block) in blocks.chunks_exact(dof).enumerate() {
         let mut s = [0.0f64; BLOCK];
-        for (&qj, lanes) in q.iter().zip(block) {
+        for (j, (&qj, lanes)) in q.iter().zip(block).enumerate() {
+            let pj = if WRAP { period[j] } else { 0.0 };
             for (s, &p) in s.iter_mut().zip(lanes) {
-                let d = qj - p;
-                *s += d * d;
+                *s += gap2::<WRAP>(qj, p, pj);
             }
         }
         // A NaN lane is never below the best.
@@ -290,21 +178,21 @@ fn scan_lanes<const DOF: usize>(blocks: &[[f64; BLOCK]], q: &[f64]) -> (f64, usi
     out
 }
 
-/// Slack on a wrapped joint's bound (rad): wrapped differences of unwrapped angles of a few
-/// hundred radians round by under 1e-13, so no node as near as the best is ever pruned.
-const WRAP_MARGIN: f64 = 1e-9;
-
 const ROOT: u32 = u32::MAX;
-const NONE: u32 = u32::MAX;
 
 impl Tree {
-    /// An empty tree over `space`; with `kd`, nearest-neighbour queries use a k-d tree, else a
-    /// linear scan. Where no joint wraps, the k-d tree of buckets answers within `1 + approx`
-    /// of the nearest distance (0: exactly; see `buckets`).
-    fn new(space: &ConfigSpace, kd: bool, approx: f64) -> Self {
+    /// An empty tree over `space`; with `indexed`, nearest-neighbour queries run on the blocks
+    /// and, from [`SCAN_BELOW`] nodes, the buckets, within `1 + approx` of the nearest distance
+    /// (0: exactly; see `buckets`), else on a plain scan of the nodes (the tests' reference).
+    fn new(space: &ConfigSpace, indexed: bool, approx: f64) -> Self {
         let dof = space.dof();
         // Room for the nodes of most searches (trees hold a few dozen at the median).
         const NODES: usize = 64;
+        let any_wrap = (0..dof).any(|i| space.wraps(i));
+        let period: Vec<f64> = match any_wrap {
+            true => (0..dof).map(|i| if space.wraps(i) { std::f64::consts::TAU } else { f64::INFINITY }).collect(),
+            false => Vec::new(),
+        };
         Self {
             dof,
             coords: Vec::with_capacity(NODES * dof),
@@ -312,15 +200,11 @@ impl Tree {
             certified: Vec::with_capacity(NODES),
             alive: Vec::with_capacity(NODES),
             blocks: Vec::with_capacity(NODES / BLOCK * dof),
+            any_wrap,
+            period,
+            query: Vec::new(),
             radius: Vec::with_capacity(NODES),
-            buckets: (kd && dof > 0 && !(0..dof).any(|i| space.wraps(i))).then(|| Buckets::new(dof, approx)),
-            kd: (kd && dof > 0 && (0..dof).any(|i| space.wraps(i))).then(|| KdIndex {
-                wraps: (0..dof).map(|i| space.wraps(i)).collect(),
-                nodes: Vec::with_capacity(NODES),
-                root: 0,
-                rebuild_at: SCAN_BELOW,
-                stack: Vec::with_capacity(NODES),
-            }),
+            buckets: (indexed && dof > 0).then(|| Buckets::new(dof, approx)),
         }
     }
     fn len(&self) -> usize {
@@ -331,34 +215,19 @@ impl Tree {
     }
     fn push(&mut self, q: &[f64], parent: u32, certified: bool) -> usize {
         let i = self.len();
-        if let Some(kd) = &mut self.kd {
-            let mut split = 0;
-            if kd.root == NONE {
-                // Every node was cut when the tree was last rebuilt.
-                kd.root = i as u32;
-            } else if i > 0 {
-                let mut n = kd.root as usize;
-                loop {
-                    let s = kd.nodes[n].split as usize;
-                    let go_right = kd.key(s, q[s]) >= kd.key(s, self.coords[n * self.dof + s]);
-                    let child = &mut kd.nodes[n].child[usize::from(go_right)];
-                    if *child == NONE {
-                        *child = i as u32;
-                        split = ((s + 1) % self.dof) as u32;
-                        break;
-                    }
-                    n = *child as usize;
-                }
-            }
-            kd.nodes.push(KdNode { child: [NONE; 2], split });
-        }
         self.coords.extend_from_slice(q);
         if i.is_multiple_of(BLOCK) {
             self.blocks.resize(self.blocks.len() + self.dof, [f64::INFINITY; BLOCK]);
         }
         let b = i / BLOCK * self.dof;
-        for (lanes, &x) in self.blocks[b..b + self.dof].iter_mut().zip(q) {
-            lanes[i % BLOCK] = x;
+        if self.any_wrap {
+            for ((lanes, &x), &p) in self.blocks[b..b + self.dof].iter_mut().zip(q).zip(&self.period) {
+                lanes[i % BLOCK] = if p.is_finite() { wrap_angle(x) } else { x };
+            }
+        } else {
+            for (lanes, &x) in self.blocks[b..b + self.dof].iter_mut().zip(q) {
+                lanes[i % BLOCK] = x;
+            }
         }
         self.parent.push(parent);
         self.certified.push(certified);
@@ -368,13 +237,7 @@ impl Tree {
             && i + 1 >= SCAN_BELOW
             && b.stale(i + 1)
         {
-            b.rebuild(&self.coords, &self.alive, i + 1);
-        }
-        if let Some(kd) = &mut self.kd
-            && i + 1 >= kd.rebuild_at
-        {
-            kd.rebuild(&self.coords, &self.alive, self.dof);
-            kd.rebuild_at = 2 * (i + 1);
+            b.rebuild(&self.blocks, &self.alive, i + 1);
         }
         i
     }
@@ -404,20 +267,10 @@ impl Tree {
         self.nearest_with_distance(space, q).1
     }
     /// The living node nearest to `q` as (squared distance, index); ties go to the lowest
-    /// index. With buckets (from [`SCAN_BELOW`] nodes), within their approximation.
+    /// index. From [`SCAN_BELOW`] nodes, within the tree's approximation.
     fn nearest_with_distance(&mut self, space: &ConfigSpace, q: &[f64]) -> (f64, usize) {
-        let mut best = (f64::INFINITY, 0);
-        if self.buckets.is_some() {
-            return match q.len() {
-                6 => self.nearest_in_buckets::<6>(q),
-                7 => self.nearest_in_buckets::<7>(q),
-                8 => self.nearest_in_buckets::<8>(q),
-                12 => self.nearest_in_buckets::<12>(q),
-                14 => self.nearest_in_buckets::<14>(q),
-                _ => self.nearest_in_buckets::<0>(q),
-            };
-        }
-        let Some(kd) = &mut self.kd else {
+        if self.buckets.is_none() {
+            let mut best = (f64::INFINITY, 0);
             for i in 0..self.len() {
                 if !self.alive[i] {
                     continue;
@@ -428,16 +281,33 @@ impl Tree {
                 }
             }
             return best;
-        };
-        kd.nearest(&self.coords, &self.alive, space, q)
+        }
+        match (q.len(), self.any_wrap) {
+            (6, false) => self.nearest_indexed::<6, false>(q),
+            (7, false) => self.nearest_indexed::<7, false>(q),
+            (8, false) => self.nearest_indexed::<8, false>(q),
+            (12, false) => self.nearest_indexed::<12, false>(q),
+            (14, false) => self.nearest_indexed::<14, false>(q),
+            (_, false) => self.nearest_indexed::<0, false>(q),
+            (6, true) => self.nearest_indexed::<6, true>(q),
+            (7, true) => self.nearest_indexed::<7, true>(q),
+            (_, true) => self.nearest_indexed::<0, true>(q),
+        }
     }
-    /// [`Self::nearest_with_distance`] with buckets: the nodes added since they were built by
-    /// the block scan (every node while the tree has fewer than [`SCAN_BELOW`]), then the
-    /// buckets, which answer a node as near only when its index is lower.
-    fn nearest_in_buckets<const DOF: usize>(&mut self, q: &[f64]) -> (f64, usize) {
+    /// [`Self::nearest_with_distance`] on the blocks: the nodes added since the buckets were
+    /// built by the block scan (every node while the tree has fewer than [`SCAN_BELOW`]), then
+    /// the buckets, which answer a node as near only when its index is lower.
+    fn nearest_indexed<const DOF: usize, const WRAP: bool>(&mut self, q: &[f64]) -> (f64, usize) {
         let Some(b) = &mut self.buckets else { return (f64::INFINITY, 0) };
-        let (d, i) = scan::<DOF>(&self.blocks[b.built / BLOCK * self.dof..], q);
-        let best = b.nearest::<DOF>(q, (d, i + b.built));
+        let q = if WRAP {
+            self.query.clear();
+            self.query.extend(q.iter().zip(&self.period).map(|(&x, p)| if p.is_finite() { wrap_angle(x) } else { x }));
+            &self.query[..]
+        } else {
+            q
+        };
+        let (d, i) = scan::<DOF, WRAP>(&self.blocks[b.built / BLOCK * self.dof..], q, &self.period);
+        let best = b.nearest::<DOF, WRAP>(q, (d, i + b.built), &self.period);
         // The scan's answer when no living node is nearer than infinity.
         if best.0 == f64::INFINITY { (f64::INFINITY, 0) } else { best }
     }
@@ -716,6 +586,8 @@ pub(crate) fn certify_path<V: StateValidity>(
 
 #[cfg(test)]
 mod tests {
+    use std::f64::consts::PI;
+
     use super::*;
 
     #[test]
@@ -747,12 +619,16 @@ mod tests {
         }
     }
 
+    /// Over wrapping joints the blocks hold angles in [-pi, pi): the distances they sum differ
+    /// from the reference's (`ConfigSpace::distance_squared` of the raw values) by roundings.
     #[test]
-    fn kd_tree_over_wrapping_joints_answers_exactly_what_the_scan_does() {
+    fn kd_tree_over_wrapping_joints_answers_what_the_scan_does() {
         // Four of six joints wrap; the coordinates reach past +-2 pi (paths leave continuous
-        // joints unwrapped), and points sit on and near the seam at +-pi.
+        // joints unwrapped), and points sit on and near the seam at +-pi. Seven joints run the
+        // unrolled search.
         kd_tree_matches_scan(vec![true, false, true, true, false, true], 9.0);
         kd_tree_matches_scan(vec![true; 3], PI);
+        kd_tree_matches_scan(vec![false, true, false, true, false, true, false], 7.0);
     }
 
     /// A tree rebuilt when most of its nodes are cut (they are left out) answers as the scan.
@@ -786,15 +662,18 @@ mod tests {
         }
     }
 
-    /// The planner's buckets (approximate): every answer is a living node at most `1 + ε` times
-    /// as far as the nearest, the same node for the same query, and the exact answer while the
-    /// tree is scanned (below [`SCAN_BELOW`] nodes); some answers differ from the scan's (so the
-    /// pruning is looser than the exact search's, else this test would not test it).
+    /// The planner's k-d trees (approximate): every answer is a living node at most `1 + ε`
+    /// times as far as the nearest, the same node for the same query, and the exact answer
+    /// below [`SCAN_BELOW`] nodes; some answers differ from the scan's (so the pruning is looser
+    /// than the exact search's, else this test would not test it). Buckets (no joint wraps)
+    /// and the k-d tree of nodes (some wrap; coordinates past +-pi as paths leave them).
     #[test]
-    fn approximate_buckets_answer_within_their_factor_of_the_nearest() {
+    fn approximate_trees_answer_within_their_factor_of_the_nearest() {
         let loose = (1.0 + APPROX) * (1.0 + APPROX);
-        for dof in [3, 7, 8] {
-            let space = ConfigSpace::from_wraps(vec![false; dof]);
+        let cases = [vec![false; 3], vec![false; 7], vec![false; 8], vec![true, false, true, true, false, true]];
+        for wraps in cases {
+            let dof = wraps.len();
+            let space = ConfigSpace::from_wraps(wraps);
             let mut rng = Rng::new(11);
             let (mut scan, mut approx) = (Tree::new(&space, false, 0.0), Tree::new(&space, true, APPROX));
             let mut q = vec![0.0; dof];
@@ -808,7 +687,7 @@ mod tests {
                     }
                 } else {
                     for v in q.iter_mut() {
-                        *v = rng.range(-3.0, 3.0);
+                        *v = rng.range(-4.0, 4.0);
                     }
                 }
                 scan.push(&q, parent, false);
@@ -820,15 +699,17 @@ mod tests {
                 }
                 for _ in 0..3 {
                     for v in q.iter_mut() {
-                        *v = rng.range(-4.0, 4.0);
+                        *v = rng.range(-5.0, 5.0);
                     }
                     let exact = scan.nearest_with_distance(&space, &q);
                     let got = approx.nearest_with_distance(&space, &q);
                     assert!(approx.alive[got.1], "a cut node answered after {i} nodes");
-                    assert_eq!(got.0, space.distance_squared(approx.node(got.1), &q));
-                    assert!(got.0 <= exact.0 * loose, "{got:?} against {exact:?} after {i} nodes");
+                    let d = space.distance_squared(approx.node(got.1), &q);
+                    assert!((got.0 - d).abs() <= 1e-12 * (1.0 + d), "{got:?}: {d}");
+                    // Wrapped differences round differently from the reference's.
+                    assert!(got.0 <= exact.0 * loose + 1e-12, "{got:?} against {exact:?} after {i} nodes");
                     assert_eq!(got, approx.nearest_with_distance(&space, &q), "the same query again");
-                    if i + 1 < SCAN_BELOW {
+                    if i + 1 < SCAN_BELOW && !approx.any_wrap {
                         assert_eq!(got, exact, "scanned trees answer exactly");
                     }
                     differ += usize::from(got != exact);
@@ -839,8 +720,9 @@ mod tests {
     }
 
     /// Random trees (clustered, collinear, duplicate and seam points; cut subtrees): the k-d
-    /// tree, and where no joint wraps the block scan, give the scan's (distance, index) for
-    /// every query.
+    /// tree and the block scan give the scan's (distance, index) for every query; where a
+    /// joint wraps, its distance within rounding (and a node at that distance), and exactly
+    /// the block scan's answer.
     fn kd_tree_matches_scan(wraps: Vec<bool>, spread: f64) {
         let dof = wraps.len();
         let space = ConfigSpace::from_wraps(wraps);
@@ -890,12 +772,37 @@ mod tests {
                     }
                 }
                 let (a, b) = (scan.nearest_with_distance(&space, &q), kd.nearest_with_distance(&space, &q));
-                assert_eq!(a, b, "query {q:?} after {i} nodes");
-                // The block scan on the whole tree too (the buckets answer from 256 nodes).
-                if !(0..dof).any(|j| space.wraps(j)) {
-                    assert_eq!(super::scan::<0>(&kd.blocks, &q), a, "block scan, query {q:?} after {i} nodes");
+                if kd.any_wrap {
+                    let close = |x: f64, y: f64| (x - y).abs() <= 1e-12 * (1.0 + x.abs());
+                    assert!(close(a.0, b.0), "query {q:?} after {i} nodes: {a:?} against {b:?}");
+                    assert!(close(space.distance_squared(kd.node(b.1), &q), b.0), "query {q:?}: {b:?}");
+                    assert!(kd.alive[b.1], "query {q:?}: a cut node {b:?}");
+                    let qw: Vec<f64> =
+                        q.iter().zip(&kd.period).map(|(&x, p)| if p.is_finite() { wrap_angle(x) } else { x }).collect();
+                    assert_eq!(
+                        super::scan::<0, true>(&kd.blocks, &qw, &kd.period),
+                        b,
+                        "block scan, query {q:?} after {i} nodes"
+                    );
+                    assert_eq!(
+                        scan_lanes::<0, true>(&kd.blocks, &qw, &kd.period),
+                        b,
+                        "baseline scan, query {q:?} after {i} nodes"
+                    );
+                } else {
+                    assert_eq!(a, b, "query {q:?} after {i} nodes");
+                    // The block scan on the whole tree too (the buckets answer from 256 nodes).
+                    assert_eq!(
+                        super::scan::<0, false>(&kd.blocks, &q, &[]),
+                        a,
+                        "block scan, query {q:?} after {i} nodes"
+                    );
                     // And on the baseline's instructions (the dispatch takes AVX2 where it can).
-                    assert_eq!(scan_lanes::<0>(&kd.blocks, &q), a, "baseline scan, query {q:?} after {i} nodes");
+                    assert_eq!(
+                        scan_lanes::<0, false>(&kd.blocks, &q, &[]),
+                        a,
+                        "baseline scan, query {q:?} after {i} nodes"
+                    );
                 }
             }
         }
