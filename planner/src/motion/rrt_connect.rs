@@ -291,6 +291,7 @@ impl Tree {
             (_, false) => self.nearest_indexed::<0, false>(q),
             (6, true) => self.nearest_indexed::<6, true>(q),
             (7, true) => self.nearest_indexed::<7, true>(q),
+            (8, true) => self.nearest_indexed::<8, true>(q),
             (_, true) => self.nearest_indexed::<0, true>(q),
         }
     }
