@@ -666,8 +666,9 @@ mod tests {
     /// The planner's k-d trees (approximate): every answer is a living node at most `1 + ε`
     /// times as far as the nearest, the same node for the same query, and the exact answer
     /// below [`SCAN_BELOW`] nodes; some answers differ from the scan's (so the pruning is looser
-    /// than the exact search's, else this test would not test it). Buckets (no joint wraps)
-    /// and the k-d tree of nodes (some wrap; coordinates past +-pi as paths leave them).
+    /// than the exact search's, else this test would not test it). Over plain joints and over
+    /// wrapping ones (coordinates past +-pi as paths leave them; below [`SCAN_BELOW`] nodes
+    /// their answers differ from the reference's by roundings only).
     #[test]
     fn approximate_trees_answer_within_their_factor_of_the_nearest() {
         let loose = (1.0 + APPROX) * (1.0 + APPROX);
