@@ -692,13 +692,8 @@ mod tests {
                         *v = rng.range(-4.0, 4.0);
                     }
                 }
-                scan.push(&q, parent, false);
-                approx.push(&q, parent, false);
-                if i % 700 == 699 {
-                    let victim = 1 + rng.below(i);
-                    scan.cut(victim);
-                    approx.cut(victim);
-                }
+                let victim = (i % 700 == 699).then(|| 1 + rng.below(i));
+                grow_both([&mut scan, &mut approx], &q, parent, victim);
                 for _ in 0..3 {
                     for v in q.iter_mut() {
                         *v = rng.range(-5.0, 5.0);
@@ -718,6 +713,16 @@ mod tests {
                 }
             }
             assert!(differ > 0, "{dof} joints: no answer differed from the exact one");
+        }
+    }
+
+    /// Node `q` (child of `parent`) added to both trees, then node `victim` cut from both.
+    fn grow_both(trees: [&mut Tree; 2], q: &[f64], parent: u32, victim: Option<usize>) {
+        for t in trees {
+            t.push(q, parent, false);
+            if let Some(v) = victim {
+                t.cut(v);
+            }
         }
     }
 
@@ -751,13 +756,8 @@ mod tests {
                 }
             }
             let parent = if i == 0 { ROOT } else { rng.below(i) as u32 };
-            scan.push(&q, parent, false);
-            kd.push(&q, parent, false);
-            if i % 500 == 499 {
-                let victim = 1 + rng.below(i);
-                scan.cut(victim);
-                kd.cut(victim);
-            }
+            let victim = (i % 500 == 499).then(|| 1 + rng.below(i));
+            grow_both([&mut scan, &mut kd], &q, parent, victim);
             for k in 0..4 {
                 for v in q.iter_mut() {
                     *v = match rng.below(5) {
