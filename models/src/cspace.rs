@@ -7,9 +7,15 @@ use std::f64::consts::{PI, TAU};
 
 use crate::robot::Robot;
 
-/// Wrap an angle into [-pi, pi).
+/// Wrap an angle into [-pi, pi). An angle already there is returned as it is (exactly, and
+/// without the `fmod` of the general case: the wrapped differences of continuous joints are
+/// mostly there already, and `fmod` was 3.4% of the planning instructions of a Fetch with three
+/// continuous joints on its MotionBenchMaker cage problems).
 #[inline]
 pub fn wrap_angle(a: f64) -> f64 {
+    if (-PI..PI).contains(&a) {
+        return a;
+    }
     let r = (a + PI).rem_euclid(TAU) - PI;
     if r >= PI { r - TAU } else { r }
 }
@@ -207,6 +213,27 @@ impl Robot {
 mod tests {
     use super::*;
     use crate::rng::Rng;
+
+    /// Angles in [-pi, pi) come back as they are; others land in [-pi, pi) a whole number of
+    /// turns away (within rounding), pi and odd multiples of it at -pi, NaN stays NaN.
+    #[test]
+    fn wrap_angle_keeps_angles_in_range_and_brings_the_others_there() {
+        let mut rng = Rng::new(5);
+        for _ in 0..10_000 {
+            let a = rng.range(-PI, PI);
+            assert_eq!(wrap_angle(a).to_bits(), a.to_bits());
+            let far = a + TAU * (rng.below(41) as f64 - 20.0);
+            let w = wrap_angle(far);
+            assert!((-PI..PI).contains(&w), "{far} -> {w}");
+            let turns = (far - w) / TAU;
+            assert!((turns - turns.round()).abs() < 1e-9, "{far} -> {w}");
+        }
+        assert_eq!(wrap_angle(-PI), -PI);
+        assert_eq!(wrap_angle(PI), -PI);
+        assert_eq!(wrap_angle(3.0 * PI), -PI);
+        assert!((wrap_angle(-3.0 * PI) + PI).abs() < 1e-12);
+        assert!(wrap_angle(f64::NAN).is_nan());
+    }
 
     /// The order of the inner points is the coarse-to-fine one of the division-based
     /// definition (every multiple of the largest power-of-two stride below `n`, then at each
