@@ -53,10 +53,9 @@ struct Tree {
     /// and the buckets; a lane past the last node or of a cut node holds infinity, so no
     /// distance to it is ever below another.
     blocks: Vec<[f64; BLOCK]>,
-    /// Per joint, its period: `TAU` where it wraps, infinity where not (empty when none wraps).
+    /// Per joint, its period: `TAU` where it wraps, infinity where not (empty when none wraps:
+    /// see [`Tree::any_wrap`]).
     period: Vec<f64>,
-    /// Some joint wraps.
-    any_wrap: bool,
     /// A query's values, wrapping joints brought into [-pi, pi).
     query: Vec<f64>,
     /// Dynamic domain: samples farther than this from the node are not extended from it
@@ -188,8 +187,7 @@ impl Tree {
         let dof = space.dof();
         // Room for the nodes of most searches (trees hold a few dozen at the median).
         const NODES: usize = 64;
-        let any_wrap = (0..dof).any(|i| space.wraps(i));
-        let period: Vec<f64> = match any_wrap {
+        let period: Vec<f64> = match (0..dof).any(|i| space.wraps(i)) {
             true => (0..dof).map(|i| if space.wraps(i) { std::f64::consts::TAU } else { f64::INFINITY }).collect(),
             false => Vec::new(),
         };
@@ -200,7 +198,6 @@ impl Tree {
             certified: Vec::with_capacity(NODES),
             alive: Vec::with_capacity(NODES),
             blocks: Vec::with_capacity(NODES / BLOCK * dof),
-            any_wrap,
             period,
             query: Vec::new(),
             radius: Vec::with_capacity(NODES),
@@ -209,6 +206,10 @@ impl Tree {
     }
     fn len(&self) -> usize {
         self.parent.len()
+    }
+    /// Some joint wraps.
+    fn any_wrap(&self) -> bool {
+        !self.period.is_empty()
     }
     fn node(&self, i: usize) -> &[f64] {
         &self.coords[i * self.dof..(i + 1) * self.dof]
@@ -220,7 +221,7 @@ impl Tree {
             self.blocks.resize(self.blocks.len() + self.dof, [f64::INFINITY; BLOCK]);
         }
         let b = i / BLOCK * self.dof;
-        if self.any_wrap {
+        if self.any_wrap() {
             for ((lanes, &x), &p) in self.blocks[b..b + self.dof].iter_mut().zip(q).zip(&self.period) {
                 lanes[i % BLOCK] = if p.is_finite() { wrap_angle(x) } else { x };
             }
@@ -282,7 +283,7 @@ impl Tree {
             }
             return best;
         }
-        match (q.len(), self.any_wrap) {
+        match (q.len(), self.any_wrap()) {
             (6, false) => self.nearest_indexed::<6, false>(q),
             (7, false) => self.nearest_indexed::<7, false>(q),
             (8, false) => self.nearest_indexed::<8, false>(q),
@@ -706,7 +707,7 @@ mod tests {
                     // Wrapped differences round differently from the reference's.
                     assert!(got.0 <= exact.0 * loose + 1e-12, "{got:?} against {exact:?} after {i} nodes");
                     assert_eq!(got, approx.nearest_with_distance(&space, &q), "the same query again");
-                    if i + 1 < SCAN_BELOW && !approx.any_wrap {
+                    if i + 1 < SCAN_BELOW && !approx.any_wrap() {
                         assert_eq!(got, exact, "scanned trees answer exactly");
                     }
                     differ += usize::from(got != exact);
@@ -774,7 +775,7 @@ mod tests {
                     }
                 }
                 let (a, b) = (scan.nearest_with_distance(&space, &q), kd.nearest_with_distance(&space, &q));
-                if kd.any_wrap {
+                if kd.any_wrap() {
                     let close = |x: f64, y: f64| (x - y).abs() <= 1e-12 * (1.0 + x.abs());
                     assert!(close(a.0, b.0), "query {q:?} after {i} nodes: {a:?} against {b:?}");
                     assert!(close(space.distance_squared(kd.node(b.1), &q), b.0), "query {q:?}: {b:?}");
