@@ -142,6 +142,13 @@ pub(crate) fn gap2<const WRAP: bool>(q: f64, p: f64, period: f64) -> f64 {
     }
 }
 
+/// A joint's value `x` as the blocks hold it: a wrapping joint's (finite `period`) as its
+/// angle in [-pi, pi), another's as it is.
+#[inline(always)]
+fn block_value(x: f64, period: f64) -> f64 {
+    if period.is_finite() { wrap_angle(x) } else { x }
+}
+
 /// [`scan`] on the instruction set of its caller. Each lane keeps its own best (distance and
 /// block) with a strict `<`, so its earliest block among equals, without a branch; the four are
 /// then reduced to the least distance, ties to the lowest node index.
@@ -223,7 +230,7 @@ impl Tree {
         let b = i / BLOCK * self.dof;
         if self.any_wrap() {
             for ((lanes, &x), &p) in self.blocks[b..b + self.dof].iter_mut().zip(q).zip(&self.period) {
-                lanes[i % BLOCK] = if p.is_finite() { wrap_angle(x) } else { x };
+                lanes[i % BLOCK] = block_value(x, p);
             }
         } else {
             for (lanes, &x) in self.blocks[b..b + self.dof].iter_mut().zip(q) {
@@ -303,7 +310,7 @@ impl Tree {
         let Some(b) = &mut self.buckets else { return (f64::INFINITY, 0) };
         let q = if WRAP {
             self.query.clear();
-            self.query.extend(q.iter().zip(&self.period).map(|(&x, p)| if p.is_finite() { wrap_angle(x) } else { x }));
+            self.query.extend(q.iter().zip(&self.period).map(|(&x, &p)| block_value(x, p)));
             &self.query[..]
         } else {
             q
@@ -780,8 +787,7 @@ mod tests {
                     assert!(close(a.0, b.0), "query {q:?} after {i} nodes: {a:?} against {b:?}");
                     assert!(close(space.distance_squared(kd.node(b.1), &q), b.0), "query {q:?}: {b:?}");
                     assert!(kd.alive[b.1], "query {q:?}: a cut node {b:?}");
-                    let qw: Vec<f64> =
-                        q.iter().zip(&kd.period).map(|(&x, p)| if p.is_finite() { wrap_angle(x) } else { x }).collect();
+                    let qw: Vec<f64> = q.iter().zip(&kd.period).map(|(&x, &p)| block_value(x, p)).collect();
                     assert_eq!(
                         super::scan::<0, true>(&kd.blocks, &qw, &kd.period),
                         b,
