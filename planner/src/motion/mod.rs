@@ -306,6 +306,11 @@ pub struct MotionSettings {
     /// their spread. 0.9 throughout saves more on the cage (mean 5,031, 90th percentile 9,836),
     /// but with it the built-in scenarios' plans under `bench deadlines` reached fewer goals at a
     /// 1 ms deadline (10-12 of 13 against 12). Equal to `rrt_local_bias`: one share throughout.
+    /// The best share depends on the robot: 0.7 on VAMP's problems (first 40 of a family, 16
+    /// seeds, collision checks a solved problem against 0.9) took the Fetch's cage 12-24% fewer
+    /// and left fewer runs without a path, the Panda's cage 6% fewer, but the UR5's cage 6% more
+    /// and the Baxter's three families 6-9% more. Odd attempts and odd racers draw with
+    /// `rrt_local_bias` throughout instead (see [`Self::rrt_restarts`] and [`Self::racers`]).
     pub rrt_late_local_bias: f64,
     /// RRT-Connect: samples of an attempt drawn before [`Self::rrt_late_local_bias`] applies.
     pub rrt_late_after: usize,
@@ -320,7 +325,13 @@ pub struct MotionSettings {
     /// planner's is. The racer threads look for work a while after their last racer before
     /// they sleep (yielding their core meanwhile; see [`set_racer_look`]), so that handing a
     /// racer over needs no system call. A validity other than a plain [`CollisionModel`]
-    /// races within the call, on the rayon pool, after a head start of 1 ms.
+    /// races within the call, on the rayon pool, after a head start of 1 ms. Odd racers draw
+    /// with [`Self::rrt_local_bias`] throughout (a portfolio of the two shares, see
+    /// [`Self::rrt_late_local_bias`]): on VAMP's Fetch bookshelf and cage problems (first 40
+    /// of each, two threads on two cores, two sets of 8 seeds, interleaved) the mean time
+    /// 3.29-3.53 -> 2.68-2.88 ms, the cage's 8.2-9.3 -> 6.2-6.7 ms, the slowest run 171-180 ->
+    /// 90 ms, within 1 ms the same (49-51%); the UR5's cage and bookshelf_small 178-188 ->
+    /// 192-194 µs (an earlier build), the Panda's and the Baxter's the same.
     pub racers: usize,
     /// Samples after which the planner gives up with [`PlanError::NoPath`] (RRT-Connect: per
     /// attempt, see [`Self::rrt_restarts`]): planning ends even without a deadline.
@@ -445,6 +456,7 @@ fn racer_settings(settings: &MotionSettings, k: usize, flag: &Arc<AtomicBool>) -
         seed: settings.seed.wrapping_add(k as u64),
         deadline: settings.deadline.clone().with_race_flag(Arc::clone(flag)),
         racers: 1,
+        rrt_late_local_bias: if k % 2 == 1 { settings.rrt_local_bias } else { settings.rrt_late_local_bias },
         ..settings.clone()
     }
 }
@@ -1267,6 +1279,29 @@ mod tests {
         }
         let one = MotionSettings { rrt_local_bias: 0.6, rrt_late_local_bias: 0.6, ..MotionSettings::default() };
         assert!(matches!(attempt_settings(&one, 1), std::borrow::Cow::Borrowed(_)));
+    }
+
+    /// Racers plan with seeds of their own, one planner each; odd racers draw with the early
+    /// share throughout.
+    #[test]
+    fn odd_racers_draw_with_the_early_share() {
+        let settings = MotionSettings {
+            seed: 7,
+            racers: 3,
+            rrt_local_bias: 0.3,
+            rrt_late_local_bias: 0.9,
+            ..MotionSettings::default()
+        };
+        let flag = Arc::new(AtomicBool::new(false));
+        for k in 0..4 {
+            let r = racer_settings(&settings, k, &flag);
+            let late = if k % 2 == 1 { 0.3 } else { 0.9 };
+            assert_eq!(
+                (r.seed, r.racers, r.rrt_local_bias, r.rrt_late_local_bias),
+                (7 + k as u64, 1, 0.3, late),
+                "racer {k}"
+            );
+        }
     }
 
     /// A racer's run hands the other racers over only once its search has begun: not while it
