@@ -51,7 +51,7 @@ def replica(module, settings, p, env, sampler, uniform_rng=None, dynamic_domain=
     # VAMP swaps before each iteration, starting from the goal tree: the start tree grows first.
     a, b = 1, 0
     sampler.reset()
-    rng = settings.range
+    reach = settings.range
 
     def free(q, v):
         return module.validate_motion([float(x) for x in q], [float(x) for x in q + v], env)
@@ -73,7 +73,7 @@ def replica(module, settings, p, env, sampler, uniform_rng=None, dynamic_domain=
         r = radius[near]
         if dynamic_domain and r < d:
             continue
-        step = (s - nodes[near]) if d < rng else (s - nodes[near]) * (rng / d)
+        step = (s - nodes[near]) if d < reach else (s - nodes[near]) * (reach / d)
         if free(nodes[near], step):
             new = nodes[near] + step
             nodes.append(new)
@@ -82,7 +82,7 @@ def replica(module, settings, p, env, sampler, uniform_rng=None, dynamic_domain=
             if dynamic_domain and r != np.inf:
                 radius[near] *= 1 + settings.alpha
             other, od = nearest(b, new)
-            n = max(1, int(np.ceil(od / rng)))
+            n = max(1, int(np.ceil(od / reach)))
             inc = (nodes[other] - new) / n
             prior, done = new, 0
             while done < n and free(prior, inc):
@@ -104,17 +104,33 @@ def main():
     import numpy as np
     import vamp
 
-    d = json.load(open(sys.argv[1]))
-    family = sys.argv[2] if len(sys.argv) > 2 else next(iter(d["problems"]))
-    count = int(sys.argv[3]) if len(sys.argv) > 3 else 20
-    seeds = int(sys.argv[4]) if len(sys.argv) > 4 else 3
-    module, plan, settings, _ = vamp.configure_robot_and_planner_with_kwargs(d["robot"], "rrtc")
+    args = sys.argv[1:]
+    if not 1 <= len(args) <= 4:
+        sys.exit("usage: rrtc_replica.py PROBLEMS.json [FAMILY] [COUNT] [SEEDS]")
+    try:
+        with open(args[0]) as f:
+            d = json.load(f)
+        problems = d["problems"]
+        robot = d["robot"]
+    except (OSError, ValueError, KeyError, TypeError) as e:
+        sys.exit(f"{args[0]}: not a VAMP problem file with 'robot' and 'problems' ({e})")
+    family = args[1] if len(args) > 1 else next(iter(problems), None)
+    if family not in problems:
+        sys.exit(f"{args[0]}: no family {family!r}; it has {', '.join(problems) or 'none'}")
+    try:
+        count = int(args[2]) if len(args) > 2 else 20
+        seeds = int(args[3]) if len(args) > 3 else 3
+    except ValueError as e:
+        sys.exit(f"COUNT and SEEDS must be whole numbers ({e})")
+    if count < 1 or seeds < 1:
+        sys.exit("COUNT and SEEDS must be at least 1")
+    module, plan, settings, _ = vamp.configure_robot_and_planner_with_kwargs(robot, "rrtc")
     sampler = module.halton()
     rows = {"VAMP (compiled)": [], "replica, Halton": [], "replica, Halton from its second point": [],
             "replica, Halton, no dynamic domain": [],
             "replica, uniform": [], "replica, uniform, no dynamic domain": []}
     same = 0
-    for p in d["problems"][family][:count]:
+    for p in problems[family][:count]:
         if not p["valid"]:
             continue
         env = vamp.problem_dict_to_vamp(p)
@@ -130,11 +146,13 @@ def main():
             rows["replica, uniform"].append(replica(module, settings, p, env, sampler, np.random.default_rng(seed)))
             rows["replica, uniform, no dynamic domain"].append(
                 replica(module, settings, p, env, sampler, np.random.default_rng(seed), dynamic_domain=False))
+    if not rows["VAMP (compiled)"]:
+        sys.exit(f"{args[0]}: the first {count} problems of {family} hold no valid one")
     print(f"{family}: {len(rows['VAMP (compiled)'])} valid problems; same iterations as compiled: {same}")
     for name, its in rows.items():
         done = [i for i in its if i is not None]
-        print(f"  {name:38s} median {statistics.median(done):8.1f}  mean {sum(done) / len(done):8.1f}  "
-              f"unsolved {len(its) - len(done)}")
+        figures = f"median {statistics.median(done):8.1f}  mean {sum(done) / len(done):8.1f}" if done else "none solved"
+        print(f"  {name:38s} {figures}  unsolved {len(its) - len(done)}")
 
 
 if __name__ == "__main__":
