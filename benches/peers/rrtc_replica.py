@@ -131,7 +131,7 @@ def main():
             "replica, uniform": [], "replica, uniform, no dynamic domain": []}
     same = 0
     for p in problems[family][:count]:
-        if not p["valid"]:
+        if not p.get("valid"):
             continue
         env = vamp.problem_dict_to_vamp(p)
         sampler.reset()
