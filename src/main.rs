@@ -352,9 +352,13 @@ enum BenchCommand {
         #[arg(long)]
         rrt_late_after: Option<usize>,
         /// The half-width of those samples' box around their node, as a share of each joint's
-        /// sampling width, above 0 (default 1/pi: 2 rad for a joint of one turn).
+        /// sampling width, above 0 (default 0.5; at most --rrt-local-reach).
         #[arg(long)]
         rrt_local_span: Option<f64>,
+        /// The most a joint of those samples is drawn from its node's value, rad (m for a
+        /// prismatic joint), above 0 (default 2; `inf`: the span alone).
+        #[arg(long)]
+        rrt_local_reach: Option<f64>,
         /// RRT-Connect without dynamic domain (Yershova et al. 2005; on by default).
         #[arg(long)]
         no_dynamic_domain: bool,
@@ -838,6 +842,7 @@ fn run(cli: Cli) -> Result<(), AppError> {
             rrt_late_local_bias,
             rrt_late_after,
             rrt_local_span,
+            rrt_local_reach,
             no_dynamic_domain,
             no_by_groups,
             serial_legs,
@@ -893,6 +898,12 @@ fn run(cli: Cli) -> Result<(), AppError> {
                     return Err(AppError::Usage(format!("--rrt-local-span must be a positive share, got {w}")));
                 }
                 args.rrt_local_span = w;
+            }
+            if let Some(r) = rrt_local_reach {
+                if r.is_nan() || r <= 0.0 {
+                    return Err(AppError::Usage(format!("--rrt-local-reach must be above 0 (rad, or `inf`), got {r}")));
+                }
+                args.rrt_local_reach = r;
             }
             if let Some(r) = resolution {
                 args.resolution = r;

@@ -87,8 +87,11 @@ pub struct MbmArgs {
     /// Samples of an attempt before `rrt_late_local_bias` applies.
     pub rrt_late_after: usize,
     /// The half-width of those samples' box around their node, as a share of each joint's
-    /// sampling width (the planner's default: 1/π, 2 rad for a joint of one turn).
+    /// sampling width (the planner's default: 0.5), at most `rrt_local_reach`.
     pub rrt_local_span: f64,
+    /// The most a joint of those samples is drawn from its node (rad, or m; the planner's
+    /// default: 2; infinite: the span alone).
+    pub rrt_local_reach: f64,
     /// Planners racing per problem (1: one planner on one thread; 2: two differently seeded
     /// planners, the second on a thread of its own; first path wins).
     pub threads: usize,
@@ -134,6 +137,7 @@ impl MbmArgs {
             rrt_late_local_bias: MotionSettings::default().rrt_late_local_bias,
             rrt_late_after: MotionSettings::default().rrt_late_after,
             rrt_local_span: MotionSettings::default().rrt_local_span,
+            rrt_local_reach: MotionSettings::default().rrt_local_reach,
             threads: 1,
             families: None,
             limit: None,
@@ -299,6 +303,10 @@ pub struct MbmSettings {
     /// (absent in reports written before it existed: read as 0).
     #[serde(default)]
     pub rrt_local_span: f64,
+    /// The most a joint of those samples is drawn from its node (rad, or m); `None`: no
+    /// bound but the span (and in reports written before it existed).
+    #[serde(default)]
+    pub rrt_local_reach: Option<f64>,
     /// Planners racing per problem.
     pub threads: usize,
     /// Plans per problem (run `r` with base seed `seed + r`).
@@ -718,6 +726,7 @@ fn run_problem(
         rrt_late_local_bias: args.rrt_late_local_bias,
         rrt_late_after: args.rrt_late_after,
         rrt_local_span: args.rrt_local_span,
+        rrt_local_reach: args.rrt_local_reach,
         racers: args.threads.max(1),
         ..MotionSettings::default()
     };
@@ -880,6 +889,7 @@ fn settings_of(args: &MbmArgs, loaded: &Loaded) -> MbmSettings {
         rrt_late_local_bias: args.rrt_late_local_bias,
         rrt_late_after: args.rrt_late_after,
         rrt_local_span: args.rrt_local_span,
+        rrt_local_reach: args.rrt_local_reach.is_finite().then_some(args.rrt_local_reach),
         threads: args.threads.max(1),
         runs: args.runs,
         limit: args.limit,
@@ -1063,8 +1073,9 @@ pub fn render_table(report: &MbmReport) -> String {
                 Some(from) => format!(", {} from sample {from} of an attempt", report.settings.rrt_late_local_bias),
                 None => String::new(),
             };
+            let reach = report.settings.rrt_local_reach.map(|r| format!(", at most {r} rad")).unwrap_or_default();
             format!(
-                " with {} of its samples near the growing tree (within {:.3} of each joint's width){late}",
+                " with {} of its samples near the growing tree (within {:.3} of each joint's width{reach}){late}",
                 report.settings.rrt_local_bias, report.settings.rrt_local_span
             )
         } else {

@@ -170,6 +170,7 @@ pub fn ompl_log(report: &MbmReport, family: &str, index: u32, machine: &Machine,
         format!("late_after = {}", s.rrt_late_after),
         format!("late_local_bias = {}", s.rrt_late_local_bias),
         format!("local_span = {}", s.rrt_local_span),
+        format!("local_reach = {}", s.rrt_local_reach.unwrap_or(f64::INFINITY)),
         format!("range = {}", s.rrt_range),
         format!(
             "sampler = {}",

@@ -426,6 +426,7 @@ pub(crate) fn plan<V: StateValidity>(
     let share = |p: f64| if p.is_finite() { p.clamp(0.0, 1.0) } else { 0.0 };
     let (early_bias, late_bias) = (share(settings.rrt_local_bias), share(settings.rrt_late_local_bias));
     let local_span = if settings.rrt_local_span.is_finite() { settings.rrt_local_span.max(0.0) } else { 0.0 };
+    let local_reach = if settings.rrt_local_reach.is_nan() { f64::INFINITY } else { settings.rrt_local_reach.max(0.0) };
     loop {
         if stats.samples - first_sample >= settings.max_samples {
             return Outcome::Infeasible;
@@ -440,7 +441,7 @@ pub(crate) fn plan<V: StateValidity>(
         let local_bias = if stats.samples - first_sample > settings.rrt_late_after { late_bias } else { early_bias };
         let near_node = (local_bias > 0.0 && rng.uniform() < local_bias).then(|| rng.below(a.len()));
         match near_node {
-            Some(k) if a.alive[k] => draw.near_into(robot, rng, a.node(k), local_span, &mut sample),
+            Some(k) if a.alive[k] => draw.near_into(robot, rng, a.node(k), (local_span, local_reach), &mut sample),
             _ => draw.next_into(robot, rng, &mut sample),
         }
         let mut new = None;

@@ -179,19 +179,21 @@ impl Draw {
     }
 
     /// A sample near `node`: each joint uniform within `span` times its sampling width of the
-    /// node's value (clamped to a bounded joint's limits; a continuous joint's value is left to
+    /// node's value, and within `reach` of it (rad, or m for a prismatic joint; the nearer of
+    /// the two), clamped to a bounded joint's limits (a continuous joint's value is left to
     /// wrap). On a robot with actuator strokes, redrawn until the strokes hold, in a box halved
     /// every four draws (16 in all), then a sample of [`Self::next_into`] instead.
-    pub fn near_into(&mut self, robot: &Robot, rng: &mut Rng, node: &[f64], span: f64, q: &mut [f64]) {
+    pub fn near_into(&mut self, robot: &Robot, rng: &mut Rng, node: &[f64], (span, reach): (f64, f64), q: &mut [f64]) {
         if node.len() != q.len() || q.len() != self.boxes.len() {
             return self.next_into(robot, rng, q);
         }
         for k in 0..16 {
-            let span = span / f64::from(1u32 << (k / 4));
+            let shrink = f64::from(1u32 << (k / 4));
+            let (span, reach) = (span / shrink, reach / shrink);
             // A local copy of the generator for the loop, as in `next_into`.
             let mut local = rng.clone();
             let mut draw = |v: &mut f64, x: f64, (lower, width): (f64, f64), bounded: bool| {
-                let y = x + (2.0 * local.uniform() - 1.0) * span * width;
+                let y = x + (2.0 * local.uniform() - 1.0) * (span * width).min(reach);
                 *v = if bounded { y.clamp(lower, lower + width) } else { y };
             };
             if self.held.is_empty() {
@@ -366,7 +368,7 @@ mod tests {
                     if k % 2 == 0 {
                         draw.next_into(&robot, &mut rng, &mut q);
                     } else {
-                        draw.near_into(&robot, &mut rng, &node, 0.3, &mut q);
+                        draw.near_into(&robot, &mut rng, &node, (0.3, f64::INFINITY), &mut q);
                     }
                     for d in 0..n {
                         if moving[d] {
@@ -430,12 +432,18 @@ mod tests {
                     continue;
                 }
                 let (mut below, mut above) = (vec![false; n], vec![false; n]);
-                for _ in 0..200 {
-                    draw.near_into(&robot, &mut rng, &node, 0.25, &mut q);
+                // Half the draws within a reach of 0.3 (rad or m), nearer than a quarter of
+                // most joints' widths.
+                let mut reached = vec![false; n];
+                for j in 0..200 {
+                    let reach = if j % 2 == 0 { f64::INFINITY } else { 0.3 };
+                    draw.near_into(&robot, &mut rng, &node, (0.25, reach), &mut q);
                     for i in 0..n {
                         let (lower, width) = draw.boxes[i];
                         let off = q[i] - node[i];
-                        assert!(off.abs() <= 0.25 * width * (1.0 + 1e-12), "{}: joint {i} moved {off}", robot.name());
+                        let most = (0.25 * width).min(reach) * (1.0 + 1e-12);
+                        assert!(off.abs() <= most, "{}: joint {i} moved {off} (reach {reach})", robot.name());
+                        reached[i] |= off.abs() > 0.3 && 0.25 * width > 0.3;
                         if draw.bounded[i] {
                             assert!(
                                 q[i] >= lower && q[i] <= lower + width,
@@ -451,6 +459,13 @@ mod tests {
                 for i in 0..n {
                     let at_lower = draw.bounded[i] && node[i] <= draw.boxes[i].0;
                     assert!(above[i] && (below[i] || at_lower), "{}: joint {i} drawn on one side only", robot.name());
+                    // Without a reach a wide joint goes past 0.3 from its node (so the bound
+                    // above tests something).
+                    let (lower, width) = draw.boxes[i];
+                    let room = if draw.bounded[i] { (node[i] - lower).max(lower + width - node[i]) } else { width };
+                    if 0.25 * width > 0.6 && room > 0.6 {
+                        assert!(reached[i], "{}: joint {i} never drawn past 0.3", robot.name());
+                    }
                 }
             }
             let wraps = (0..n).any(|i| !draw.bounded[i]);
@@ -458,7 +473,7 @@ mod tests {
                 // A continuous joint near +-pi goes past it.
                 let node = vec![3.1; n];
                 let past = (0..200).any(|_| {
-                    draw.near_into(&robot, &mut rng, &node, 0.25, &mut q);
+                    draw.near_into(&robot, &mut rng, &node, (0.25, 0.3), &mut q);
                     (0..n).any(|i| !draw.bounded[i] && q[i] > std::f64::consts::PI)
                 });
                 assert!(past, "{}: a continuous joint was clamped", robot.name());
