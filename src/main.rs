@@ -359,6 +359,19 @@ enum BenchCommand {
         /// prismatic joint), above 0 (default 2; `inf`: the span alone).
         #[arg(long)]
         rrt_local_reach: Option<f64>,
+        /// Samples an RRT-Connect attempt may draw before it starts again with new trees, at
+        /// least 1 (default 50,000).
+        #[arg(long, value_name = "N")]
+        max_samples: Option<usize>,
+        /// RRT-Connect attempts after the first (default 64): a problem with no path ends after
+        /// (1 + N) x --max-samples samples, or at the deadline.
+        #[arg(long, value_name = "N")]
+        rrt_restarts: Option<usize>,
+        /// With certified edges, RRT-Connect probes its tree edges at this step (rad, the
+        /// largest joint change between probed points) and certifies them once they lie on a
+        /// path; 0 certifies each as it is added (default 0.1).
+        #[arg(long, value_name = "RAD")]
+        lazy_probe: Option<f64>,
         /// RRT-Connect without dynamic domain (Yershova et al. 2005; on by default).
         #[arg(long)]
         no_dynamic_domain: bool,
@@ -843,6 +856,9 @@ fn run(cli: Cli) -> Result<(), AppError> {
             rrt_late_after,
             rrt_local_span,
             rrt_local_reach,
+            max_samples,
+            rrt_restarts,
+            lazy_probe,
             no_dynamic_domain,
             no_by_groups,
             serial_legs,
@@ -904,6 +920,23 @@ fn run(cli: Cli) -> Result<(), AppError> {
                     return Err(AppError::Usage(format!("--rrt-local-reach must be above 0 (rad, or `inf`), got {r}")));
                 }
                 args.rrt_local_reach = r;
+            }
+            if let Some(n) = max_samples {
+                if n == 0 {
+                    return Err(AppError::Usage("--max-samples must be at least 1, got 0".to_string()));
+                }
+                args.max_samples = n;
+            }
+            if let Some(n) = rrt_restarts {
+                args.rrt_restarts = n;
+            }
+            if let Some(step) = lazy_probe {
+                if !(step.is_finite() && step >= 0.0) {
+                    return Err(AppError::Usage(format!(
+                        "--lazy-probe must be 0 (every tree edge certified as added) or a positive number of rad, got {step}"
+                    )));
+                }
+                args.lazy_probe = step;
             }
             if let Some(r) = resolution {
                 args.resolution = r;

@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 use common::{TempDir, embodied};
 use embodied::AppError;
 use embodied::batch::{JsonlWriter, Shard, read_shards};
-use embodied::mbm::{MbmArgs, MbmReport, ProblemResult, merge_mbm, render_table, run_mbm_to};
+use embodied::mbm::{MbmArgs, MbmReport, ProblemResult, ProblemStatus, merge_mbm, render_table, run_mbm_to};
 
 fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
@@ -509,4 +509,43 @@ fn the_screen_length_reads_back_infinite_or_finite() {
     assert!(value.as_object_mut().unwrap().remove("screen_above").is_some());
     let old: embodied::mbm::MbmSettings = serde_json::from_value(value).expect("an old report's settings");
     assert_eq!(old.screen_above, f64::INFINITY);
+}
+
+/// `max_samples`, `rrt_restarts` and `lazy_probe` reach the planner and the report: with
+/// attempts of 5 samples and one restart, no solved run drew more than 10 samples and the runs
+/// that need more end without a path; with the defaults every problem is solved. A report
+/// written before they were recorded reads them as unknown.
+#[test]
+fn attempt_length_restarts_and_probe_step_reach_the_planner_and_the_report() {
+    let dir = TempDir::new("batch-attempts");
+    let mut args = mbm_args();
+    args.max_samples = 5;
+    args.rrt_restarts = 1;
+    args.lazy_probe = 0.05;
+    let short = run_to(&args, &dir.join("short.jsonl"));
+    let s = &short.settings;
+    assert_eq!((s.max_samples, s.rrt_restarts, s.lazy_probe), (Some(5), Some(1), Some(0.05)));
+    let samples = |r: &ProblemResult| r.stats.as_ref().and_then(|v| v["samples"].as_u64());
+    let mut out_of_samples = 0;
+    for r in short.problems.iter().filter(|r| !r.status.is_invalid()) {
+        if r.solved {
+            assert!(samples(r).is_some_and(|n| n <= 10), "{}/{}: {:?}", r.family, r.index, r.stats);
+        } else {
+            assert_eq!(r.status, ProblemStatus::Failed, "{}/{}: {:?}", r.family, r.index, r.message);
+            assert!(r.message.as_deref().is_some_and(|m| m.contains("with 10 samples")), "{:?}", r.message);
+            out_of_samples += 1;
+        }
+    }
+    assert!(out_of_samples > 0, "every fixture problem was solved within 10 samples");
+    let full = run_to(&mbm_args(), &dir.join("full.jsonl"));
+    let s = &full.settings;
+    assert_eq!((s.max_samples, s.rrt_restarts, s.lazy_probe), (Some(50_000), Some(64), Some(0.1)));
+    assert!(full.problems.iter().filter(|r| !r.status.is_invalid()).all(|r| r.solved));
+    let mut old = serde_json::to_value(&full.settings).unwrap();
+    let fields = old.as_object_mut().unwrap();
+    for f in ["max_samples", "rrt_restarts", "lazy_probe"] {
+        assert!(fields.remove(f).is_some(), "{f}");
+    }
+    let old: embodied::mbm::MbmSettings = serde_json::from_value(old).expect("an old report's settings");
+    assert_eq!((old.max_samples, old.rrt_restarts, old.lazy_probe), (None, None, None));
 }

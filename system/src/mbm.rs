@@ -92,6 +92,15 @@ pub struct MbmArgs {
     /// The most a joint of those samples is drawn from its node (rad, or m; the planner's
     /// default: 2; infinite: the span alone).
     pub rrt_local_reach: f64,
+    /// Samples an RRT-Connect attempt may draw before it starts again with new trees (the
+    /// planner's default: 50,000; see `MotionSettings::max_samples`).
+    pub max_samples: usize,
+    /// Attempts after the first (the planner's default: 64; see `MotionSettings::rrt_restarts`).
+    pub rrt_restarts: usize,
+    /// RRT-Connect's tree edges probed at this step (rad) and certified once on a path; 0:
+    /// each certified as it is added (the planner's default: 0.1; see
+    /// `MotionSettings::lazy_probe`).
+    pub lazy_probe: f64,
     /// Planners racing per problem (1: one planner on one thread; 2: two differently seeded
     /// planners, the second on a thread of its own; first path wins).
     pub threads: usize,
@@ -138,6 +147,9 @@ impl MbmArgs {
             rrt_late_after: MotionSettings::default().rrt_late_after,
             rrt_local_span: MotionSettings::default().rrt_local_span,
             rrt_local_reach: MotionSettings::default().rrt_local_reach,
+            max_samples: MotionSettings::default().max_samples,
+            rrt_restarts: MotionSettings::default().rrt_restarts,
+            lazy_probe: MotionSettings::default().lazy_probe,
             threads: 1,
             families: None,
             limit: None,
@@ -307,6 +319,17 @@ pub struct MbmSettings {
     /// bound but the span (and in reports written before it existed).
     #[serde(default)]
     pub rrt_local_reach: Option<f64>,
+    /// Samples an RRT-Connect attempt could draw before starting again (`None` in reports
+    /// written before it was recorded).
+    #[serde(default)]
+    pub max_samples: Option<usize>,
+    /// Attempts after the first (`None` in reports written before it was recorded).
+    #[serde(default)]
+    pub rrt_restarts: Option<usize>,
+    /// The step tree edges were probed at (rad; 0: each certified as added; `None` in reports
+    /// written before it was recorded).
+    #[serde(default)]
+    pub lazy_probe: Option<f64>,
     /// Planners racing per problem.
     pub threads: usize,
     /// Plans per problem (run `r` with base seed `seed + r`).
@@ -727,6 +750,9 @@ fn run_problem(
         rrt_late_after: args.rrt_late_after,
         rrt_local_span: args.rrt_local_span,
         rrt_local_reach: args.rrt_local_reach,
+        max_samples: args.max_samples,
+        rrt_restarts: args.rrt_restarts,
+        lazy_probe: args.lazy_probe,
         racers: args.threads.max(1),
         ..MotionSettings::default()
     };
@@ -890,6 +916,9 @@ fn settings_of(args: &MbmArgs, loaded: &Loaded) -> MbmSettings {
         rrt_late_after: args.rrt_late_after,
         rrt_local_span: args.rrt_local_span,
         rrt_local_reach: args.rrt_local_reach.is_finite().then_some(args.rrt_local_reach),
+        max_samples: Some(args.max_samples),
+        rrt_restarts: Some(args.rrt_restarts),
+        lazy_probe: Some(args.lazy_probe),
         threads: args.threads.max(1),
         runs: args.runs,
         limit: args.limit,

@@ -162,7 +162,7 @@ pub fn ompl_log(report: &MbmReport, family: &str, index: u32, machine: &Machine,
         EdgeCheck::Certified { tolerance } => format!("certified (tolerance {tolerance} m)"),
         EdgeCheck::Sampled => format!("sampled at {} rad", s.resolution),
     };
-    let common = [
+    let mut common = vec![
         format!("balance = {}", flag(s.balance)),
         format!("dynamic_domain = {}", flag(s.dynamic_domain)),
         format!("edge_check = {edges}"),
@@ -181,6 +181,10 @@ pub fn ompl_log(report: &MbmReport, family: &str, index: u32, machine: &Machine,
         format!("screen_above = {}", s.screen_above),
         format!("threads = {}", s.threads),
     ];
+    // Recorded since these settings became options; older reports leave them out.
+    common.extend(s.lazy_probe.map(|v| format!("lazy_probe = {v}")));
+    common.extend(s.max_samples.map(|v| format!("max_samples = {v}")));
+    common.extend(s.rrt_restarts.map(|v| format!("restarts = {v}")));
     line(format!("{} common properties", common.len()));
     for c in common {
         line(c);
