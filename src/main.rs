@@ -573,6 +573,20 @@ fn to_json<T: serde::Serialize>(value: &T) -> Result<String, AppError> {
 /// ms; the median within noise); more are not measured.
 const AUTO_RACERS: usize = 2;
 
+/// A flag's value when it is given and `ok` holds; otherwise a usage error `says, got VALUE`.
+/// (`ok` sees NaN as it is: a comparison with NaN is false, so NaN is refused unless `ok` says
+/// otherwise.)
+fn checked<T: Copy + std::fmt::Display>(
+    value: Option<T>,
+    ok: impl Fn(T) -> bool,
+    says: &str,
+) -> Result<Option<T>, AppError> {
+    match value {
+        Some(v) if !ok(v) => Err(AppError::Usage(format!("{says}, got {v}"))),
+        _ => Ok(value),
+    }
+}
+
 /// `--threads`: `auto` (the cores this process may run on, at most [`AUTO_RACERS`]) or a count
 /// of at least 1.
 fn racers_of(value: &str) -> Result<usize, AppError> {
@@ -888,54 +902,36 @@ fn run(cli: Cli) -> Result<(), AppError> {
             args.parallel_legs = !serial_legs;
             args.balance = !no_balance;
             args.sampler = sampler;
-            if let Some(r) = rrt_range {
-                if !(r.is_finite() && r > 0.0) {
-                    return Err(AppError::Usage(format!("--rrt-range must be a positive number, got {r}")));
-                }
+            let share = |p: f64| (0.0..=1.0).contains(&p);
+            if let Some(r) = checked(rrt_range, |r| r.is_finite() && r > 0.0, "--rrt-range must be a positive number")?
+            {
                 args.rrt_range = r;
             }
-            if let Some(p) = rrt_local_bias {
-                if !(0.0..=1.0).contains(&p) {
-                    return Err(AppError::Usage(format!("--rrt-local-bias must be a share in [0, 1], got {p}")));
-                }
+            if let Some(p) = checked(rrt_local_bias, share, "--rrt-local-bias must be a share in [0, 1]")? {
                 args.rrt_local_bias = p;
             }
-            if let Some(p) = rrt_late_local_bias {
-                if !(0.0..=1.0).contains(&p) {
-                    return Err(AppError::Usage(format!("--rrt-late-local-bias must be a share in [0, 1], got {p}")));
-                }
+            if let Some(p) = checked(rrt_late_local_bias, share, "--rrt-late-local-bias must be a share in [0, 1]")? {
                 args.rrt_late_local_bias = p;
             }
             if let Some(n) = rrt_late_after {
                 args.rrt_late_after = n;
             }
-            if let Some(w) = rrt_local_span {
-                if !(w.is_finite() && w > 0.0) {
-                    return Err(AppError::Usage(format!("--rrt-local-span must be a positive share, got {w}")));
-                }
+            let says = "--rrt-local-span must be a positive share";
+            if let Some(w) = checked(rrt_local_span, |w| w.is_finite() && w > 0.0, says)? {
                 args.rrt_local_span = w;
             }
-            if let Some(r) = rrt_local_reach {
-                if r.is_nan() || r <= 0.0 {
-                    return Err(AppError::Usage(format!("--rrt-local-reach must be above 0 (rad, or `inf`), got {r}")));
-                }
+            let says = "--rrt-local-reach must be above 0 (rad, or `inf`)";
+            if let Some(r) = checked(rrt_local_reach, |r| r > 0.0, says)? {
                 args.rrt_local_reach = r;
             }
-            if let Some(n) = max_samples {
-                if n == 0 {
-                    return Err(AppError::Usage("--max-samples must be at least 1, got 0".to_string()));
-                }
+            if let Some(n) = checked(max_samples, |n| n > 0, "--max-samples must be at least 1")? {
                 args.max_samples = n;
             }
             if let Some(n) = rrt_restarts {
                 args.rrt_restarts = n;
             }
-            if let Some(step) = lazy_probe {
-                if !(step.is_finite() && step >= 0.0) {
-                    return Err(AppError::Usage(format!(
-                        "--lazy-probe must be 0 (every tree edge certified as added) or a positive number of rad, got {step}"
-                    )));
-                }
+            let says = "--lazy-probe must be 0 (every tree edge certified as added) or a positive number of rad";
+            if let Some(step) = checked(lazy_probe, |s| s.is_finite() && s >= 0.0, says)? {
                 args.lazy_probe = step;
             }
             if let Some(r) = resolution {
@@ -945,20 +941,13 @@ fn run(cli: Cli) -> Result<(), AppError> {
             if let Some(n) = shortcut_attempts {
                 args.shortcut_attempts = n;
             }
-            if let Some(g) = shortcut_min_gain {
-                if !(g.is_finite() && g >= 0.0) {
-                    return Err(AppError::Usage(format!(
-                        "--shortcut-min-gain must be zero or a positive number, got {g}"
-                    )));
-                }
+            let says = "--shortcut-min-gain must be zero or a positive number";
+            if let Some(g) = checked(shortcut_min_gain, |g| g.is_finite() && g >= 0.0, says)? {
                 args.shortcut_min_gain = g;
             }
-            if let Some(l) = screen_above {
-                if l.is_nan() || l < 0.0 {
-                    return Err(AppError::Usage(format!(
-                        "--screen-above must be zero, a positive number or inf, got {l}"
-                    )));
-                }
+            if let Some(l) =
+                checked(screen_above, |l| l >= 0.0, "--screen-above must be zero, a positive number or inf")?
+            {
                 args.screen_above = l;
             }
             args.deadline_ms = deadline_ms;
