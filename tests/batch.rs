@@ -537,10 +537,14 @@ fn attempt_length_restarts_and_probe_step_reach_the_planner_and_the_report() {
         }
     }
     assert!(out_of_samples > 0, "every fixture problem was solved within 10 samples");
+    let table = render_table(&short);
+    assert!(table.contains(", attempts of 5 samples, 1 restart, tree edges probed every 0.05 rad ("), "{table}");
     let full = run_to(&mbm_args(), &dir.join("full.jsonl"));
     let s = &full.settings;
     assert_eq!((s.max_samples, s.rrt_restarts, s.lazy_probe), (Some(50_000), Some(64), Some(0.1)));
     assert!(full.problems.iter().filter(|r| !r.status.is_invalid()).all(|r| r.solved));
+    let table = render_table(&full);
+    assert!(!table.contains("attempts of") && !table.contains("tree edges"), "{table}");
     let mut old = serde_json::to_value(&full.settings).unwrap();
     let fields = old.as_object_mut().unwrap();
     for f in ["max_samples", "rrt_restarts", "lazy_probe"] {

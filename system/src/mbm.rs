@@ -1038,6 +1038,31 @@ fn fmt_us(v: Option<f64>) -> String {
     }
 }
 
+/// The attempt length, restarts and edge-probe step of RRT-Connect when any differs from the
+/// planner's defaults (`MotionSettings`), for the table's first line; empty otherwise and for
+/// reports that did not record them.
+fn attempts_note(s: &MbmSettings) -> String {
+    let d = MotionSettings::default();
+    let mut parts = Vec::new();
+    if let (Some(n), Some(r)) = (s.max_samples, s.rrt_restarts)
+        && (n != d.max_samples || r != d.rrt_restarts)
+    {
+        parts.push(format!("attempts of {n} samples, {r} restart{}", if r == 1 { "" } else { "s" }));
+    }
+    if let Some(step) = s.lazy_probe.filter(|&p| p != d.lazy_probe) {
+        parts.push(if step == 0.0 {
+            "tree edges certified as added".to_string()
+        } else {
+            format!("tree edges probed every {step} rad")
+        });
+    }
+    if s.algorithm != PlannerKind::RrtConnect || parts.is_empty() {
+        String::new()
+    } else {
+        format!(", {}", parts.join(", "))
+    }
+}
+
 /// A plain-text table for the terminal: one row per family and one for all.
 pub fn render_table(report: &MbmReport) -> String {
     let header = [
@@ -1092,7 +1117,7 @@ pub fn render_table(report: &MbmReport) -> String {
         EdgeCheck::Sampled => format!("edges sampled at {} rad", report.settings.resolution),
     };
     let mut out = format!(
-        "MotionBenchMaker: deadline {} ms, seed {}, {edges}, paths re-checked at {} rad, {}{} ({} thread{}){}{}\n",
+        "MotionBenchMaker: deadline {} ms, seed {}, {edges}, paths re-checked at {} rad, {}{}{} ({} thread{}){}{}\n",
         report.settings.deadline_ms,
         report.settings.seed,
         report.settings.verify_resolution,
@@ -1110,6 +1135,7 @@ pub fn render_table(report: &MbmReport) -> String {
         } else {
             String::new()
         },
+        attempts_note(&report.settings),
         report.settings.threads,
         if report.settings.threads == 1 { "" } else { "s" },
         if report.settings.runs > 1 { format!(", {} runs per problem", report.settings.runs) } else { String::new() },
