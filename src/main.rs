@@ -506,6 +506,12 @@ enum BenchCommand {
         plot: Option<PathBuf>,
         #[arg(long, default_value_t = 1)]
         seed: u64,
+        /// Plan every problem with this many planner seeds, each counted as a problem (the
+        /// scenario's seed and the next ones; for the MotionBenchMaker sample --seed and the next
+        /// ones), at least 1: one problem's time depends on its random stream far more than on a
+        /// setting.
+        #[arg(long, default_value_t = 1, value_name = "N")]
+        planner_seeds: u64,
         /// Add a sample of MotionBenchMaker problems from this folder of family folders (e.g.
         /// the unpacked problems/); needs --urdf and --srdf.
         #[arg(long, requires_all = ["urdf", "srdf"])]
@@ -1084,11 +1090,13 @@ fn run(cli: Cli) -> Result<(), AppError> {
             json,
             plot,
             seed,
+            planner_seeds,
             mbm,
             urdf,
             srdf,
             mbm_sample,
         }) => {
+            checked(Some(planner_seeds), |n| n > 0, "--planner-seeds must be at least 1")?;
             let mbm = match (mbm, urdf, srdf) {
                 (Some(problems), Some(urdf), Some(srdf)) => {
                     Some(embodied::deadlines::MbmSample { urdf, srdf, problems, count: mbm_sample })
@@ -1106,6 +1114,7 @@ fn run(cli: Cli) -> Result<(), AppError> {
                 deadlines_ms,
                 scenarios,
                 seed,
+                planner_seeds,
                 mbm,
                 ..embodied::deadlines::DeadlineArgs::default()
             };

@@ -79,6 +79,9 @@ fn exit_status_0_success_1_not_succeeded_2_bad_input() {
         assert_eq!(code, 2, "{flag}: {err}");
         assert!(err.contains(says), "{flag}: {err}");
     }
+    let (code, _, err) = embodied(&["bench", "deadlines", "--scenarios", "irp6-pick", "--planner-seeds", "0"]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("--planner-seeds must be at least 1, got 0"), "{err}");
     // The statuses are documented in --help.
     let (code, out, _) = embodied(&["--help"]);
     assert_eq!(code, 0);

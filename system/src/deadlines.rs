@@ -55,6 +55,12 @@ pub struct DeadlineArgs {
     pub max_steps: u64,
     /// Seed of the runtime and the planner.
     pub seed: u64,
+    /// Planner seeds per planning problem (at least 1): a scenario agent's problem is planned
+    /// with its scenario's planner seed and the next `planner_seeds - 1`, a MotionBenchMaker
+    /// problem with `seed` and the next ones; each seed counts as a problem of its own
+    /// (`name#k` from the second). A planner's time on one problem depends on its random
+    /// stream far more than on a setting, so comparing settings at tight deadlines needs many.
+    pub planner_seeds: u64,
 }
 
 impl Default for DeadlineArgs {
@@ -65,6 +71,7 @@ impl Default for DeadlineArgs {
             mbm: None,
             max_steps: 60_000,
             seed: 1,
+            planner_seeds: 1,
         }
     }
 }
@@ -216,15 +223,18 @@ fn problems(args: &DeadlineArgs) -> Result<Vec<Problem>, SystemError> {
         let starts: Vec<Vec<Vec<f64>>> = sc.agents.iter().map(|a| vec![a.start.clone()]).collect();
         for (k, a) in sc.agents.iter().enumerate() {
             if let Some(goal) = &a.goal {
-                out.push(Problem {
-                    set: "scenarios",
-                    name: format!("{}/{}", sc.name, a.name),
-                    collision: agent_problem(&sc, k, &starts),
-                    start: a.start.clone(),
-                    goal: goal_of(goal),
-                    seed: sc.planner.seed,
-                    resolution: sc.planner.resolution,
-                });
+                let collision = agent_problem(&sc, k, &starts);
+                for j in 0..args.planner_seeds.max(1) {
+                    out.push(Problem {
+                        set: "scenarios",
+                        name: seeded_name(format!("{}/{}", sc.name, a.name), j),
+                        collision: collision.clone(),
+                        start: a.start.clone(),
+                        goal: goal_of(goal),
+                        seed: sc.planner.seed.wrapping_add(j),
+                        resolution: sc.planner.resolution,
+                    });
+                }
             }
         }
     }
@@ -232,15 +242,17 @@ fn problems(args: &DeadlineArgs) -> Result<Vec<Problem>, SystemError> {
         let mut margs = crate::mbm::MbmArgs::new(&m.urdf, &m.srdf, &m.problems);
         margs.seed = args.seed;
         for p in crate::mbm::sample_problems(&margs, m.count)? {
-            out.push(Problem {
-                set: "mbm",
-                name: p.name,
-                collision: p.model,
-                start: p.start,
-                goal: Goal::Configuration(p.goal),
-                seed: args.seed,
-                resolution: margs.resolution,
-            });
+            for j in 0..args.planner_seeds.max(1) {
+                out.push(Problem {
+                    set: "mbm",
+                    name: seeded_name(p.name.clone(), j),
+                    collision: p.model.clone(),
+                    start: p.start.clone(),
+                    goal: Goal::Configuration(p.goal.clone()),
+                    seed: args.seed.wrapping_add(j),
+                    resolution: margs.resolution,
+                });
+            }
         }
     }
     if out.is_empty() && task_scenarios(args)?.is_empty() {
@@ -249,6 +261,12 @@ fn problems(args: &DeadlineArgs) -> Result<Vec<Problem>, SystemError> {
         ));
     }
     Ok(out)
+}
+
+/// A problem's name under its `j`-th planner seed: the name itself for the first, `name#j`
+/// after it.
+fn seeded_name(name: String, j: u64) -> String {
+    if j == 0 { name } else { format!("{name}#{j}") }
 }
 
 /// Per-run tallies read from the log.

@@ -100,3 +100,27 @@ fn task_plans_are_benchmarked_as_their_own_set() {
     assert!(table.contains("tasks (1): two-irp6-stack"), "{table}");
     eprintln!("{table}");
 }
+
+/// With three planner seeds a scenario's planning problem counts three times, under its name
+/// and `#1`, `#2`: a zero deadline delivers none of them, and 200 ms reaches the goal with each
+/// seed.
+#[test]
+fn planner_seeds_multiply_the_problems() {
+    let base = DeadlineArgs {
+        deadlines_ms: vec![0.0, 200.0],
+        scenarios: vec!["irp6-pick".into()],
+        max_steps: 6000,
+        ..DeadlineArgs::default()
+    };
+    let one = run_deadline_bench(&base).expect("bench runs");
+    let three = run_deadline_bench(&DeadlineArgs { planner_seeds: 3, ..base }).expect("bench runs");
+    let names: Vec<&str> = three.problems.iter().map(|(_, n)| n.as_str()).collect();
+    assert_eq!(names, ["irp6-pick/irp6p", "irp6-pick/irp6p#1", "irp6-pick/irp6p#2"], "{names:?}");
+    assert_eq!(one.problems.len(), 1);
+    for (a, b) in one.rows.iter().zip(&three.rows) {
+        assert_eq!((a.problems * 3, a.deadline_ms), (b.problems, b.deadline_ms));
+        assert!(b.requested >= 3 * usize::from(a.requested > 0), "{} ms: {} requests", b.deadline_ms, b.requested);
+    }
+    assert_eq!(three.rows[0].goals_reached, 0);
+    assert_eq!(three.rows[1].goals_reached, 3);
+}
