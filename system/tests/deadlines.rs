@@ -6,15 +6,19 @@ use std::path::PathBuf;
 
 use embodied_system::deadlines::{DeadlineArgs, MbmSample, plot_svg, render_table, run_deadline_bench};
 
-#[test]
-fn small_deadline_bench_is_consistent() {
-    let args = DeadlineArgs {
+/// The IRp-6 pick scenario at a zero deadline and at 200 ms.
+fn irp6_pick_args() -> DeadlineArgs {
+    DeadlineArgs {
         deadlines_ms: vec![0.0, 200.0],
         scenarios: vec!["irp6-pick".into()],
         max_steps: 6000,
         ..DeadlineArgs::default()
-    };
-    let report = run_deadline_bench(&args).expect("bench runs");
+    }
+}
+
+#[test]
+fn small_deadline_bench_is_consistent() {
+    let report = run_deadline_bench(&irp6_pick_args()).expect("bench runs");
     assert_eq!(report.rows.len(), 2);
     assert!(!report.problems.is_empty());
     for r in &report.rows {
@@ -106,12 +110,7 @@ fn task_plans_are_benchmarked_as_their_own_set() {
 /// seed.
 #[test]
 fn planner_seeds_multiply_the_problems() {
-    let base = DeadlineArgs {
-        deadlines_ms: vec![0.0, 200.0],
-        scenarios: vec!["irp6-pick".into()],
-        max_steps: 6000,
-        ..DeadlineArgs::default()
-    };
+    let base = irp6_pick_args();
     let one = run_deadline_bench(&base).expect("bench runs");
     let three = run_deadline_bench(&DeadlineArgs { planner_seeds: 3, ..base }).expect("bench runs");
     let names: Vec<&str> = three.problems.iter().map(|(_, n)| n.as_str()).collect();
