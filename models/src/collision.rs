@@ -816,8 +816,16 @@ pub struct CollisionScratch {
     spans: Vec<Span>,
     /// The pieces a level of single-precision batches leaves (index at the level's cut, self
     /// pairs free), and those of the level before while the next runs.
-    lanes_left: Vec<(u32, bool)>,
-    lanes_parents: Vec<(u32, bool)>,
+    lanes_left: Vec<(u32, bool, u64)>,
+    lanes_parents: Vec<(u32, bool, u64)>,
+    /// Whether a level of the certificate's batches tests only what the level before left
+    /// near (the groups near an obstacle, the self pairs not found free); false: everything,
+    /// for tests that compare the two.
+    scoped_levels: bool,
+    /// Batches of the certificate's levels that skipped a group's obstacle tests or the self
+    /// pairs (for tests).
+    #[cfg(test)]
+    pub(crate) scoped_batches: u64,
     steps: Vec<f64>,
     /// The joint steps of the segment a certificate checks (signed).
     delta: Vec<f64>,
@@ -838,6 +846,14 @@ impl Default for CollisionScratch {
 }
 
 impl CollisionScratch {
+    /// This scratch with every level of the certificate's batches testing everything (see
+    /// `scoped_levels`), for tests that compare the two.
+    #[cfg(test)]
+    pub(crate) fn with_unscoped_levels(mut self) -> Self {
+        self.scoped_levels = false;
+        self
+    }
+
     /// An empty scratch space; it grows to the size the first query needs.
     pub const fn new() -> Self {
         Self {
@@ -856,6 +872,9 @@ impl CollisionScratch {
             spans: Vec::new(),
             lanes_left: Vec::new(),
             lanes_parents: Vec::new(),
+            scoped_levels: true,
+            #[cfg(test)]
+            scoped_batches: 0,
             steps: Vec::new(),
             delta: Vec::new(),
             step: Vec::new(),
@@ -1336,6 +1355,8 @@ impl CollisionModel {
             pairs_of_near: false,
             along: false,
             still: 0,
+            settled: 0,
+            pairs_settled: false,
         };
         let answer = fast.free_lanes(input, dof, solids32, grow, &mut s.spheres.lanes);
         let used = (1u32 << n) - 1;
@@ -1455,6 +1476,8 @@ impl CollisionModel {
             pairs_of_near: false,
             along: false,
             still,
+            settled: 0,
+            pairs_settled: false,
         };
         let input = LaneInput::Segment(SegmentIn { a, delta, n, ids: lane_ids, end });
         let answer = fast.free_lanes(input, dof, solids32, margins, &mut s.spheres.lanes);
@@ -2312,13 +2335,13 @@ impl CollisionModel {
         let pieces = need.next_multiple_of(lanes::LANES).min(LANES_MAX_PIECES);
         let mut left = std::mem::take(&mut s.lanes_left);
         left.clear();
-        let first_ids = lane_pieces_in_order(pieces).map(|i| (i as u32, false));
+        let first_ids = lane_pieces_in_order(pieces).map(|i| (i as u32, false, u64::MAX));
         let (mut batches, mut hit) = self.pieces_in_lanes(
             fast,
             solids32,
             (qa, delta, still),
             (travel, steps),
-            (pieces, levels == 1),
+            pieces,
             first_ids,
             &mut left,
             (&mut *margins, &mut *step, &mut *dir),
@@ -2337,20 +2360,13 @@ impl CollisionModel {
             let mut parents = std::mem::take(&mut s.lanes_parents);
             std::mem::swap(&mut parents, &mut left);
             left.clear();
-            let next = parents.iter().flat_map(|&(i, pairs)| (0..cut as u32).map(move |j| (i * cut as u32 + j, pairs)));
+            let next = parents
+                .iter()
+                .flat_map(|&(i, pairs, near)| (0..cut as u32).map(move |j| (i * cut as u32 + j, pairs, near)));
             at *= cut;
             let bufs = (&mut *margins, &mut *step, &mut *dir);
-            let (b, h) = self.pieces_in_lanes(
-                fast,
-                solids32,
-                (qa, delta, still),
-                (travel, steps),
-                (at, done + 1 == levels),
-                next,
-                &mut left,
-                bufs,
-                s,
-            );
+            let (b, h) =
+                self.pieces_in_lanes(fast, solids32, (qa, delta, still), (travel, steps), at, next, &mut left, bufs, s);
             batches += b;
             hit = h;
             done += 1;
@@ -2360,7 +2376,7 @@ impl CollisionModel {
         spans.clear();
         if !hit {
             let width = 1.0 / at as f64;
-            spans.extend(left.iter().map(|&(i, pairs_free)| Span {
+            spans.extend(left.iter().map(|&(i, pairs_free, _)| Span {
                 t0: i as f64 * width,
                 t1: (i + 1) as f64 * width,
                 within: None,
@@ -2373,10 +2389,15 @@ impl CollisionModel {
 
     /// One level of the certificate's single-precision batches: the pieces `ids` of `qa`-`qb`
     /// cut into `pieces` equal pieces (a power of two), [`lanes::LANES`] at a time, each lane
-    /// at its piece's midpoint and grown by the piece's margins. Pushes onto `left` each piece
-    /// not proven free, with whether its self pairs are free (given with the piece, or, on the
-    /// `last` level, found here). Returns the batches run and whether one found a contact
-    /// (then it stopped). The groups `still` are not tested ([`lanes::LaneMargins::still`]).
+    /// at its piece's midpoint and grown by the piece's margins. Each id comes with what the
+    /// coarser piece holding it left: whether its self pairs are free, and the groups it had
+    /// near an obstacle (every group on the first level). A batch tests only those groups
+    /// against obstacles, and the self pairs only when some lane's are not free
+    /// ([`lanes::LaneMargins::settled`], `pairs_settled`): the coarser piece's test, with its
+    /// larger margins, covers all of it. Pushes onto `left` each piece not proven free, with
+    /// whether its self pairs are free (given, or found here) and the groups found near here.
+    /// Returns the batches run and whether one found a contact (then it stopped). The groups
+    /// `still` are not tested ([`lanes::LaneMargins::still`]).
     #[allow(clippy::too_many_arguments)]
     fn pieces_in_lanes(
         &self,
@@ -2384,9 +2405,9 @@ impl CollisionModel {
         solids32: &Solids32,
         (qa, delta, still): (&[f64], &[f64], u64),
         (travel, steps): (&[f64], &[f64]),
-        (pieces, last): (usize, bool),
-        mut ids: impl Iterator<Item = (u32, bool)>,
-        left: &mut Vec<(u32, bool)>,
+        pieces: usize,
+        mut ids: impl Iterator<Item = (u32, bool, u64)>,
+        left: &mut Vec<(u32, bool, u64)>,
         (margins, step, dir): (&mut Vec<f64>, &mut Vec<f64>, &mut Vec<f64>),
         s: &mut CollisionScratch,
     ) -> (u32, bool) {
@@ -2399,7 +2420,7 @@ impl CollisionModel {
         span_dir(0.5 / pieces as f64, delta, dir);
         fast.set_lane_motion((step, dir), &mut s.spheres.lanes);
         let mut batches = 0;
-        let mut lane = [(0u32, false); lanes::LANES];
+        let mut lane = [(0u32, false, u64::MAX); lanes::LANES];
         loop {
             let mut n = 0;
             for slot in lane.iter_mut() {
@@ -2423,27 +2444,38 @@ impl CollisionModel {
             // 1e-9 of a half-length, at least 1/128 of the segment, that `span_margins` adds),
             // written into the lanes from the segment (rows built first and turned cost
             // about 300 instructions a batch more).
-            let points = SegmentIn { a: qa, delta, n: 2 * pieces as u32, ids: lane.map(|(i, _)| 2 * i + 1), end: None };
+            let points =
+                SegmentIn { a: qa, delta, n: 2 * pieces as u32, ids: lane.map(|(i, ..)| 2 * i + 1), end: None };
+            // Each piece lies in a coarser one whose batch proved free of every obstacle the
+            // groups it did not find near, and perhaps the self pairs: only the rest is tested.
+            let scoped = s.scoped_levels;
+            let near = if scoped { lane.iter().fold(0u64, |m, &(_, _, nr)| m | nr) } else { u64::MAX };
+            let pairs_settled = scoped && lane.iter().all(|&(_, pairs, _)| pairs);
+            #[cfg(test)]
+            if near != u64::MAX || pairs_settled {
+                s.scoped_batches += 1;
+            }
             let grow = LaneMargins {
                 link: &margins[..slots],
                 pair: &margins[slots..],
                 uniform: None,
                 step: Some(step),
-                // Self pairs free only matter to the double-precision checks, which take the
-                // last level's pieces (earlier levels' go on to the next: public 90 planning
-                // instructions 61.59 M -> 61.42 M, 40 cage problems -0.1%, the same paths).
-                pairs_of_near: last,
+                // Which lanes' self pairs are free, at every level: the next level's batches
+                // and the double-precision checks then skip them.
+                pairs_of_near: true,
                 along: true,
                 still,
+                settled: !near,
+                pairs_settled,
             };
             let answer = fast.free_lanes(LaneInput::Segment(points), dof, solids32, grow, &mut s.spheres.lanes);
             batches += 1;
             if answer.hit & ((1u32 << n) - 1) != 0 {
                 return (batches, true);
             }
-            for (k, &(i, pairs)) in lane[..n].iter().enumerate() {
+            for (k, &(i, pairs, _)) in lane[..n].iter().enumerate() {
                 if answer.free & (1 << k) == 0 {
-                    left.push((i, pairs || answer.pairs_free & (1 << k) != 0));
+                    left.push((i, pairs || answer.pairs_free & (1 << k) != 0, s.spheres.lanes.near[k]));
                 }
             }
         }

@@ -416,6 +416,16 @@ pub(crate) struct LaneMargins<'a> {
     /// ([`SphereGeom::still_groups`]), so each lane poses them as there. None of their spheres
     /// is tested against an obstacle, nor against another such group's. 0: every group is tested.
     pub still: u64,
+    /// In a batch along a motion ([`Self::along`]): groups free of every obstacle over each
+    /// lane's piece without a test (bit `g` for group `g`). A coarser piece holding each
+    /// lane's found them so: its midpoint test with its (larger) margins covers all of it, so
+    /// it covers every part. None of their spheres is tested against an obstacle; their self
+    /// pairs are. 0 otherwise.
+    pub settled: u64,
+    /// In a batch along a motion: every lane's self pairs are free over its piece without a
+    /// test (a coarser piece holding it found them free): none is tested, and with
+    /// [`Self::pairs_of_near`] every lane's pairs are called free.
+    pub pairs_settled: bool,
 }
 
 /// A straight motion's terms for the batches of its pieces (all of one length, see
@@ -519,6 +529,16 @@ pub(crate) struct Lanes8 {
     /// With [`LaneMargins::pairs_of_near`], the lanes whose self pairs are certainly free
     /// (inflated), near an obstacle or not; otherwise empty.
     pub pairs_free: u32,
+}
+
+impl Lanes8 {
+    /// Nothing settled, nothing in contact.
+    const NONE: Lanes8 = Lanes8 { free: 0, hit: 0, pairs_free: 0 };
+
+    /// The lanes `hit` certainly in contact.
+    const fn hit(hit: u32) -> Lanes8 {
+        Lanes8 { hit, ..Lanes8::NONE }
+    }
 }
 
 /// Where a batch's [`LANES`] configurations are.
@@ -687,6 +707,11 @@ pub(crate) struct LaneScratch {
     kept_frames: Option<ProgramId>,
     kept_groups: u64,
     kept_values: Vec<f64>,
+    /// After a batch along a motion ([`LaneMargins::along`]), per lane, the groups (bit `g`
+    /// for group `g`) whose spheres it may have near an obstacle: those it found near (every
+    /// other group it proved free of every obstacle, or was told so by
+    /// [`LaneMargins::settled`]); every group when it stopped early.
+    pub(crate) near: [u64; LANES],
 }
 
 impl LaneScratch {
@@ -733,6 +758,7 @@ impl LaneScratch {
             kept_frames: None,
             kept_groups: 0,
             kept_values: Vec::new(),
+            near: [u64::MAX; LANES],
         }
     }
 
@@ -794,6 +820,8 @@ struct Work<'a> {
     along_at: &'a mut [u32],
     /// [`LaneScratch::kept_frames`].
     kept_frames: &'a mut Option<ProgramId>,
+    /// [`LaneScratch::near`].
+    near: &'a mut [u64; LANES],
 }
 
 impl LaneScratch {
@@ -823,6 +851,7 @@ impl LaneScratch {
             along: &mut self.along,
             along_at: &mut self.along_at,
             kept_frames: &mut self.kept_frames,
+            near: &mut self.near,
         }
     }
 }
@@ -1454,8 +1483,21 @@ impl SphereGeom {
         margins: LaneMargins<'_>,
         s: &mut LaneScratch,
     ) -> Lanes8 {
-        let LaneMargins { link: link_m, pair: pair_m, uniform, step, pairs_of_near, along, still } = margins;
-        let none = Lanes8 { free: 0, hit: 0, pairs_free: 0 };
+        let LaneMargins {
+            link: link_m,
+            pair: pair_m,
+            uniform,
+            step,
+            pairs_of_near,
+            along,
+            still,
+            settled,
+            pairs_settled,
+        } = margins;
+        let none = Lanes8::NONE;
+        if ALONG {
+            s.near = [u64::MAX; LANES];
+        }
         let lanes = &self.lanes;
         let margins_fit =
             uniform.is_some() || (link_m.len() == self.links.len() && pair_m.len() == self.self_pairs.len());
@@ -1525,6 +1567,12 @@ impl SphereGeom {
         let ob_buf = std::mem::take(&mut w.solid_t);
         let s = &mut w;
         let mut live: u32 = (1 << LANES) - 1;
+        // Along a motion, `live` keeps every lane through the groups, so that each lane's near
+        // groups are known (`Lanes8::near`: the next level's pieces test only those), and
+        // `clear` the lanes with no sphere near yet. (Otherwise a lane leaves `live` at its
+        // first near sphere.)
+        let mut clear = live;
+        let mut near = [0u64; LANES];
         // Against obstacles: group, link, sphere; the groups farthest down the chain first
         // (they meet obstacles most often, so a contact ends the batch sooner). The order may
         // change which lanes a batch settles, never what its callers conclude: a lane left
@@ -1536,9 +1584,12 @@ impl SphereGeom {
             // group has been here): a batch that ends in a contact skips the groups after it.
             let gc = place(o, &load(o, &s.rot[g.body]), &load(o, &s.pos[g.body]), &lanes.groups[gi]);
             store(&gc, &mut s.group_c[gi]);
-            if (gi == 0 && skip_fixed) || (STILL && is_still(still, gi)) {
+            if (gi == 0 && skip_fixed) || (STILL && is_still(still, gi)) || (ALONG && is_still(settled, gi)) {
                 continue;
             }
+            // The lanes every group is tested in (along a motion, `live` is these again after
+            // this group).
+            let before = live;
             let gg = if kept {
                 s.grown.group[gi]
             } else {
@@ -1567,7 +1618,7 @@ impl SphereGeom {
             if per_solid.len() != n_ob || obstacles.bound_c.len() != n_ob {
                 return none;
             }
-            for ((ob, bc), &x) in obstacles.solids.iter().zip(&obstacles.bound_c).zip(per_solid) {
+            'solids: for ((ob, bc), &x) in obstacles.solids.iter().zip(&obstacles.bound_c).zip(per_solid) {
                 let tb = if ALONG { thr(gg, x, 0.0) } else { x };
                 // The spheres around the group and the solid first.
                 if live & within(dist2(&gc, &load(o, bc)), tb) == 0 {
@@ -1599,7 +1650,7 @@ impl SphereGeom {
                         if mk != 0 {
                             let hit = mk & within(d2, contact(self.radius[k]));
                             if hit != 0 {
-                                return Lanes8 { free: 0, hit, pairs_free: 0 };
+                                return Lanes8::hit(hit);
                             }
                             if along {
                                 // A threshold that is not a number (a motion too large for
@@ -1610,11 +1661,28 @@ impl SphereGeom {
                         }
                         live &= !mk;
                         if live == 0 {
+                            if ALONG {
+                                break 'solids;
+                            }
                             return none;
                         }
                     }
                 }
             }
+            if ALONG && live != before {
+                // The lanes near with this group.
+                clear &= live;
+                let mut m = before & !live;
+                while m != 0 {
+                    let k = m.trailing_zeros() as usize;
+                    near[k] |= 1u64.checked_shl(gi as u32).unwrap_or(u64::MAX);
+                    m &= m - 1;
+                }
+                live = before;
+            }
+        }
+        if ALONG {
+            live = clear;
         }
         // Self pairs, by group pair (as the scalar query): the two group spheres, the cell
         // table, then each pair's link spheres and spheres. With `pairs_of_near`, of every lane,
@@ -1625,7 +1693,9 @@ impl SphereGeom {
         let mut pairs_near = 0;
         // No step (the edge probes): a lane's own cell, not a box of cells.
         let point_cells = step.is_some_and(|st| st.iter().all(|&d| d == 0.0));
-        for (k, gp) in self.group_pairs.iter().enumerate() {
+        // Pairs the caller knows free: none tested.
+        let group_pairs = if ALONG && pairs_settled { &self.group_pairs[..0] } else { &self.group_pairs[..] };
+        for (k, gp) in group_pairs.iter().enumerate() {
             let Some(range) = lanes.pair_ranges.get(k) else { break };
             if STILL && is_still(still, gp.outer) && is_still(still, gp.inner) {
                 continue;
@@ -1710,7 +1780,7 @@ impl SphereGeom {
                             self.pose_lane_link(o, b, s);
                             match self.sphere_against_link(o, (i, &ci), b, ri, pg, grow, s) {
                                 Ok(t) => touch |= t,
-                                Err(hit) => return Lanes8 { free: 0, hit, pairs_free: 0 },
+                                Err(hit) => return Lanes8::hit(hit),
                             }
                         }
                         if touch == near {
@@ -1741,7 +1811,7 @@ impl SphereGeom {
                         }
                         match self.sphere_against_link(o, (i, &ci), b, close, pg, grow, s) {
                             Ok(t) => touch |= t,
-                            Err(hit) => return Lanes8 { free: 0, hit, pairs_free: 0 },
+                            Err(hit) => return Lanes8::hit(hit),
                         }
                     }
                     if touch == near {
@@ -1752,8 +1822,14 @@ impl SphereGeom {
             live &= !touch;
             pairs_near |= touch;
             if live == 0 && (!pairs_of_near || pairs_near == all) {
+                if ALONG {
+                    break;
+                }
                 return none;
             }
+        }
+        if ALONG {
+            *s.near = near;
         }
         Lanes8 { free: live, hit: 0, pairs_free: if pairs_of_near { all & !pairs_near } else { 0 } }
     }
@@ -2121,6 +2197,8 @@ mod tests {
             pairs_of_near: false,
             along: false,
             still: 0,
+            settled: 0,
+            pairs_settled: false,
         };
         let (mut s1, mut s2) = (LaneScratch::new(), LaneScratch::new());
         let (mut same, mut hits) = (0, 0);
