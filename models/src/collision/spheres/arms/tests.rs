@@ -640,7 +640,7 @@ fn what_a_listing_query_certifies_around_the_midpoint_is_free() {
     }
 }
 
-/// The pieces a certificate's single-precision batches (all their levels) leave to double precision with their
+/// The pieces a certificate's single-precision batches (all their levels, or four) leave to double precision with their
 /// self pairs found free (whose checks then skip the self pairs) have no self pair near in the
 /// double-precision query of the piece and no self contact anywhere, sampled every 1e-3 rad
 /// (or m); and both kinds of piece occur: on the UR5 (as
@@ -664,13 +664,15 @@ fn pieces_left_with_their_self_pairs_free_have_no_self_contact() {
         let (mut freed, mut kept) = (0, 0);
         let mut q = vec![0.0; robot.dof()];
         let zero = vec![0.0; robot.dof()];
-        // Until enough pieces of each kind were seen (the batches' levels leave few).
-        for _ in 0..4000 {
+        // Until enough pieces of each kind were seen (the batches' levels leave few), with the
+        // certificate's levels and with four (which leave more pieces without their pairs free).
+        for k in 0..4000 {
             if freed >= 40 && (which < 2 || kept >= 40) {
                 break;
             }
             let (qa, qb) = free_ends(robot, &model, &mut rng, 0.05, 1.0);
-            let Some(left) = model.batches_left(&qa, &qb, super::super::super::LANES_LEVELS, &mut s) else { continue };
+            let levels = if k % 2 == 0 { super::super::super::LANES_LEVELS } else { 4 };
+            let Some(left) = model.batches_left(&qa, &qb, levels, &mut s) else { continue };
             for (t0, t1, pairs_free) in left {
                 if !pairs_free {
                     kept += 1;
