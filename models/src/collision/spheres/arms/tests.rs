@@ -461,6 +461,20 @@ fn cluttered(which: usize, robot: &Robot, seed: u64) -> CollisionModel {
     sphere_model(robot, env)
 }
 
+/// Robot 0 (the UR5) as loaded, with its self-collision cell tables, in the table-pick scene
+/// plus `clutter(seed)`; any other robot as [`cluttered`] (with the seed plus `which`).
+fn loaded_in_clutter(which: usize, robot: &Robot, seed: u64) -> CollisionModel {
+    if which == 0 {
+        let mut env = clutter(seed);
+        for o in table_pick().obstacles() {
+            env.add(o.clone());
+        }
+        CollisionModel::new(robot, env)
+    } else {
+        cluttered(which, robot, seed + which as u64)
+    }
+}
+
 /// No configuration of the segment `qa`-`qb` sampled every 1e-3 rad (or m) collides.
 fn assert_free_when_sampled_finely(robot: &Robot, model: &CollisionModel, qa: &[f64], qb: &[f64]) {
     let space = robot.config_space();
@@ -649,15 +663,7 @@ fn what_a_listing_query_certifies_around_the_midpoint_is_free() {
 #[test]
 fn pieces_left_with_their_self_pairs_free_have_no_self_contact() {
     for (which, robot) in [ur5(), mimic_arm(), snake()].iter().enumerate() {
-        let model = if which == 0 {
-            let mut env = clutter(80);
-            for o in table_pick().obstacles() {
-                env.add(o.clone());
-            }
-            CollisionModel::new(robot, env)
-        } else {
-            cluttered(which, robot, 80 + which as u64)
-        };
+        let model = loaded_in_clutter(which, robot, 80);
         let space = robot.config_space();
         let mut s = model.scratch();
         let mut rng = Rng::new(23 + which as u64);
@@ -757,15 +763,7 @@ fn further_levels_of_batches_only_narrow_what_is_left() {
 fn scoped_levels_leave_a_subset_of_what_full_levels_leave_and_stay_sound() {
     let levels = super::super::super::LANES_LEVELS;
     for (which, robot) in [ur5(), mimic_arm(), snake()].iter().enumerate() {
-        let model = if which == 0 {
-            let mut env = clutter(90);
-            for o in table_pick().obstacles() {
-                env.add(o.clone());
-            }
-            CollisionModel::new(robot, env)
-        } else {
-            cluttered(which, robot, 90 + which as u64)
-        };
+        let model = loaded_in_clutter(which, robot, 90);
         let space = robot.config_space();
         let (mut scoped_s, mut full_s) = (model.scratch(), model.scratch().with_unscoped_levels());
         let mut rng = Rng::new(71 + which as u64);
