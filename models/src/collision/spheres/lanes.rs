@@ -1568,7 +1568,7 @@ impl SphereGeom {
         let s = &mut w;
         let mut live: u32 = (1 << LANES) - 1;
         // Along a motion, `live` keeps every lane through the groups, so that each lane's near
-        // groups are known (`Lanes8::near`: the next level's pieces test only those), and
+        // groups are known (`LaneScratch::near`: the next level's pieces test only those), and
         // `clear` the lanes with no sphere near yet. (Otherwise a lane leaves `live` at its
         // first near sphere.)
         let mut clear = live;
