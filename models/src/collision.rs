@@ -815,7 +815,8 @@ pub struct CollisionScratch {
     intervals: Vec<(u32, u32)>,
     spans: Vec<Span>,
     /// The pieces a level of single-precision batches leaves (index at the level's cut, self
-    /// pairs free), and those of the level before while the next runs.
+    /// pairs free, the groups found near an obstacle), and those of the level before while the
+    /// next runs.
     lanes_left: Vec<(u32, bool, u64)>,
     lanes_parents: Vec<(u32, bool, u64)>,
     /// Whether a level of the certificate's batches tests only what the level before left
@@ -2449,8 +2450,8 @@ impl CollisionModel {
             // about 300 instructions a batch more).
             let points =
                 SegmentIn { a: qa, delta, n: 2 * pieces as u32, ids: lane.map(|(i, ..)| 2 * i + 1), end: None };
-            // Each piece lies in a coarser one whose batch proved free of every obstacle the
-            // groups it did not find near, and perhaps the self pairs: only the rest is tested.
+            // Each piece lies in a coarser one whose batch proved the groups it did not find near
+            // free of every obstacle, and perhaps the self pairs free: only the rest is tested.
             let scoped = s.scoped_levels;
             let near = if scoped { lane.iter().fold(0u64, |m, &(_, _, nr)| m | nr) } else { u64::MAX };
             let pairs_settled = scoped && lane.iter().all(|&(_, pairs, _)| pairs);

@@ -403,8 +403,8 @@ pub(crate) struct LaneMargins<'a> {
     pub uniform: Option<f64>,
     pub step: Option<&'a [f64]>,
     /// Test the self pairs of the lanes already near an obstacle too (unless every lane is),
-    /// and say which lanes' pairs are free ([`Lanes8::pairs_free`]): the certificate's
-    /// double-precision check of a piece then skips its self pairs.
+    /// and say which lanes' pairs are free ([`Lanes8::pairs_free`]): the certificate's next
+    /// level of batches and its double-precision check of a piece then skip its self pairs.
     pub pairs_of_near: bool,
     /// Every lane is the midpoint of a piece of one straight motion, whose terms the scratch
     /// holds ([`SphereGeom::set_lane_motion`]): a sphere near an obstacle
