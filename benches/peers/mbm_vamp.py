@@ -13,6 +13,13 @@
   mbm_vamp.py summarize VAMP_OUT.json
       Per family: VAMP's planning and planning + simplification p50 / p95 / max and the share
       within 1 ms, from the output of ../shared/peers/vamp/vamp_run.py.
+  mbm_vamp.py lengths PROBLEMS.json OUT.json [OURS.jsonl]
+      Plans every valid problem of a VAMP problem file as vamp_run.py does (RRT-Connect, the
+      Halton sampler reset per problem, then its simplification) and writes the joint-space
+      length of each simplified path (Euclidean, as `bench mbm` measures a path of joints that do
+      not wrap). Given the `--jsonl` file of a `bench mbm` run on the same problems, it prints per
+      family both planners' median lengths and the median and mean of ours / VAMP's per problem.
+      Needs the vamp module (the virtual environment compare-mbm makes).
 """
 import glob
 import json
@@ -93,10 +100,60 @@ def summarize(path):
               f"  {pct(simp, .5):8.0f} {pct(simp, .95):8.0f} {max(simp):8.0f}")
 
 
+def lengths(problems_path, out_path, ours_path=None):
+    import statistics
+
+    import numpy as np
+    import vamp
+
+    d = json.load(open(problems_path))
+    module, plan, plan_settings, simp_settings = vamp.configure_robot_and_planner_with_kwargs(d["robot"], "rrtc")
+    sampler = module.halton()
+    theirs = {}
+    for family, problems in d["problems"].items():
+        for p in problems:
+            if not p["valid"]:
+                continue
+            env = vamp.problem_dict_to_vamp(p)
+            sampler.reset()
+            r = plan(p["start"], p["goals"], env, plan_settings, sampler)
+            if not r.solved:
+                continue
+            path = module.simplify(r.path, env, simp_settings, sampler).path
+            # Indexed: the path object's iterator does not stop at its end.
+            points = [np.asarray(path[k], dtype=float) for k in range(len(path))]
+            length = sum(float(np.linalg.norm(b - a)) for a, b in zip(points, points[1:]))
+            theirs.setdefault(family, {})[int(p["index"])] = length
+    json.dump({f: sorted(v.items()) for f, v in theirs.items()}, open(out_path, "w"))
+    if ours_path is None:
+        for family, v in theirs.items():
+            print(f"{family:<24} {len(v):>4} solved  VAMP median length {statistics.median(v.values()):.3f}")
+        return
+    ours = {}
+    for n, line in enumerate(open(ours_path)):
+        row = json.loads(line)
+        if n == 0 or not row.get("solved"):
+            continue
+        # `bench mbm` names a family by its folder (`table_pick_ur5`), VAMP's file without the robot.
+        family = row["family"].rsplit("_", 1)[0] if row["family"] not in theirs else row["family"]
+        ours.setdefault((family, int(row["index"])), []).append(row["path_length"])
+    print(f"{'family':<24} {'both':>5}  {'VAMP':>7}  {'ours':>7}  ours / VAMP per problem: median, mean")
+    for family, v in theirs.items():
+        pairs = [(t, o) for i, t in v.items() for o in ours.get((family, i), []) if t > 0]
+        if not pairs:
+            print(f"{family:<24} no problem solved by both")
+            continue
+        ratios = [o / t for t, o in pairs]
+        print(f"{family:<24} {len(pairs):>5}  {statistics.median(t for t, _ in pairs):7.3f}  "
+              f"{statistics.median(o for _, o in pairs):7.3f}  {statistics.median(ratios):.3f}, {statistics.mean(ratios):.3f}")
+
+
 if __name__ == "__main__":
     if len(sys.argv) in (4, 5) and sys.argv[1] == "convert":
         convert(*sys.argv[2:])
     elif len(sys.argv) == 3 and sys.argv[1] == "summarize":
         summarize(sys.argv[2])
+    elif len(sys.argv) in (4, 5) and sys.argv[1] == "lengths":
+        lengths(*sys.argv[2:])
     else:
         sys.exit(__doc__)
