@@ -213,7 +213,7 @@ enum Command {
     },
     /// Benchmarks: MotionBenchMaker problems, planning deadlines.
     #[command(subcommand)]
-    Bench(BenchCommand),
+    Bench(Box<BenchCommand>),
     /// Print a shell completion script (e.g. `embodied completions bash > /etc/bash_completion.d/embodied`).
     Completions {
         /// The shell.
@@ -307,6 +307,10 @@ enum BenchCommand {
         /// Only the first N problems of each family.
         #[arg(long)]
         limit: Option<usize>,
+        /// Only these families (folder names, comma separated, e.g. `box_ur5,cage_ur5`; default:
+        /// every family folder found).
+        #[arg(long, value_delimiter = ',', value_name = "NAMES")]
+        families: Vec<String>,
         #[arg(long, default_value_t = 1)]
         seed: u64,
         /// The planner after the straight segment: rrt-connect or lazy-prm.
@@ -606,6 +610,310 @@ fn racers_of(value: &str) -> Result<usize, AppError> {
     }
 }
 
+/// `bench mbm --families`: the names given (trimmed, each once, in their order), or `None` (every
+/// family) when none is.
+fn mbm_families(names: Vec<String>) -> Result<Option<Vec<String>>, AppError> {
+    let mut wanted: Vec<String> = Vec::new();
+    for name in names {
+        let name = name.trim();
+        if name.is_empty() {
+            return Err(AppError::Usage(
+                "--families must be family folder names separated by commas, got an empty name".into(),
+            ));
+        }
+        if !wanted.iter().any(|w| w == name) {
+            wanted.push(name.to_string());
+        }
+    }
+    Ok((!wanted.is_empty()).then_some(wanted))
+}
+
+/// `embodied bench ...`.
+fn run_bench(bench: BenchCommand) -> Result<(), AppError> {
+    match bench {
+        BenchCommand::Mbm {
+            urdf,
+            srdf,
+            problems,
+            json,
+            out,
+            deadline_ms,
+            limit,
+            families,
+            seed,
+            algorithm,
+            resolution,
+            shortcut_attempts,
+            shortcut_min_gain,
+            screen_above,
+            threads,
+            racer_look_ms,
+            rrt_range,
+            rrt_local_bias,
+            rrt_late_local_bias,
+            rrt_late_after,
+            rrt_local_span,
+            rrt_local_reach,
+            max_samples,
+            rrt_restarts,
+            lazy_probe,
+            no_dynamic_domain,
+            no_by_groups,
+            serial_legs,
+            no_balance,
+            sampler,
+            shard,
+            jsonl,
+            runs,
+            ompl_log,
+        } => {
+            let threads = racers_of(&threads)?;
+            if let Some(ms) = racer_look_ms {
+                if !(ms.is_finite() && ms >= 0.0) {
+                    return Err(AppError::Usage(format!(
+                        "--racer-look-ms must be a number of ms, at least 0, got {ms}"
+                    )));
+                }
+                // At most 10 s (the planner's cap too), so that no value overflows here.
+                let look = std::time::Duration::from_secs_f64(ms.min(10_000.0) / 1000.0);
+                embodied_planner::motion::set_racer_look(look);
+            }
+            let mut args = embodied::mbm::MbmArgs::new(urdf, srdf, problems);
+            args.algorithm = algorithm;
+            args.threads = threads;
+            args.dynamic_domain = !no_dynamic_domain;
+            args.by_groups = !no_by_groups;
+            args.parallel_legs = !serial_legs;
+            args.balance = !no_balance;
+            args.sampler = sampler;
+            let share = |p: f64| (0.0..=1.0).contains(&p);
+            if let Some(r) = checked(rrt_range, |r| r.is_finite() && r > 0.0, "--rrt-range must be a positive number")?
+            {
+                args.rrt_range = r;
+            }
+            if let Some(p) = checked(rrt_local_bias, share, "--rrt-local-bias must be a share in [0, 1]")? {
+                args.rrt_local_bias = p;
+            }
+            if let Some(p) = checked(rrt_late_local_bias, share, "--rrt-late-local-bias must be a share in [0, 1]")? {
+                args.rrt_late_local_bias = p;
+            }
+            if let Some(n) = rrt_late_after {
+                args.rrt_late_after = n;
+            }
+            let says = "--rrt-local-span must be a positive share";
+            if let Some(w) = checked(rrt_local_span, |w| w.is_finite() && w > 0.0, says)? {
+                args.rrt_local_span = w;
+            }
+            let says = "--rrt-local-reach must be above 0 (rad, or `inf`)";
+            if let Some(r) = checked(rrt_local_reach, |r| r > 0.0, says)? {
+                args.rrt_local_reach = r;
+            }
+            if let Some(n) = checked(max_samples, |n| n > 0, "--max-samples must be at least 1")? {
+                args.max_samples = n;
+            }
+            if let Some(n) = rrt_restarts {
+                args.rrt_restarts = n;
+            }
+            let says = "--lazy-probe must be 0 (every tree edge certified as added) or a positive number of rad";
+            if let Some(step) = checked(lazy_probe, |s| s.is_finite() && s >= 0.0, says)? {
+                args.lazy_probe = step;
+            }
+            if let Some(r) = resolution {
+                args.resolution = r;
+                args.edge_check = embodied_planner::motion::EdgeCheck::Sampled;
+            }
+            if let Some(n) = shortcut_attempts {
+                args.shortcut_attempts = n;
+            }
+            let says = "--shortcut-min-gain must be zero or a positive number";
+            if let Some(g) = checked(shortcut_min_gain, |g| g.is_finite() && g >= 0.0, says)? {
+                args.shortcut_min_gain = g;
+            }
+            if let Some(l) =
+                checked(screen_above, |l| l >= 0.0, "--screen-above must be zero, a positive number or inf")?
+            {
+                args.screen_above = l;
+            }
+            args.deadline_ms = deadline_ms;
+            args.limit = limit;
+            args.families = mbm_families(families)?;
+            args.seed = seed;
+            args.runs = runs;
+            args.shard = shard.unwrap_or(embodied::batch::Shard::ALL);
+            let mut writer = jsonl.as_deref().map(embodied::batch::JsonlWriter::create).transpose()?;
+            let bar = if json { indicatif::ProgressBar::hidden() } else { progress_bar() };
+            let report = embodied::mbm::run_mbm_to(
+                &args,
+                &mut |done, total| {
+                    bar.set_length(total as u64);
+                    bar.set_position(done as u64);
+                },
+                writer.as_mut(),
+            );
+            bar.finish_and_clear();
+            let report = report?;
+            if let Some(dir) = &ompl_log {
+                embodied::ompl_log::write_ompl_logs(&report, dir)?;
+            }
+            print_mbm(&report, json, out.as_deref(), jsonl.as_deref() == Some(std::path::Path::new("-")))
+        }
+        BenchCommand::MbmGenerate { urdf, srdf, family, count, seed, out, json } => {
+            let families = embodied::mbm_generate::parse_families(&family)?;
+            let args = embodied::mbm_generate::GenerateArgs { urdf, srdf, families, count, seed, out };
+            let bar = if json { indicatif::ProgressBar::hidden() } else { progress_bar() };
+            let outcomes = embodied::mbm_generate::generate_mbm(&args, &mut |family, done, total| {
+                bar.set_message(family.folder());
+                bar.set_length(total as u64);
+                bar.set_position(done as u64);
+            });
+            bar.finish_and_clear();
+            let outcomes = outcomes?;
+            let text = if json {
+                to_json(&outcomes)? + "\n"
+            } else {
+                let mut t = format!("{:<24} {:>8} {:>14} {:>9}\n", "family", "problems", "scenes sampled", "IK calls");
+                for o in &outcomes {
+                    t.push_str(&format!(
+                        "{:<24} {:>8} {:>14} {:>9}  {}\n",
+                        o.family,
+                        o.problems,
+                        o.scenes_sampled,
+                        o.ik_calls,
+                        o.folder.display()
+                    ));
+                }
+                t
+            };
+            std::io::Write::write_all(&mut std::io::stdout(), text.as_bytes()).map_err(AppError::Output)
+        }
+        BenchCommand::Merge { files, json, out } => {
+            let merged = embodied::batch::read_shards(&files)?;
+            if merged.header.kind == embodied::batch_plan::PLAN_BATCH_KIND {
+                if out.is_some() {
+                    return Err(AppError::Usage("--out writes the paths of bench mbm shards; these are plan --batch results, whose lines hold the plans".into()));
+                }
+                let report = embodied::batch_plan::merge_plan_batch(merged)?;
+                if json {
+                    outln!("{}", to_json(&report)?);
+                } else {
+                    out!("{}", embodied::batch_plan::render_batch(&report));
+                }
+                if report.certified < report.total {
+                    return Err(AppError::Failed(format!(
+                        "{} of {} problems without a certified plan",
+                        report.total - report.certified,
+                        report.total
+                    )));
+                }
+                return Ok(());
+            }
+            let report = embodied::mbm::merge_mbm(merged)?;
+            print_mbm(&report, json, out.as_deref(), false)
+        }
+        BenchCommand::Load {
+            agents,
+            deliberative_share,
+            workers,
+            policy,
+            duration,
+            deadline_ms,
+            give_up_ms,
+            sequential,
+            planning,
+            json,
+        } => {
+            use embodied_executor::deliberation::QueuePolicy;
+            let settings = embodied::load::LoadSettings {
+                agents,
+                deliberative_share,
+                workers,
+                policy: if policy == "fifo" { QueuePolicy::Fifo } else { QueuePolicy::EarliestDeadline },
+                duration_s: duration,
+                deadline_ms,
+                give_up_ms,
+                parallel: !sequential,
+                planner_threads: planning == "threads",
+                ..embodied::load::LoadSettings::default()
+            };
+            let bar = spinner("running");
+            let report = embodied::load::run_load(&settings);
+            bar.finish_and_clear();
+            let report = report?;
+            if json {
+                outln!("{}", to_json(&report)?);
+            } else {
+                out!("{}", embodied::load::render_load(&report));
+            }
+            if report.unanswered_without_halt > 0 || report.starved_agents > 0 {
+                return Err(AppError::Failed(
+                    "a request went unanswered without a halt, or an agent got no plan".into(),
+                ));
+            }
+            Ok(())
+        }
+        BenchCommand::Qp { scenario, json } => {
+            let bar = spinner("solving every held step's QP twice");
+            let report = embodied::bench_qp::bench_qp(&scenario);
+            bar.finish_and_clear();
+            let report = report?;
+            if json {
+                outln!("{}", to_json(&report)?);
+            } else {
+                out!("{}", embodied::bench_qp::render_bench_qp(&report));
+            }
+            Ok(())
+        }
+        BenchCommand::Deadlines {
+            deadlines_ms,
+            scenarios,
+            json,
+            plot,
+            seed,
+            planner_seeds,
+            mbm,
+            urdf,
+            srdf,
+            mbm_sample,
+        } => {
+            checked(Some(planner_seeds), |n| n > 0, "--planner-seeds must be at least 1")?;
+            let mbm = match (mbm, urdf, srdf) {
+                (Some(problems), Some(urdf), Some(srdf)) => {
+                    Some(embodied::deadlines::MbmSample { urdf, srdf, problems, count: mbm_sample })
+                }
+                (None, None, None) => None,
+                _ => return Err(AppError::Usage("--mbm, --urdf and --srdf go together".into())),
+            };
+            // The built-in scenarios always, the MBM sample when asked for.
+            let scenarios = if scenarios.is_empty() && mbm.is_some() {
+                embodied::scenario::BUILTIN_SCENARIOS.iter().map(|(n, _)| (*n).to_string()).collect()
+            } else {
+                scenarios
+            };
+            let args = embodied::deadlines::DeadlineArgs {
+                deadlines_ms,
+                scenarios,
+                seed,
+                planner_seeds,
+                mbm,
+                ..embodied::deadlines::DeadlineArgs::default()
+            };
+            let bar = spinner("planning under every deadline");
+            let report = embodied::deadlines::run_deadline_bench(&args);
+            bar.finish_and_clear();
+            let report = report?;
+            if let Some(path) = &plot {
+                embodied::deadlines::plot_svg(&report, path)?;
+            }
+            if json {
+                outln!("{}", to_json(&report)?);
+            } else {
+                out!("{}", embodied::deadlines::render_table(&report));
+            }
+            Ok(())
+        }
+    }
+}
+
 fn run(cli: Cli) -> Result<(), AppError> {
     match cli.command {
         Command::Model { robot, srdf, q, ik, ee, json } => {
@@ -854,284 +1162,7 @@ fn run(cli: Cli) -> Result<(), AppError> {
             }
             Ok(())
         }
-        Command::Bench(BenchCommand::Mbm {
-            urdf,
-            srdf,
-            problems,
-            json,
-            out,
-            deadline_ms,
-            limit,
-            seed,
-            algorithm,
-            resolution,
-            shortcut_attempts,
-            shortcut_min_gain,
-            screen_above,
-            threads,
-            racer_look_ms,
-            rrt_range,
-            rrt_local_bias,
-            rrt_late_local_bias,
-            rrt_late_after,
-            rrt_local_span,
-            rrt_local_reach,
-            max_samples,
-            rrt_restarts,
-            lazy_probe,
-            no_dynamic_domain,
-            no_by_groups,
-            serial_legs,
-            no_balance,
-            sampler,
-            shard,
-            jsonl,
-            runs,
-            ompl_log,
-        }) => {
-            let threads = racers_of(&threads)?;
-            if let Some(ms) = racer_look_ms {
-                if !(ms.is_finite() && ms >= 0.0) {
-                    return Err(AppError::Usage(format!(
-                        "--racer-look-ms must be a number of ms, at least 0, got {ms}"
-                    )));
-                }
-                // At most 10 s (the planner's cap too), so that no value overflows here.
-                let look = std::time::Duration::from_secs_f64(ms.min(10_000.0) / 1000.0);
-                embodied_planner::motion::set_racer_look(look);
-            }
-            let mut args = embodied::mbm::MbmArgs::new(urdf, srdf, problems);
-            args.algorithm = algorithm;
-            args.threads = threads;
-            args.dynamic_domain = !no_dynamic_domain;
-            args.by_groups = !no_by_groups;
-            args.parallel_legs = !serial_legs;
-            args.balance = !no_balance;
-            args.sampler = sampler;
-            let share = |p: f64| (0.0..=1.0).contains(&p);
-            if let Some(r) = checked(rrt_range, |r| r.is_finite() && r > 0.0, "--rrt-range must be a positive number")?
-            {
-                args.rrt_range = r;
-            }
-            if let Some(p) = checked(rrt_local_bias, share, "--rrt-local-bias must be a share in [0, 1]")? {
-                args.rrt_local_bias = p;
-            }
-            if let Some(p) = checked(rrt_late_local_bias, share, "--rrt-late-local-bias must be a share in [0, 1]")? {
-                args.rrt_late_local_bias = p;
-            }
-            if let Some(n) = rrt_late_after {
-                args.rrt_late_after = n;
-            }
-            let says = "--rrt-local-span must be a positive share";
-            if let Some(w) = checked(rrt_local_span, |w| w.is_finite() && w > 0.0, says)? {
-                args.rrt_local_span = w;
-            }
-            let says = "--rrt-local-reach must be above 0 (rad, or `inf`)";
-            if let Some(r) = checked(rrt_local_reach, |r| r > 0.0, says)? {
-                args.rrt_local_reach = r;
-            }
-            if let Some(n) = checked(max_samples, |n| n > 0, "--max-samples must be at least 1")? {
-                args.max_samples = n;
-            }
-            if let Some(n) = rrt_restarts {
-                args.rrt_restarts = n;
-            }
-            let says = "--lazy-probe must be 0 (every tree edge certified as added) or a positive number of rad";
-            if let Some(step) = checked(lazy_probe, |s| s.is_finite() && s >= 0.0, says)? {
-                args.lazy_probe = step;
-            }
-            if let Some(r) = resolution {
-                args.resolution = r;
-                args.edge_check = embodied_planner::motion::EdgeCheck::Sampled;
-            }
-            if let Some(n) = shortcut_attempts {
-                args.shortcut_attempts = n;
-            }
-            let says = "--shortcut-min-gain must be zero or a positive number";
-            if let Some(g) = checked(shortcut_min_gain, |g| g.is_finite() && g >= 0.0, says)? {
-                args.shortcut_min_gain = g;
-            }
-            if let Some(l) =
-                checked(screen_above, |l| l >= 0.0, "--screen-above must be zero, a positive number or inf")?
-            {
-                args.screen_above = l;
-            }
-            args.deadline_ms = deadline_ms;
-            args.limit = limit;
-            args.seed = seed;
-            args.runs = runs;
-            args.shard = shard.unwrap_or(embodied::batch::Shard::ALL);
-            let mut writer = jsonl.as_deref().map(embodied::batch::JsonlWriter::create).transpose()?;
-            let bar = if json { indicatif::ProgressBar::hidden() } else { progress_bar() };
-            let report = embodied::mbm::run_mbm_to(
-                &args,
-                &mut |done, total| {
-                    bar.set_length(total as u64);
-                    bar.set_position(done as u64);
-                },
-                writer.as_mut(),
-            );
-            bar.finish_and_clear();
-            let report = report?;
-            if let Some(dir) = &ompl_log {
-                embodied::ompl_log::write_ompl_logs(&report, dir)?;
-            }
-            print_mbm(&report, json, out.as_deref(), jsonl.as_deref() == Some(std::path::Path::new("-")))
-        }
-        Command::Bench(BenchCommand::MbmGenerate { urdf, srdf, family, count, seed, out, json }) => {
-            let families = embodied::mbm_generate::parse_families(&family)?;
-            let args = embodied::mbm_generate::GenerateArgs { urdf, srdf, families, count, seed, out };
-            let bar = if json { indicatif::ProgressBar::hidden() } else { progress_bar() };
-            let outcomes = embodied::mbm_generate::generate_mbm(&args, &mut |family, done, total| {
-                bar.set_message(family.folder());
-                bar.set_length(total as u64);
-                bar.set_position(done as u64);
-            });
-            bar.finish_and_clear();
-            let outcomes = outcomes?;
-            let text = if json {
-                to_json(&outcomes)? + "\n"
-            } else {
-                let mut t = format!("{:<24} {:>8} {:>14} {:>9}\n", "family", "problems", "scenes sampled", "IK calls");
-                for o in &outcomes {
-                    t.push_str(&format!(
-                        "{:<24} {:>8} {:>14} {:>9}  {}\n",
-                        o.family,
-                        o.problems,
-                        o.scenes_sampled,
-                        o.ik_calls,
-                        o.folder.display()
-                    ));
-                }
-                t
-            };
-            std::io::Write::write_all(&mut std::io::stdout(), text.as_bytes()).map_err(AppError::Output)
-        }
-        Command::Bench(BenchCommand::Merge { files, json, out }) => {
-            let merged = embodied::batch::read_shards(&files)?;
-            if merged.header.kind == embodied::batch_plan::PLAN_BATCH_KIND {
-                if out.is_some() {
-                    return Err(AppError::Usage("--out writes the paths of bench mbm shards; these are plan --batch results, whose lines hold the plans".into()));
-                }
-                let report = embodied::batch_plan::merge_plan_batch(merged)?;
-                if json {
-                    outln!("{}", to_json(&report)?);
-                } else {
-                    out!("{}", embodied::batch_plan::render_batch(&report));
-                }
-                if report.certified < report.total {
-                    return Err(AppError::Failed(format!(
-                        "{} of {} problems without a certified plan",
-                        report.total - report.certified,
-                        report.total
-                    )));
-                }
-                return Ok(());
-            }
-            let report = embodied::mbm::merge_mbm(merged)?;
-            print_mbm(&report, json, out.as_deref(), false)
-        }
-        Command::Bench(BenchCommand::Load {
-            agents,
-            deliberative_share,
-            workers,
-            policy,
-            duration,
-            deadline_ms,
-            give_up_ms,
-            sequential,
-            planning,
-            json,
-        }) => {
-            use embodied_executor::deliberation::QueuePolicy;
-            let settings = embodied::load::LoadSettings {
-                agents,
-                deliberative_share,
-                workers,
-                policy: if policy == "fifo" { QueuePolicy::Fifo } else { QueuePolicy::EarliestDeadline },
-                duration_s: duration,
-                deadline_ms,
-                give_up_ms,
-                parallel: !sequential,
-                planner_threads: planning == "threads",
-                ..embodied::load::LoadSettings::default()
-            };
-            let bar = spinner("running");
-            let report = embodied::load::run_load(&settings);
-            bar.finish_and_clear();
-            let report = report?;
-            if json {
-                outln!("{}", to_json(&report)?);
-            } else {
-                out!("{}", embodied::load::render_load(&report));
-            }
-            if report.unanswered_without_halt > 0 || report.starved_agents > 0 {
-                return Err(AppError::Failed(
-                    "a request went unanswered without a halt, or an agent got no plan".into(),
-                ));
-            }
-            Ok(())
-        }
-        Command::Bench(BenchCommand::Qp { scenario, json }) => {
-            let bar = spinner("solving every held step's QP twice");
-            let report = embodied::bench_qp::bench_qp(&scenario);
-            bar.finish_and_clear();
-            let report = report?;
-            if json {
-                outln!("{}", to_json(&report)?);
-            } else {
-                out!("{}", embodied::bench_qp::render_bench_qp(&report));
-            }
-            Ok(())
-        }
-        Command::Bench(BenchCommand::Deadlines {
-            deadlines_ms,
-            scenarios,
-            json,
-            plot,
-            seed,
-            planner_seeds,
-            mbm,
-            urdf,
-            srdf,
-            mbm_sample,
-        }) => {
-            checked(Some(planner_seeds), |n| n > 0, "--planner-seeds must be at least 1")?;
-            let mbm = match (mbm, urdf, srdf) {
-                (Some(problems), Some(urdf), Some(srdf)) => {
-                    Some(embodied::deadlines::MbmSample { urdf, srdf, problems, count: mbm_sample })
-                }
-                (None, None, None) => None,
-                _ => return Err(AppError::Usage("--mbm, --urdf and --srdf go together".into())),
-            };
-            // The built-in scenarios always, the MBM sample when asked for.
-            let scenarios = if scenarios.is_empty() && mbm.is_some() {
-                embodied::scenario::BUILTIN_SCENARIOS.iter().map(|(n, _)| (*n).to_string()).collect()
-            } else {
-                scenarios
-            };
-            let args = embodied::deadlines::DeadlineArgs {
-                deadlines_ms,
-                scenarios,
-                seed,
-                planner_seeds,
-                mbm,
-                ..embodied::deadlines::DeadlineArgs::default()
-            };
-            let bar = spinner("planning under every deadline");
-            let report = embodied::deadlines::run_deadline_bench(&args);
-            bar.finish_and_clear();
-            let report = report?;
-            if let Some(path) = &plot {
-                embodied::deadlines::plot_svg(&report, path)?;
-            }
-            if json {
-                outln!("{}", to_json(&report)?);
-            } else {
-                out!("{}", embodied::deadlines::render_table(&report));
-            }
-            Ok(())
-        }
+        Command::Bench(bench) => run_bench(*bench),
         Command::Completions { shell } => {
             use clap::CommandFactory;
             let mut script = Vec::new();

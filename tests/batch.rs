@@ -474,6 +474,46 @@ fn bench_mbm_writes_json_lines_to_stdout_and_ompl_logs() {
     assert!(stderr.contains("--runs must be at least 1"), "{stderr}");
 }
 
+#[test]
+fn bench_mbm_plans_only_the_families_asked_for() {
+    let robot = root().join("models/tests/fixtures");
+    let s = |p: &Path| p.to_str().unwrap().to_string();
+    let (urdf, srdf, problems) =
+        (s(&robot.join("ur5_spherized.urdf")), s(&robot.join("ur5.srdf")), s(&root().join("tests/fixtures/mbm")));
+    let base = ["bench", "mbm", "--urdf", &urdf, "--srdf", &srdf, "--problems", &problems, "--deadline-ms", "20000"];
+    // One family, named twice: planned once, the other family left out.
+    let mut args = base.to_vec();
+    args.extend(["--families", "box_ur5, box_ur5", "--jsonl", "-"]);
+    let (code, stdout, stderr) = embodied(&args);
+    assert_eq!(code, 0, "{stderr}");
+    let lines: Vec<serde_json::Value> = stdout.lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+    assert_eq!(lines[0]["settings"]["families"], serde_json::json!(["box_ur5"]), "{}", lines[0]);
+    assert!(lines.len() > 1, "{stdout}");
+    assert!(lines[1..].iter().all(|l| l["family"] == "box_ur5"), "{stdout}");
+    // Both, comma separated: every problem of the fixture.
+    let mut args = base.to_vec();
+    args.extend(["--families", "box_ur5,bookshelf_small_ur5", "--jsonl", "-"]);
+    let (code, both, stderr) = embodied(&args);
+    assert_eq!(code, 0, "{stderr}");
+    let families: std::collections::BTreeSet<String> = both
+        .lines()
+        .skip(1)
+        .map(|l| serde_json::from_str::<serde_json::Value>(l).unwrap()["family"].as_str().unwrap().to_string())
+        .collect();
+    assert_eq!(families.into_iter().collect::<Vec<_>>(), ["bookshelf_small_ur5", "box_ur5"]);
+    // A family that is not there, and an empty name: usage errors naming what is.
+    let mut args = base.to_vec();
+    args.extend(["--families", "cage_ur5"]);
+    let (code, _, stderr) = embodied(&args);
+    assert_eq!(code, 2, "{stderr}");
+    assert!(stderr.contains("no family `cage_ur5`") && stderr.contains("bookshelf_small_ur5, box_ur5"), "{stderr}");
+    let mut args = base.to_vec();
+    args.extend(["--families", "box_ur5,"]);
+    let (code, _, stderr) = embodied(&args);
+    assert_eq!(code, 2, "{stderr}");
+    assert!(stderr.contains("--families") && stderr.contains("empty name"), "{stderr}");
+}
+
 /// A report written before the late share existed reads as the first share throughout: its
 /// settings lack `rrt_late_local_bias` and `rrt_late_after`, and the table says nothing of a
 /// late share (nor overflows counting its first sample).
