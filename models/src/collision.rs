@@ -222,7 +222,7 @@ impl World {
             World::Capsule { a, b, r } => View::Capsule { a: *a, b: *b, r: *r },
             World::Cuboid { iso, half } => View::Cuboid { iso, half: *half },
             World::Cylinder { iso, r, hh } => View::Cylinder { iso, r: *r, hh: *hh },
-            World::Mesh { iso, hull } => View::Mesh { iso, poly: &hull.polyhedron },
+            World::Mesh { iso, hull } => View::Mesh { iso, hull },
         }
     }
 

@@ -12,9 +12,9 @@
 
 use nalgebra::{Isometry3, Point3, UnitQuaternion, Vector3};
 use parry3d_f64::query::{self, ClosestPoints};
-use parry3d_f64::shape::{Ball, Capsule, ConvexPolyhedron, Cuboid, Cylinder, Segment, Shape as ParryShape};
+use parry3d_f64::shape::{Ball, Capsule, Cuboid, Cylinder, Segment, Shape as ParryShape, SupportMap};
 
-use crate::geometry::Shape;
+use crate::geometry::{Climbing, ConvexHull, Shape};
 
 /// The result of a distance query between two shapes, A and B.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -41,7 +41,7 @@ pub(crate) enum View<'a> {
     Capsule { a: Point3<f64>, b: Point3<f64>, r: f64 },
     Cuboid { iso: &'a Isometry3<f64>, half: Vector3<f64> },
     Cylinder { iso: &'a Isometry3<f64>, r: f64, hh: f64 },
-    Mesh { iso: &'a Isometry3<f64>, poly: &'a ConvexPolyhedron },
+    Mesh { iso: &'a Isometry3<f64>, hull: &'a ConvexHull },
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -556,7 +556,7 @@ enum Held<'a> {
     Capsule(Capsule),
     Cuboid(Cuboid),
     Cylinder(Cylinder),
-    Poly(&'a ConvexPolyhedron),
+    Poly(&'a ConvexHull),
 }
 
 impl Held<'_> {
@@ -566,7 +566,19 @@ impl Held<'_> {
             Held::Capsule(s) => s,
             Held::Cuboid(s) => s,
             Held::Cylinder(s) => s,
-            Held::Poly(s) => *s,
+            Held::Poly(s) => &s.polyhedron,
+        }
+    }
+
+    /// The shape as a support map for GJK: a hull climbs its vertex graph (see
+    /// [`ConvexHull::support_index`]) instead of parry's scan of every vertex.
+    fn with_support_map<T>(&self, f: impl FnOnce(&dyn SupportMap) -> T) -> Option<T> {
+        match self {
+            Held::Ball(s) => Some(f(s)),
+            Held::Capsule(s) => Some(f(s)),
+            Held::Cuboid(s) => Some(f(s)),
+            Held::Cylinder(s) => Some(f(s)),
+            Held::Poly(h) => Some(f(&Climbing::new(h))),
         }
     }
 }
@@ -584,13 +596,23 @@ fn to_parry<'a>(v: &View<'a>) -> (Isometry3<f64>, Held<'a>) {
         View::Cylinder { iso, r, hh } => {
             (Isometry3::from_parts(iso.translation, iso.rotation * y_to_z()), Held::Cylinder(Cylinder::new(hh, r)))
         }
-        View::Mesh { iso, poly } => (*iso, Held::Poly(poly)),
+        View::Mesh { iso, hull } => (*iso, Held::Poly(hull)),
     }
 }
 
 pub(crate) fn parry_intersects(a: &View, b: &View) -> bool {
     let (ia, sa) = to_parry(a);
     let (ib, sb) = to_parry(b);
+    // A hull on either side: GJK on the support maps, the hull's climbing its vertex graph.
+    if matches!(sa, Held::Poly(_)) || matches!(sb, Held::Poly(_)) {
+        let pos12 = ia.inv_mul(&ib);
+        let hit = sa.with_support_map(|ga| {
+            sb.with_support_map(|gb| query::details::intersection_test_support_map_support_map(&pos12, ga, gb))
+        });
+        if let Some(Some(hit)) = hit {
+            return hit;
+        }
+    }
     // Unsupported cannot happen for convex shapes; if it ever does, say "colliding" (safe side).
     query::intersection_test(&ia, sa.shape(), &ib, sb.shape()).unwrap_or(true)
 }
@@ -611,21 +633,27 @@ pub(crate) fn within(a: &View, b: &View, e: f64) -> bool {
 }
 
 fn parry_within(a: &View, b: &View, e: f64) -> bool {
-    use parry3d_f64::query::gjk::{self, CSOPoint, GJKResult, VoronoiSimplex};
     let (ia, sa) = to_parry(a);
     let (ib, sb) = to_parry(b);
-    let (Some(ga), Some(gb)) = (sa.shape().as_support_map(), sb.shape().as_support_map()) else {
-        return parry_separation(a, b).distance <= e;
-    };
     let pos12 = ia.inv_mul(&ib);
+    let answer = sa.with_support_map(|ga| sb.with_support_map(|gb| gjk_within(&pos12, ga, gb, e)));
+    match answer {
+        Some(Some(near)) => near,
+        _ => parry_separation(a, b).distance <= e,
+    }
+}
+
+/// [`parry_within`] on two support maps, `pos12` the second's pose in the first's frame.
+fn gjk_within(pos12: &Isometry3<f64>, ga: &dyn SupportMap, gb: &dyn SupportMap, e: f64) -> bool {
+    use parry3d_f64::query::gjk::{self, CSOPoint, GJKResult, VoronoiSimplex};
     let start = nalgebra::Unit::try_new(-pos12.translation.vector, f64::EPSILON).unwrap_or_else(Vector3::x_axis);
     let mut simplex = VoronoiSimplex::new();
-    simplex.reset(CSOPoint::from_shapes(&pos12, ga, gb, &start));
-    match gjk::closest_points(&pos12, ga, gb, e, false, &mut simplex) {
+    simplex.reset(CSOPoint::from_shapes(pos12, ga, gb, &start));
+    match gjk::closest_points(pos12, ga, gb, e, false, &mut simplex) {
         GJKResult::NoIntersection(dir) => {
             // Every point x of the shapes' difference has |x| >= -dir.x >= -dir.support(dir).
             // Farther only when that gap is over `e` (a NaN gap proves nothing).
-            let gap = -dir.dot(&CSOPoint::from_shapes(&pos12, ga, gb, &dir).point.coords);
+            let gap = -dir.dot(&CSOPoint::from_shapes(pos12, ga, gb, &dir).point.coords);
             gap.partial_cmp(&e) != Some(std::cmp::Ordering::Greater)
         }
         _ => true,
@@ -658,7 +686,7 @@ pub(crate) fn view_of<'a>(shape: &'a Shape, pose: &'a Isometry3<f64>) -> View<'a
         Shape::Capsule { a, b, radius } => View::Capsule { a: pose * a, b: pose * b, r: *radius },
         Shape::Cuboid { half_extents } => View::Cuboid { iso: pose, half: *half_extents },
         Shape::Cylinder { radius, half_height } => View::Cylinder { iso: pose, r: *radius, hh: *half_height },
-        Shape::ConvexMesh(hull) => View::Mesh { iso: pose, poly: &hull.polyhedron },
+        Shape::ConvexMesh(hull) => View::Mesh { iso: pose, hull },
     }
 }
 
