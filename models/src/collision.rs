@@ -1705,10 +1705,16 @@ impl CollisionModel {
                 continue;
             }
             let kv = s.world[k].view();
+            // Grown, the proximity test first: a shape proven farther than `e` does not touch
+            // either, and its overlap test is not run (one GJK run where there were two).
+            let grown = GROW && e > 0.0;
+            if grown && !narrow::within(&kv, &ov, e) {
+                continue;
+            }
             if narrow::intersects(&kv, &ov) {
                 return Err(());
             }
-            near = near || (GROW && e > 0.0 && narrow::within(&kv, &ov, e));
+            near = near || grown;
         }
         Ok(near)
     }
@@ -1732,10 +1738,15 @@ impl CollisionModel {
                     continue;
                 }
                 let (vi, vj) = (s.world[i].view(), s.world[j].view());
+                // As in `link_hits_obstacle`: proven farther than `grow`, not touching either.
+                let grown = GROW && grow > 0.0;
+                if grown && !narrow::within(&vi, &vj, grow) {
+                    continue;
+                }
                 if narrow::intersects(&vi, &vj) {
                     return Err(());
                 }
-                near = near || (GROW && grow > 0.0 && narrow::within(&vi, &vj, grow));
+                near = near || grown;
             }
         }
         Ok(near)
