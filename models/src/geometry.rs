@@ -55,7 +55,7 @@ pub struct ConvexHull {
 /// A hull's vertex graph (the neighbours of vertex `v` are `adj[first[v]..first[v + 1]]`) and,
 /// for each cell of a cube map of directions ([`cube_cell`]), the vertex farthest along its
 /// centre (where a climb starts).
-#[derive(Debug, Clone, Default)]
+#[derive(Debug, Clone)]
 struct Climb {
     first: Vec<u32>,
     adj: Vec<u32>,
@@ -135,7 +135,7 @@ impl ConvexHull {
     fn support_from(&self, dir: &Vector3<f64>, from: Option<usize>) -> usize {
         let pts = &self.points;
         let c = &self.climb;
-        if pts.len() <= SCAN_VERTICES || c.first.len() != pts.len() + 1 || c.adj_points.len() != c.adj.len() {
+        if pts.len() <= SCAN_VERTICES || c.first.len() != pts.len() + 1 {
             return scan_support(pts, dir);
         }
         let mut v = c.starts.get(cube_cell(dir)).map_or(0, |&s| s as usize);

@@ -572,13 +572,13 @@ impl Held<'_> {
 
     /// The shape as a support map for GJK: a hull climbs its vertex graph (see
     /// [`ConvexHull::support_index`]) instead of parry's scan of every vertex.
-    fn with_support_map<T>(&self, f: impl FnOnce(&dyn SupportMap) -> T) -> Option<T> {
+    fn with_support_map<T>(&self, f: impl FnOnce(&dyn SupportMap) -> T) -> T {
         match self {
-            Held::Ball(s) => Some(f(s)),
-            Held::Capsule(s) => Some(f(s)),
-            Held::Cuboid(s) => Some(f(s)),
-            Held::Cylinder(s) => Some(f(s)),
-            Held::Poly(h) => Some(f(&Climbing::new(h))),
+            Held::Ball(s) => f(s),
+            Held::Capsule(s) => f(s),
+            Held::Cuboid(s) => f(s),
+            Held::Cylinder(s) => f(s),
+            Held::Poly(h) => f(&Climbing::new(h)),
         }
     }
 }
@@ -606,12 +606,9 @@ pub(crate) fn parry_intersects(a: &View, b: &View) -> bool {
     // A hull on either side: GJK on the support maps, the hull's climbing its vertex graph.
     if matches!(sa, Held::Poly(_)) || matches!(sb, Held::Poly(_)) {
         let pos12 = ia.inv_mul(&ib);
-        let hit = sa.with_support_map(|ga| {
+        return sa.with_support_map(|ga| {
             sb.with_support_map(|gb| query::details::intersection_test_support_map_support_map(&pos12, ga, gb))
         });
-        if let Some(Some(hit)) = hit {
-            return hit;
-        }
     }
     // Unsupported cannot happen for convex shapes; if it ever does, say "colliding" (safe side).
     query::intersection_test(&ia, sa.shape(), &ib, sb.shape()).unwrap_or(true)
@@ -636,11 +633,7 @@ fn parry_within(a: &View, b: &View, e: f64) -> bool {
     let (ia, sa) = to_parry(a);
     let (ib, sb) = to_parry(b);
     let pos12 = ia.inv_mul(&ib);
-    let answer = sa.with_support_map(|ga| sb.with_support_map(|gb| gjk_within(&pos12, ga, gb, e)));
-    match answer {
-        Some(Some(near)) => near,
-        _ => parry_separation(a, b).distance <= e,
-    }
+    sa.with_support_map(|ga| sb.with_support_map(|gb| gjk_within(&pos12, ga, gb, e)))
 }
 
 /// [`parry_within`] on two support maps, `pos12` the second's pose in the first's frame.
