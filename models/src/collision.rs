@@ -837,6 +837,12 @@ pub struct CollisionScratch {
     margins: Vec<f64>,
     /// The points of an edge probe, or one of them (see [`CollisionModel::probe_collides`]).
     probe: Vec<f64>,
+    /// Per shape and obstacle, then per pair of shapes, the direction that last separated the
+    /// pair, where GJK starts (see [`narrow::intersects_from`]; zero: none yet). Only a start:
+    /// any value is sound.
+    hints: Vec<narrow::Hint>,
+    /// The model (its geometry and scene, by address) `hints` are of.
+    hints_of: (usize, usize),
     spheres: SphereScratch,
 }
 
@@ -883,6 +889,8 @@ impl CollisionScratch {
             inflation: Vec::new(),
             margins: Vec::new(),
             probe: Vec::new(),
+            hints: Vec::new(),
+            hints_of: (0, 0),
             spheres: SphereScratch::new(),
         }
     }
@@ -918,6 +926,10 @@ impl CollisionScratch {
         }
     }
 }
+
+/// Robots with more shapes than this keep no separating directions for their self pairs (one
+/// per pair of shapes would be too many).
+const HINTED_SHAPES_MAX: usize = 256;
 
 /// At most this many spare scratch spaces per thread (see [`CollisionModel::scratch`]).
 const SPARE_SCRATCHES: usize = 4;
@@ -1190,6 +1202,9 @@ impl CollisionModel {
         let mut s = spare.unwrap_or_default();
         // A spare may have been set to the baseline vectors: a new scratch uses the best.
         s.spheres.lanes.isa = Isa::Best;
+        // Its separating directions start afresh: a planner's answers depend on its own
+        // queries alone.
+        s.hints_of = (0, 0);
         s.begin(&self.geom);
         // Room for a typical certificate, so that planning does not grow them piece by piece.
         let (dof, rows) = (self.geom.dof, self.geom.links.len() + self.geom.self_pairs.len());
@@ -1658,6 +1673,21 @@ impl CollisionModel {
         }
     }
 
+    /// The scratch's separating directions made this model's (all none when they were another's
+    /// or are new): one per shape and obstacle, and, for robots of at most
+    /// [`HINTED_SHAPES_MAX`] shapes, one per pair of shapes.
+    #[inline]
+    fn fit_hints(&self, s: &mut CollisionScratch) {
+        let of = (Arc::as_ptr(&self.geom) as usize, Arc::as_ptr(&self.scene) as usize);
+        if s.hints_of != of {
+            let n = self.geom.shapes.len();
+            let pairs = if n <= HINTED_SHAPES_MAX { n * n } else { 0 };
+            s.hints.clear();
+            s.hints.resize(n * self.scene.obstacles.len() + pairs, narrow::Hint::NONE);
+            s.hints_of = of;
+        }
+    }
+
     /// World poses of a link's shapes, computed once per query.
     #[inline]
     fn pose_link(&self, slot: usize, s: &mut CollisionScratch) {
@@ -1689,10 +1719,11 @@ impl CollisionModel {
     fn link_hits_obstacle<const GROW: bool>(
         &self,
         slot: usize,
-        o: &ObstacleGeom,
+        oi: usize,
         e: f64,
         s: &mut CollisionScratch,
     ) -> Result<bool, ()> {
+        let o = &self.scene.obstacles[oi];
         let l = &self.geom.links[slot];
         if !sphere_hits_aabb(&s.link_c[slot], l.r + e, o) {
             return Ok(false);
@@ -1705,13 +1736,16 @@ impl CollisionModel {
                 continue;
             }
             let kv = s.world[k].view();
+            let hint = s.hints.get_mut(k * self.scene.obstacles.len() + oi);
+            let mut none = narrow::Hint::NONE;
+            let hint = hint.unwrap_or(&mut none);
             // Grown, the proximity test first: a shape proven farther than `e` does not touch
             // either, and its overlap test is not run (one GJK run where there were two).
             let grown = GROW && e > 0.0;
-            if grown && !narrow::within(&kv, &ov, e) {
+            if grown && !narrow::within_from(&kv, &ov, e, hint) {
                 continue;
             }
-            if narrow::intersects(&kv, &ov) {
+            if narrow::intersects_from(&kv, &ov, hint) {
                 return Err(());
             }
             near = near || grown;
@@ -1738,12 +1772,15 @@ impl CollisionModel {
                     continue;
                 }
                 let (vi, vj) = (s.world[i].view(), s.world[j].view());
+                let hint = s.hints.get_mut(g.shapes.len() * self.scene.obstacles.len() + i * g.shapes.len() + j);
+                let mut none = narrow::Hint::NONE;
+                let hint = hint.unwrap_or(&mut none);
                 // As in `link_hits_obstacle`: proven farther than `grow`, not touching either.
                 let grown = GROW && grow > 0.0;
-                if grown && !narrow::within(&vi, &vj, grow) {
+                if grown && !narrow::within_from(&vi, &vj, grow, hint) {
                     continue;
                 }
-                if narrow::intersects(&vi, &vj) {
+                if narrow::intersects_from(&vi, &vj, hint) {
                     return Err(());
                 }
                 near = near || grown;
@@ -1776,6 +1813,7 @@ impl CollisionModel {
         s: &mut CollisionScratch,
     ) -> Result<bool, Hit> {
         self.pose_bodies(q, s);
+        self.fit_hints(s);
         let g = &*self.geom;
         let grow = |slot: usize| if GROW { inflation.map_or(0.0, |e| e.link[slot]) } else { 0.0 };
         let mut near = false;
@@ -1800,7 +1838,7 @@ impl CollisionModel {
                         return true;
                     }
                     *seen = visit;
-                    match self.link_hits_obstacle::<GROW>(slot, &self.scene.obstacles[oi as usize], e, s) {
+                    match self.link_hits_obstacle::<GROW>(slot, oi as usize, e, s) {
                         Err(()) => {
                             hit = Some(Hit::Env { slot, obstacle: oi as usize });
                             false
@@ -1843,9 +1881,8 @@ impl CollisionModel {
             }
             for ci in 0..s.candidates.len() {
                 let oi = s.candidates[ci] as usize;
-                let o = &self.scene.obstacles[oi];
                 for slot in 0..g.links.len() {
-                    match self.link_hits_obstacle::<GROW>(slot, o, grow(slot), s) {
+                    match self.link_hits_obstacle::<GROW>(slot, oi, grow(slot), s) {
                         Err(()) => return Err(Hit::Env { slot, obstacle: oi }),
                         Ok(n) => near |= n,
                     }

@@ -399,4 +399,84 @@ mod climb_tests {
         assert!(hits > 300 && hits < 2700, "{hits} overlaps of 3000");
         assert_eq!(near, 0, "proximity tests called shapes near at half their distance");
     }
+
+    /// Queries that start from the direction that separated the pair in the query before (see
+    /// `narrow::intersects_from`), as a planner asks about a pair in nearby poses one after
+    /// another, answer as parry's own from nothing: the same overlaps, never "farther" within
+    /// the distance, "farther" at half of it. Hull against hull, hull against box, box against
+    /// cylinder, each pose a small step from the one before; the kept direction alone decides
+    /// most of the answers "apart".
+    #[test]
+    fn hinted_queries_answer_as_parry_along_walks() {
+        use crate::collision::narrow::{Hint, intersects_from, view_of, within_from};
+        use nalgebra::UnitQuaternion;
+        use parry3d_f64::query;
+        let mut rng = Rng::new(31);
+        let cloud: Vec<Point3<f64>> = (0..200)
+            .map(|_| {
+                let d = Vector3::new(rng.range(-1.0, 1.0), rng.range(-1.0, 1.0), rng.range(-1.0, 1.0)).normalize();
+                Point3::new(0.3 * d.x, 0.1 * d.y, 0.08 * d.z)
+            })
+            .collect();
+        let hull = Arc::new(ConvexHull::from_points(&cloud).expect("a hull"));
+        let mesh = Shape::ConvexMesh(hull.clone());
+        let cuboid = Shape::cuboid(0.2, 0.05, 0.3);
+        let cylinder = Shape::cylinder(0.1, 0.25);
+        let parry_of = |s: &Shape| -> Box<dyn parry3d_f64::shape::Shape> {
+            match s {
+                Shape::ConvexMesh(h) => Box::new(h.polyhedron.clone()),
+                Shape::Cuboid { half_extents } => Box::new(parry3d_f64::shape::Cuboid::new(*half_extents)),
+                // parry's cylinders run along y, ours along z.
+                Shape::Cylinder { radius, half_height } => {
+                    Box::new(parry3d_f64::shape::Cylinder::new(*half_height, *radius))
+                }
+                _ => unreachable!("hulls, boxes and cylinders only"),
+            }
+        };
+        let to_y = UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::FRAC_PI_2);
+        let parry_pose = |s: &Shape, p: &Isometry3<f64>| match s {
+            Shape::Cylinder { .. } => Isometry3::from_parts(p.translation, p.rotation * to_y),
+            _ => *p,
+        };
+        let (mut apart, mut decided, mut hits) = (0, 0, 0);
+        for (a, b) in [(&mesh, &mesh), (&mesh, &cuboid), (&cuboid, &cylinder)] {
+            let mut hint = Hint::NONE;
+            let mut pa = Isometry3::identity();
+            let mut pb = Isometry3::translation(0.3, 0.0, 0.0);
+            for i in 0..2000 {
+                // A small step of each, pulled back towards the region where they meet.
+                let step = |rng: &mut Rng, p: &Isometry3<f64>, home: Vector3<f64>| {
+                    let t = home
+                        + (p.translation.vector - home) * 0.98
+                        + Vector3::new(rng.range(-0.03, 0.03), rng.range(-0.03, 0.03), rng.range(-0.03, 0.03));
+                    let r = UnitQuaternion::new(Vector3::new(
+                        rng.range(-0.05, 0.05),
+                        rng.range(-0.05, 0.05),
+                        rng.range(-0.05, 0.05),
+                    )) * p.rotation;
+                    Isometry3::from_parts(t.into(), r)
+                };
+                pa = step(&mut rng, &pa, Vector3::zeros());
+                pb = step(&mut rng, &pb, Vector3::new(0.4, 0.0, 0.0));
+                let (ra, rb) = (parry_pose(a, &pa), parry_pose(b, &pb));
+                let reference = query::intersection_test(&ra, &*parry_of(a), &rb, &*parry_of(b)).expect("convex");
+                let (va, vb) = (view_of(a, &pa), view_of(b, &pb));
+                let before = hint;
+                assert_eq!(intersects_from(&va, &vb, &mut hint), reference, "pose {i}");
+                hits += usize::from(reference);
+                if reference {
+                    continue;
+                }
+                apart += 1;
+                decided += usize::from(before.dir != Vector3::zeros() && hint == before);
+                let d = query::distance(&ra, &*parry_of(a), &rb, &*parry_of(b)).expect("convex");
+                assert!(within_from(&va, &vb, d * 1.001 + 1e-9, &mut hint), "pose {i}: {d}");
+                if d > 0.02 {
+                    assert!(!within_from(&va, &vb, 0.5 * d, &mut hint), "pose {i}: near at half of {d}");
+                }
+            }
+        }
+        assert!(hits > 300 && apart > 1000, "{hits} overlaps, {apart} apart");
+        assert!(decided * 5 > apart * 4, "the kept direction decided {decided} of {apart} answers apart");
+    }
 }

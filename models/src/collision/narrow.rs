@@ -371,6 +371,18 @@ fn sphere_cylinder_hit(c: &Point3<f64>, r: f64, iso: &Isometry3<f64>, rc: f64, h
 /// Whether two posed shapes overlap (touching counts).
 #[inline]
 pub(crate) fn intersects(a: &View, b: &View) -> bool {
+    intersects_from(a, b, &mut { Hint::NONE })
+}
+
+/// [`intersects`] with a hint: `hint` (world frame; zero for none) is a direction from `a`
+/// towards `b` that separated the pair in an earlier query. Where GJK would run (a box, a
+/// cylinder or a hull on both sides), the hint is tested first: when the two shapes are apart
+/// along it, that is the answer; otherwise GJK starts from it, and a separating direction it
+/// finds replaces it. In motion planning a pair is asked about again and again in nearby
+/// poses, and the last separating direction most often still separates. Any hint gives the
+/// same answer but at GJK's tolerance (a touch within about 1e-7 of the pair's size).
+#[inline]
+pub(crate) fn intersects_from(a: &View, b: &View, hint: &mut Hint) -> bool {
     use View::*;
     match (a, b) {
         (Sphere { c: c1, r: r1 }, Sphere { c: c2, r: r2 }) => {
@@ -399,7 +411,7 @@ pub(crate) fn intersects(a: &View, b: &View) -> bool {
         (Capsule { a, b, r }, Cylinder { iso, r: rc, hh }) | (Cylinder { iso, r: rc, hh }, Capsule { a, b, r }) => {
             capsule_cylinder_hit(a, b, *r, iso, *rc, *hh)
         }
-        _ => parry_intersects(a, b),
+        _ => parry_intersects_from(a, b, hint),
     }
 }
 
@@ -601,14 +613,62 @@ fn to_parry<'a>(v: &View<'a>) -> (Isometry3<f64>, Held<'a>) {
 }
 
 pub(crate) fn parry_intersects(a: &View, b: &View) -> bool {
+    parry_intersects_from(a, b, &mut { Hint::NONE })
+}
+
+/// What an earlier query of a pair of shapes leaves for the next (see [`intersects_from`]):
+/// the direction (world frame) from the first shape towards the second that last separated
+/// them; zero for none. (Starting each hull's climb from its vertex of the query before as
+/// well measured no better than the cube map's start: 617 M planning instructions against
+/// 614 M.)
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct Hint {
+    /// The direction; zero for none.
+    pub dir: Vector3<f64>,
+}
+
+impl Hint {
+    /// No hint.
+    pub const NONE: Hint = Hint { dir: Vector3::new(0.0, 0.0, 0.0) };
+}
+
+/// The hint's direction in `a`'s frame (`iso_a` its pose), `None` for none.
+fn hint_in(iso_a: &Isometry3<f64>, hint: &Hint) -> Option<nalgebra::Unit<Vector3<f64>>> {
+    nalgebra::Unit::try_new(iso_a.rotation.inverse_transform_vector(&hint.dir), f64::EPSILON)
+}
+
+fn parry_intersects_from(a: &View, b: &View, hint: &mut Hint) -> bool {
     let (ia, sa) = to_parry(a);
     let (ib, sb) = to_parry(b);
+    // Two boxes: parry's separating-axis test, cheaper than trying the hint first.
+    if let (Held::Cuboid(ca), Held::Cuboid(cb)) = (&sa, &sb) {
+        return query::intersection_test(&ia, ca, &ib, cb).unwrap_or(true);
+    }
+    let pos12 = ia.inv_mul(&ib);
+    let start = hint_in(&ia, hint);
+    if let Some(d) = start
+        && sa.with_support_map(|ga| sb.with_support_map(|gb| axis_gap(&pos12, ga, gb, &d))) > 0.0
+    {
+        return false;
+    }
     // A hull on either side: GJK on the support maps, the hull's climbing its vertex graph.
     if matches!(sa, Held::Poly(_)) || matches!(sb, Held::Poly(_)) {
-        let pos12 = ia.inv_mul(&ib);
-        return sa.with_support_map(|ga| {
-            sb.with_support_map(|gb| query::details::intersection_test_support_map_support_map(&pos12, ga, gb))
+        use parry3d_f64::query::gjk::VoronoiSimplex;
+        let (hit, dir) = sa.with_support_map(|ga| {
+            sb.with_support_map(|gb| {
+                query::details::intersection_test_support_map_support_map_with_params(
+                    &pos12,
+                    ga,
+                    gb,
+                    &mut VoronoiSimplex::new(),
+                    start,
+                )
+            })
         });
+        if !hit {
+            hint.dir = ia.rotation * dir.into_inner();
+        }
+        return hit;
     }
     // Unsupported cannot happen for convex shapes; if it ever does, say "colliding" (safe side).
     query::intersection_test(&ia, sa.shape(), &ib, sb.shape()).unwrap_or(true)
@@ -622,24 +682,60 @@ pub(crate) fn parry_intersects(a: &View, b: &View) -> bool {
 /// of the distance, where the converged distance of [`separation`] is an upper one (and GJK's
 /// give-up after 100 iterations also comes back as "no intersection").
 pub(crate) fn within(a: &View, b: &View, e: f64) -> bool {
+    within_from(a, b, e, &mut { Hint::NONE })
+}
+
+/// [`within`] with a hint, as [`intersects_from`].
+#[inline]
+pub(crate) fn within_from(a: &View, b: &View, e: f64, hint: &mut Hint) -> bool {
     use View::*;
     match (a, b) {
         (Sphere { .. } | Capsule { .. }, _) | (_, Sphere { .. } | Capsule { .. }) => separation(a, b).distance <= e,
-        _ => parry_within(a, b, e),
+        _ => parry_within_from(a, b, e, hint),
     }
 }
 
-fn parry_within(a: &View, b: &View, e: f64) -> bool {
+fn parry_within_from(a: &View, b: &View, e: f64, hint: &mut Hint) -> bool {
     let (ia, sa) = to_parry(a);
     let (ib, sb) = to_parry(b);
     let pos12 = ia.inv_mul(&ib);
-    sa.with_support_map(|ga| sb.with_support_map(|gb| gjk_within(&pos12, ga, gb, e)))
+    let start = hint_in(&ia, hint);
+    if let Some(d) = start
+        && sa.with_support_map(|ga| sb.with_support_map(|gb| axis_gap(&pos12, ga, gb, &d))) > e
+    {
+        return false;
+    }
+    let (near, dir) = sa.with_support_map(|ga| sb.with_support_map(|gb| gjk_within(&pos12, ga, gb, e, start)));
+    if let Some(dir) = dir {
+        hint.dir = ia.rotation * dir.into_inner();
+    }
+    near
 }
 
-/// [`parry_within`] on two support maps, `pos12` the second's pose in the first's frame.
-fn gjk_within(pos12: &Isometry3<f64>, ga: &dyn SupportMap, gb: &dyn SupportMap, e: f64) -> bool {
+/// How far apart two support maps are along the unit direction `d` (the first's frame, from the
+/// first towards the second; `pos12` the second's pose in the first's frame): the least `d.x`
+/// over the second less the greatest over the first, a lower bound of their distance (NaN
+/// when a support point is not finite, which proves nothing). The same sum GJK's own test of a
+/// direction makes.
+fn axis_gap(pos12: &Isometry3<f64>, ga: &dyn SupportMap, gb: &dyn SupportMap, d: &nalgebra::Unit<Vector3<f64>>) -> f64 {
+    use parry3d_f64::query::gjk::CSOPoint;
+    -d.dot(&CSOPoint::from_shapes(pos12, ga, gb, d).point.coords)
+}
+
+/// [`within`] on two support maps, `pos12` the second's pose in the first's frame, GJK
+/// started from `start` (the first's frame) when given; with the direction that proved the
+/// shapes farther, if it did.
+fn gjk_within(
+    pos12: &Isometry3<f64>,
+    ga: &dyn SupportMap,
+    gb: &dyn SupportMap,
+    e: f64,
+    start: Option<nalgebra::Unit<Vector3<f64>>>,
+) -> (bool, Option<nalgebra::Unit<Vector3<f64>>>) {
     use parry3d_f64::query::gjk::{self, CSOPoint, GJKResult, VoronoiSimplex};
-    let start = nalgebra::Unit::try_new(-pos12.translation.vector, f64::EPSILON).unwrap_or_else(Vector3::x_axis);
+    let start = start.unwrap_or_else(|| {
+        nalgebra::Unit::try_new(-pos12.translation.vector, f64::EPSILON).unwrap_or_else(Vector3::x_axis)
+    });
     let mut simplex = VoronoiSimplex::new();
     simplex.reset(CSOPoint::from_shapes(pos12, ga, gb, &start));
     match gjk::closest_points(pos12, ga, gb, e, false, &mut simplex) {
@@ -647,9 +743,10 @@ fn gjk_within(pos12: &Isometry3<f64>, ga: &dyn SupportMap, gb: &dyn SupportMap, 
             // Every point x of the shapes' difference has |x| >= -dir.x >= -dir.support(dir).
             // Farther only when that gap is over `e` (a NaN gap proves nothing).
             let gap = -dir.dot(&CSOPoint::from_shapes(pos12, ga, gb, &dir).point.coords);
-            gap.partial_cmp(&e) != Some(std::cmp::Ordering::Greater)
+            let farther = gap.partial_cmp(&e) == Some(std::cmp::Ordering::Greater);
+            (!farther, farther.then_some(dir))
         }
-        _ => true,
+        _ => (true, None),
     }
 }
 
