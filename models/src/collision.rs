@@ -843,6 +843,12 @@ pub struct CollisionScratch {
     hints: Vec<narrow::Hint>,
     /// The model (its geometry and scene, by address) `hints` are of.
     hints_of: (usize, usize),
+    /// The items a certificate's grown checks on the general path found near, level after
+    /// level (see [`CollisionModel::check_items`]): link slot `l` against obstacle `o` as
+    /// `l * obstacles + o`, self pair `p` as `links * obstacles + p`.
+    near_items: Vec<u32>,
+    /// Whether grown scans record their near items in `near_items` (in certificates only).
+    record_near: bool,
     spheres: SphereScratch,
 }
 
@@ -891,6 +897,8 @@ impl CollisionScratch {
             probe: Vec::new(),
             hints: Vec::new(),
             hints_of: (0, 0),
+            near_items: Vec::new(),
+            record_near: false,
             spheres: SphereScratch::new(),
         }
     }
@@ -1598,6 +1606,57 @@ impl CollisionModel {
     }
 
     /// Exact or inflated query, by either path.
+    /// A certificate's grown check on the general path: with `scope` `None` every item, as
+    /// [`Self::check`], else only the items `near_items[a..b]` (those a coarser sub-interval
+    /// around this one left near: every other item was proven farther than its margin over
+    /// that whole sub-interval, which holds this one). The items found near are appended to
+    /// `near_items`.
+    fn check_items(
+        &self,
+        q: &[f64],
+        inflation: Inflation<'_>,
+        scope: Option<(usize, usize)>,
+        s: &mut CollisionScratch,
+    ) -> Check {
+        let Some((a, b)) = scope else {
+            s.record_near = true;
+            let answer = self.scan::<true>(q, Some(inflation), s);
+            s.record_near = false;
+            return match answer {
+                Err(_) => Check::Hit,
+                Ok(true) => Check::Near,
+                Ok(false) => Check::Free,
+            };
+        };
+        self.pose_bodies(q, s);
+        self.fit_hints(s);
+        let g = &*self.geom;
+        let n_obs = self.scene.obstacles.len();
+        let env = g.links.len() * n_obs;
+        let mut near = false;
+        for i in a..b {
+            let Some(&item) = s.near_items.get(i) else { break };
+            let it = item as usize;
+            let answer = if it < env {
+                let slot = it / n_obs;
+                self.link_hits_obstacle::<true>(slot, it % n_obs, inflation.link[slot], s)
+            } else {
+                let p = it - env;
+                let (pa, pb) = g.self_pairs[p];
+                self.pair_hits::<true>(pa as usize, pb as usize, inflation.pair[p], s)
+            };
+            match answer {
+                Err(()) => return Check::Hit,
+                Ok(true) => {
+                    s.near_items.push(item);
+                    near = true;
+                }
+                Ok(false) => {}
+            }
+        }
+        if near { Check::Near } else { Check::Free }
+    }
+
     fn check(&self, q: &[f64], inflation: Option<Inflation<'_>>, s: &mut CollisionScratch) -> Check {
         match &self.fast {
             Some(fast) => fast.check(q, &self.scene.obstacles, &self.scene.solids, inflation, &mut s.spheres),
@@ -1844,6 +1903,9 @@ impl CollisionModel {
                             false
                         }
                         Ok(n) => {
+                            if GROW && n && s.record_near {
+                                s.near_items.push((slot * self.scene.obstacles.len()) as u32 + oi);
+                            }
                             near |= n;
                             true
                         }
@@ -1884,7 +1946,12 @@ impl CollisionModel {
                 for slot in 0..g.links.len() {
                     match self.link_hits_obstacle::<GROW>(slot, oi, grow(slot), s) {
                         Err(()) => return Err(Hit::Env { slot, obstacle: oi }),
-                        Ok(n) => near |= n,
+                        Ok(n) => {
+                            if GROW && n && s.record_near {
+                                s.near_items.push((slot * self.scene.obstacles.len() + oi) as u32);
+                            }
+                            near |= n;
+                        }
                     }
                 }
             }
@@ -1893,7 +1960,12 @@ impl CollisionModel {
             let (a, b) = (a as usize, b as usize);
             match self.pair_hits::<GROW>(a, b, if GROW { inflation.map_or(0.0, |e| e.pair[p]) } else { 0.0 }, s) {
                 Err(()) => return Err(Hit::Pair { a, b }),
-                Ok(n) => near |= n,
+                Ok(n) => {
+                    if GROW && n && s.record_near {
+                        s.near_items.push((g.links.len() * self.scene.obstacles.len() + p) as u32);
+                    }
+                    near |= n;
+                }
             }
         }
         Ok(near)
@@ -2265,6 +2337,7 @@ impl CollisionModel {
         spans.clear();
         let pieces = first_pieces(most);
         s.spheres.items.clear();
+        s.near_items.clear();
         let mut free = true;
         if listed && let (Some(fast), Some(solids32)) = (&self.fast, &self.scene.solids32) {
             // The batches cut their own pieces (finer), or leave these to the loop below.
@@ -2306,8 +2379,9 @@ impl CollisionModel {
             ConfigSpace::step_into(qa, &delta, tm, &mut q);
             checks += 1;
             let inflation = Inflation { link: &margins[..slots], pair: &margins[slots..], step: &step, dir: &dir };
-            // On the sphere path, a half is checked against only what was near over the whole.
+            // A half is checked against only what was near over the whole.
             let first_item = s.spheres.items.len();
+            let first_general = s.near_items.len();
             let answer = match &self.fast {
                 Some(fast) if listed => {
                     let scope = match within {
@@ -2317,9 +2391,15 @@ impl CollisionModel {
                     };
                     fast.check_listed(&q, &self.scene.obstacles, &self.scene.solids, inflation, scope, &mut s.spheres)
                 }
-                _ => self.check(&q, Some(inflation), s),
+                Some(_) => self.check(&q, Some(inflation), s),
+                None if listed => self.check_items(&q, inflation, within, s),
+                None => self.check(&q, Some(inflation), s),
             };
-            let near_items = Some((first_item, s.spheres.items.len())).filter(|_| listed && self.fast.is_some());
+            let near_items = match &self.fast {
+                Some(_) => Some((first_item, s.spheres.items.len())),
+                None => Some((first_general, s.near_items.len())),
+            }
+            .filter(|_| listed);
             match answer {
                 Check::Free => {}
                 Check::Hit => {
@@ -2333,7 +2413,7 @@ impl CollisionModel {
                 Check::Near => {
                     // On the sphere path the query also says how much of the sub-interval
                     // around `tm` it certified free: only the rest is checked again.
-                    let reach = if near_items.is_some() { s.spheres.reach } else { 0.0 };
+                    let reach = if near_items.is_some() && self.fast.is_some() { s.spheres.reach } else { 0.0 };
                     let rho = reach_of(half, reach);
                     spans.push(Span { t0, t1: tm - rho, within: near_items, pairs_free });
                     spans.push(Span { t0: tm + rho, t1, within: near_items, pairs_free });
@@ -2670,6 +2750,72 @@ pub fn disable_never_colliding(robot: &mut Robot, max_relative_dofs: usize, max_
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// On the general path a certificate's halves test only the items (a link against an
+    /// obstacle, a self pair) the coarser piece around them left near. On the UR5 of meshes
+    /// (example-robot-data's) among boxes, cylinders and hulls, certificates answer as when
+    /// every half tests everything, with as many checks; what they certify is free at a fine
+    /// resolution; and the halves' scopes are narrower than everything.
+    #[test]
+    fn general_path_halves_test_only_what_was_near() {
+        let corpus = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../tests/fixtures/corpus");
+        let urdf = corpus.join("example-robot-data/robots/ur_description/urdf/ur5_robot.urdf");
+        let options = crate::urdf::UrdfOptions { package_dirs: vec![corpus.clone()], ..Default::default() };
+        let mut robot = crate::urdf::load_urdf_with(&urdf, None, &options).expect("the UR5 of meshes");
+        disable_always_colliding(&mut robot, 300, 3);
+        let mut rng = crate::Rng::new(41);
+        let mut env = Environment::new();
+        for k in 0..12 {
+            let p = Vector3::new(rng.range(-0.9, 0.9), rng.range(-0.9, 0.9), rng.range(-0.2, 1.0));
+            if p.xy().norm() < 0.3 {
+                continue;
+            }
+            let rot = UnitQuaternion::from_euler_angles(rng.range(-3.0, 3.0), rng.range(-3.0, 3.0), 0.0);
+            let shape = match k % 3 {
+                0 => Shape::cuboid(rng.range(0.02, 0.15), rng.range(0.02, 0.15), rng.range(0.02, 0.15)),
+                1 => Shape::cylinder(rng.range(0.02, 0.1), rng.range(0.05, 0.2)),
+                _ => {
+                    let cloud: Vec<Point3<f64>> = (0..30)
+                        .map(|_| Point3::new(rng.range(-0.1, 0.1), rng.range(-0.1, 0.1), rng.range(-0.1, 0.1)))
+                        .collect();
+                    Shape::ConvexMesh(Arc::new(crate::geometry::ConvexHull::from_points(&cloud).expect("a hull")))
+                }
+            };
+            env.add(Obstacle::new(format!("o{k}"), Isometry3::from_parts(p.into(), rot), shape));
+        }
+        let model = CollisionModel::new(&robot, env);
+        assert!(model.fast.is_none(), "meshes take the general path");
+        let space = robot.config_space();
+        let (mut listed, mut everything) = (model.scratch(), model.scratch());
+        let (mut certified, mut refused, mut tried, mut narrower) = (0, 0, 0, 0);
+        while tried < 80 {
+            let qa = robot.random_configuration(&mut rng);
+            let far = robot.random_configuration(&mut rng);
+            let qb = space.interpolate(&qa, &far, 0.3);
+            if model.collides(&qa) || model.collides(&qb) {
+                continue;
+            }
+            tried += 1;
+            let answer = model.certify_in(&qa, &qb, 1e-4, false, true, &mut listed);
+            assert_eq!(answer, model.certify_in(&qa, &qb, 1e-4, false, false, &mut everything), "{qa:?} -> {qb:?}");
+            // Fewer items listed at the end than a full scan of every item would test.
+            let items = robot_items(&model);
+            narrower += usize::from(answer.1 > 1 && listed.near_items.len() < items * answer.1 as usize);
+            if answer.0 {
+                certified += 1;
+                assert!(model.motion_is_free(&qa, &qb, 0.0005), "certified but collides: {qa:?} -> {qb:?}");
+            } else {
+                refused += 1;
+            }
+        }
+        assert!(certified > 10 && refused > 5, "{certified} certified, {refused} refused");
+        assert!(narrower > 5, "{narrower} certificates scoped their halves");
+    }
+
+    /// Every item a general-path scan can test: each link against each obstacle, each self pair.
+    fn robot_items(model: &CollisionModel) -> usize {
+        model.geom.links.len() * model.scene.obstacles.len() + model.geom.self_pairs.len()
+    }
 
     /// A dropped scratch comes back from the thread's spares with its buffers, and with the best
     /// vector instructions even if it was set to the baseline ones.
