@@ -1798,16 +1798,19 @@ impl CollisionModel {
             let hint = s.hints.get_mut(k * self.scene.obstacles.len() + oi);
             let mut none = narrow::Hint::NONE;
             let hint = hint.unwrap_or(&mut none);
-            // Grown, the proximity test first: a shape proven farther than `e` does not touch
-            // either, and its overlap test is not run (one GJK run where there were two).
-            let grown = GROW && e > 0.0;
-            if grown && !narrow::within_from(&kv, &ov, e, hint) {
+            // Grown, the proximity test answers the overlap test too (one GJK run where there
+            // were two).
+            if GROW && e > 0.0 {
+                match narrow::proximity_from(&kv, &ov, e, hint) {
+                    narrow::Proximity::Farther => {}
+                    narrow::Proximity::Near => near = true,
+                    narrow::Proximity::Touching => return Err(()),
+                }
                 continue;
             }
             if narrow::intersects_from(&kv, &ov, hint) {
                 return Err(());
             }
-            near = near || grown;
         }
         Ok(near)
     }
@@ -1834,15 +1837,18 @@ impl CollisionModel {
                 let hint = s.hints.get_mut(g.shapes.len() * self.scene.obstacles.len() + i * g.shapes.len() + j);
                 let mut none = narrow::Hint::NONE;
                 let hint = hint.unwrap_or(&mut none);
-                // As in `link_hits_obstacle`: proven farther than `grow`, not touching either.
-                let grown = GROW && grow > 0.0;
-                if grown && !narrow::within_from(&vi, &vj, grow, hint) {
+                // As in `link_hits_obstacle`.
+                if GROW && grow > 0.0 {
+                    match narrow::proximity_from(&vi, &vj, grow, hint) {
+                        narrow::Proximity::Farther => {}
+                        narrow::Proximity::Near => near = true,
+                        narrow::Proximity::Touching => return Err(()),
+                    }
                     continue;
                 }
                 if narrow::intersects_from(&vi, &vj, hint) {
                     return Err(());
                 }
-                near = near || grown;
             }
         }
         Ok(near)

@@ -405,10 +405,11 @@ mod climb_tests {
     /// another, answer as parry's own from nothing: the same overlaps, never "farther" within
     /// the distance, "farther" at half of it. Hull against hull, hull against box, box against
     /// cylinder, each pose a small step from the one before; the kept direction alone decides
-    /// most of the answers "apart".
+    /// most of the answers "apart". The one-run proximity test (`narrow::proximity_from`)
+    /// answers as the proximity test and then the overlap test do.
     #[test]
     fn hinted_queries_answer_as_parry_along_walks() {
-        use crate::collision::narrow::{Hint, intersects_from, view_of, within_from};
+        use crate::collision::narrow::{Hint, Proximity, intersects_from, proximity_from, view_of, within_from};
         use nalgebra::UnitQuaternion;
         use parry3d_f64::query;
         let mut rng = Rng::new(31);
@@ -464,6 +465,16 @@ mod climb_tests {
                 let before = hint;
                 assert_eq!(intersects_from(&va, &vb, &mut hint), reference, "pose {i}");
                 hits += usize::from(reference);
+                // The one-run proximity test answers as the two tests (at a margin of 1 cm).
+                let mut other = hint;
+                let expected = if reference {
+                    Proximity::Touching
+                } else if within_from(&va, &vb, 0.01, &mut { hint }) {
+                    Proximity::Near
+                } else {
+                    Proximity::Farther
+                };
+                assert_eq!(proximity_from(&va, &vb, 0.01, &mut other), expected, "pose {i}");
                 if reference {
                     continue;
                 }

@@ -712,6 +712,78 @@ fn parry_within_from(a: &View, b: &View, e: f64, hint: &mut Hint) -> bool {
     near
 }
 
+/// Where two posed shapes stand against a margin (see [`proximity_from`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Proximity {
+    /// Proven farther apart than the margin.
+    Farther,
+    /// Not proven farther, and not touching.
+    Near,
+    /// Touching or overlapping (as [`intersects`] answers).
+    Touching,
+}
+
+/// [`within_from`] and then, when not proven farther, [`intersects_from`], in one GJK run
+/// where GJK decides: its proximity query to the margin ends in "farther" (with a separating
+/// direction whose gap, recomputed, is over the margin), "separated, within the margin" (a
+/// positive gap or its convergence to a positive distance: not touching, as parry's own
+/// overlap test concludes from the same steps) or "intersecting". A pair found near is then
+/// asked about once, not twice. Analytic pairs answer as the two tests do.
+#[inline]
+pub(crate) fn proximity_from(a: &View, b: &View, e: f64, hint: &mut Hint) -> Proximity {
+    use View::*;
+    let answer = |touching: bool| if touching { Proximity::Touching } else { Proximity::Near };
+    match (a, b) {
+        (Sphere { .. } | Capsule { .. }, _) | (_, Sphere { .. } | Capsule { .. }) => {
+            if separation(a, b).distance <= e {
+                answer(intersects(a, b))
+            } else {
+                Proximity::Farther
+            }
+        }
+        _ => {
+            use parry3d_f64::query::gjk::{self, CSOPoint, GJKResult, VoronoiSimplex};
+            let (ia, sa) = to_parry(a);
+            let (ib, sb) = to_parry(b);
+            let pos12 = ia.inv_mul(&ib);
+            let start = hint_in(&ia, hint);
+            if let Some(d) = start
+                && sa.with_support_map(|ga| sb.with_support_map(|gb| axis_gap(&pos12, ga, gb, &d))) > e
+            {
+                return Proximity::Farther;
+            }
+            let result = sa.with_support_map(|ga| {
+                sb.with_support_map(|gb| {
+                    let start = start.unwrap_or_else(|| {
+                        nalgebra::Unit::try_new(-pos12.translation.vector, f64::EPSILON).unwrap_or_else(Vector3::x_axis)
+                    });
+                    let mut simplex = VoronoiSimplex::new();
+                    simplex.reset(CSOPoint::from_shapes(&pos12, ga, gb, &start));
+                    match gjk::closest_points(&pos12, ga, gb, e, false, &mut simplex) {
+                        GJKResult::NoIntersection(dir) => {
+                            // As in `gjk_within`: farther only when the gap is over `e`.
+                            let gap = -dir.dot(&CSOPoint::from_shapes(&pos12, ga, gb, &dir).point.coords);
+                            if gap.partial_cmp(&e) == Some(std::cmp::Ordering::Greater) { Ok(dir) } else { Err(None) }
+                        }
+                        GJKResult::Intersection => Err(Some(true)),
+                        _ => Err(Some(false)),
+                    }
+                })
+            });
+            match result {
+                Ok(dir) => {
+                    hint.dir = ia.rotation * dir.into_inner();
+                    Proximity::Farther
+                }
+                Err(Some(touching)) => answer(touching),
+                // A direction GJK gave up with (after 100 steps) or whose gap is not over `e`:
+                // near, and the overlap test of its own decides.
+                Err(None) => answer(parry_intersects_from(a, b, hint)),
+            }
+        }
+    }
+}
+
 /// How far apart two support maps are along the unit direction `d` (the first's frame, from the
 /// first towards the second; `pos12` the second's pose in the first's frame): the least `d.x`
 /// over the second less the greatest over the first, a lower bound of their distance (NaN
