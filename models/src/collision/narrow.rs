@@ -696,6 +696,15 @@ pub(crate) fn within_from(a: &View, b: &View, e: f64, hint: &mut Hint) -> bool {
 }
 
 fn parry_within_from(a: &View, b: &View, e: f64, hint: &mut Hint) -> bool {
+    parry_proximity(a, b, e, hint).is_err()
+}
+
+/// GJK's proximity query of two posed shapes (not analytic) to the margin `e`, after their
+/// hint's direction: `Ok(())` when proven farther (the hint then holds the direction that
+/// proved it), else `Err(Some(touching))` as GJK concluded, or `Err(None)` when it did not
+/// decide (a direction it gave up with after 100 steps, or whose gap is not over `e`).
+fn parry_proximity(a: &View, b: &View, e: f64, hint: &mut Hint) -> Result<(), Option<bool>> {
+    use parry3d_f64::query::gjk::{self, CSOPoint, GJKResult, VoronoiSimplex};
     let (ia, sa) = to_parry(a);
     let (ib, sb) = to_parry(b);
     let pos12 = ia.inv_mul(&ib);
@@ -703,13 +712,29 @@ fn parry_within_from(a: &View, b: &View, e: f64, hint: &mut Hint) -> bool {
     if let Some(d) = start
         && sa.with_support_map(|ga| sb.with_support_map(|gb| axis_gap(&pos12, ga, gb, &d))) > e
     {
-        return false;
+        return Ok(());
     }
-    let (near, dir) = sa.with_support_map(|ga| sb.with_support_map(|gb| gjk_within(&pos12, ga, gb, e, start)));
-    if let Some(dir) = dir {
-        hint.dir = ia.rotation * dir.into_inner();
-    }
-    near
+    let result = sa.with_support_map(|ga| {
+        sb.with_support_map(|gb| {
+            let start = start.unwrap_or_else(|| {
+                nalgebra::Unit::try_new(-pos12.translation.vector, f64::EPSILON).unwrap_or_else(Vector3::x_axis)
+            });
+            let mut simplex = VoronoiSimplex::new();
+            simplex.reset(CSOPoint::from_shapes(&pos12, ga, gb, &start));
+            match gjk::closest_points(&pos12, ga, gb, e, false, &mut simplex) {
+                GJKResult::NoIntersection(dir) => {
+                    // Every point x of the shapes' difference has |x| >= -dir.x >=
+                    // -dir.support(dir). Farther only when that gap is over `e` (a NaN gap
+                    // proves nothing).
+                    let gap = -dir.dot(&CSOPoint::from_shapes(&pos12, ga, gb, &dir).point.coords);
+                    if gap.partial_cmp(&e) == Some(std::cmp::Ordering::Greater) { Ok(dir) } else { Err(None) }
+                }
+                GJKResult::Intersection => Err(Some(true)),
+                _ => Err(Some(false)),
+            }
+        })
+    });
+    result.map(|dir| hint.dir = ia.rotation * dir.into_inner())
 }
 
 /// Where two posed shapes stand against a margin (see [`proximity_from`]).
@@ -741,46 +766,12 @@ pub(crate) fn proximity_from(a: &View, b: &View, e: f64, hint: &mut Hint) -> Pro
                 Proximity::Farther
             }
         }
-        _ => {
-            use parry3d_f64::query::gjk::{self, CSOPoint, GJKResult, VoronoiSimplex};
-            let (ia, sa) = to_parry(a);
-            let (ib, sb) = to_parry(b);
-            let pos12 = ia.inv_mul(&ib);
-            let start = hint_in(&ia, hint);
-            if let Some(d) = start
-                && sa.with_support_map(|ga| sb.with_support_map(|gb| axis_gap(&pos12, ga, gb, &d))) > e
-            {
-                return Proximity::Farther;
-            }
-            let result = sa.with_support_map(|ga| {
-                sb.with_support_map(|gb| {
-                    let start = start.unwrap_or_else(|| {
-                        nalgebra::Unit::try_new(-pos12.translation.vector, f64::EPSILON).unwrap_or_else(Vector3::x_axis)
-                    });
-                    let mut simplex = VoronoiSimplex::new();
-                    simplex.reset(CSOPoint::from_shapes(&pos12, ga, gb, &start));
-                    match gjk::closest_points(&pos12, ga, gb, e, false, &mut simplex) {
-                        GJKResult::NoIntersection(dir) => {
-                            // As in `gjk_within`: farther only when the gap is over `e`.
-                            let gap = -dir.dot(&CSOPoint::from_shapes(&pos12, ga, gb, &dir).point.coords);
-                            if gap.partial_cmp(&e) == Some(std::cmp::Ordering::Greater) { Ok(dir) } else { Err(None) }
-                        }
-                        GJKResult::Intersection => Err(Some(true)),
-                        _ => Err(Some(false)),
-                    }
-                })
-            });
-            match result {
-                Ok(dir) => {
-                    hint.dir = ia.rotation * dir.into_inner();
-                    Proximity::Farther
-                }
-                Err(Some(touching)) => answer(touching),
-                // A direction GJK gave up with (after 100 steps) or whose gap is not over `e`:
-                // near, and the overlap test of its own decides.
-                Err(None) => answer(parry_intersects_from(a, b, hint)),
-            }
-        }
+        _ => match parry_proximity(a, b, e, hint) {
+            Ok(()) => Proximity::Farther,
+            Err(Some(touching)) => answer(touching),
+            // Undecided: near, and the overlap test of its own decides.
+            Err(None) => answer(parry_intersects_from(a, b, hint)),
+        },
     }
 }
 
@@ -792,34 +783,6 @@ pub(crate) fn proximity_from(a: &View, b: &View, e: f64, hint: &mut Hint) -> Pro
 fn axis_gap(pos12: &Isometry3<f64>, ga: &dyn SupportMap, gb: &dyn SupportMap, d: &nalgebra::Unit<Vector3<f64>>) -> f64 {
     use parry3d_f64::query::gjk::CSOPoint;
     -d.dot(&CSOPoint::from_shapes(pos12, ga, gb, d).point.coords)
-}
-
-/// [`within`] on two support maps, `pos12` the second's pose in the first's frame, GJK
-/// started from `start` (the first's frame) when given; with the direction that proved the
-/// shapes farther, if it did.
-fn gjk_within(
-    pos12: &Isometry3<f64>,
-    ga: &dyn SupportMap,
-    gb: &dyn SupportMap,
-    e: f64,
-    start: Option<nalgebra::Unit<Vector3<f64>>>,
-) -> (bool, Option<nalgebra::Unit<Vector3<f64>>>) {
-    use parry3d_f64::query::gjk::{self, CSOPoint, GJKResult, VoronoiSimplex};
-    let start = start.unwrap_or_else(|| {
-        nalgebra::Unit::try_new(-pos12.translation.vector, f64::EPSILON).unwrap_or_else(Vector3::x_axis)
-    });
-    let mut simplex = VoronoiSimplex::new();
-    simplex.reset(CSOPoint::from_shapes(pos12, ga, gb, &start));
-    match gjk::closest_points(pos12, ga, gb, e, false, &mut simplex) {
-        GJKResult::NoIntersection(dir) => {
-            // Every point x of the shapes' difference has |x| >= -dir.x >= -dir.support(dir).
-            // Farther only when that gap is over `e` (a NaN gap proves nothing).
-            let gap = -dir.dot(&CSOPoint::from_shapes(pos12, ga, gb, &dir).point.coords);
-            let farther = gap.partial_cmp(&e) == Some(std::cmp::Ordering::Greater);
-            (!farther, farther.then_some(dir))
-        }
-        _ => (true, None),
-    }
 }
 
 pub(crate) fn parry_separation(a: &View, b: &View) -> Separation {
