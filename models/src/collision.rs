@@ -849,6 +849,11 @@ pub struct CollisionScratch {
     near_items: Vec<u32>,
     /// Whether grown scans record their near items in `near_items` (in certificates only).
     record_near: bool,
+    /// Per link slot, whether no joint moves it along an edge probe (see
+    /// [`CollisionModel::still_links`]); while `skip_still`, exact scans skip such links
+    /// against obstacles and pairs of two such links (edge probes from a free start only).
+    still: Vec<bool>,
+    skip_still: bool,
     spheres: SphereScratch,
 }
 
@@ -899,6 +904,8 @@ impl CollisionScratch {
             hints_of: (0, 0),
             near_items: Vec::new(),
             record_near: false,
+            still: Vec::new(),
+            skip_still: false,
             spheres: SphereScratch::new(),
         }
     }
@@ -1444,7 +1451,10 @@ impl CollisionModel {
         if dof == 0 || !self.certifies_in_batches() {
             let mut points = std::mem::take(&mut s.probe);
             probe_points_into(a, end, delta, n, &mut points);
+            // On the general path from a free start, the links no joint moves are skipped.
+            s.skip_still = a_free && self.fast.is_none() && self.still_links(a, end, delta, &mut s.still);
             let hit = self.any_collides_settled(&points, s);
+            s.skip_still = false;
             s.probe = points;
             return hit;
         }
@@ -1606,6 +1616,27 @@ impl CollisionModel {
     }
 
     /// Exact or inflated query, by either path.
+    /// `still` := per link slot, whether its body keeps its pose at every point of the probe
+    /// from `a` by `delta` (and at `end`): no joint on its chain changes value there (to the
+    /// bit: a point is `a + k delta`, so a joint of zero step keeps `a`'s value). Whether any
+    /// link is still (and any moves: a probe that moves nothing skips nothing).
+    fn still_links(&self, a: &[f64], end: Option<&[f64]>, delta: &[f64], still: &mut Vec<bool>) -> bool {
+        let g = &*self.geom;
+        let moves = |i: usize| delta.get(i).is_none_or(|&d| d != 0.0) || end.is_some_and(|e| e.get(i) != a.get(i));
+        // Bodies come after their parents.
+        let mut body_still = vec![true; g.bodies.len()];
+        for (b, body) in g.bodies.iter().enumerate().skip(1) {
+            let own = match body.value {
+                Value::Dof(i) | Value::Mimic(i, ..) => !moves(i),
+                Value::Zero => true,
+            };
+            body_still[b] = own && body_still.get(body.parent).copied().unwrap_or(false);
+        }
+        still.clear();
+        still.extend(g.links.iter().map(|l| body_still.get(l.body).copied().unwrap_or(false)));
+        still.iter().any(|&x| x) && still.iter().any(|&x| !x)
+    }
+
     /// A certificate's grown check on the general path: with `scope` `None` every item, as
     /// [`Self::check`], else only the items `near_items[a..b]` (those a coarser sub-interval
     /// around this one left near: every other item was proven farther than its margin over
@@ -1888,6 +1919,9 @@ impl CollisionModel {
             visited.resize(self.scene.obstacles.len(), 0);
             let mut hit = None;
             for (slot, l) in g.links.iter().enumerate() {
+                if !GROW && s.skip_still && s.still[slot] {
+                    continue;
+                }
                 s.visit = s.visit.wrapping_add(1);
                 if s.visit == 0 {
                     visited.fill(0);
@@ -1929,7 +1963,11 @@ impl CollisionModel {
             // Obstacles near the robot at all: against the box around every link sphere.
             let mut lo = Point3::from(Vector3::repeat(f64::INFINITY));
             let mut hi = Point3::from(Vector3::repeat(f64::NEG_INFINITY));
+            let skip = !GROW && s.skip_still;
             for (slot, l) in g.links.iter().enumerate() {
+                if skip && s.still[slot] {
+                    continue;
+                }
                 let c = s.link_c[slot];
                 let r = Vector3::repeat(l.r + grow(slot));
                 lo = lo.inf(&(c - r));
@@ -1950,6 +1988,9 @@ impl CollisionModel {
             for ci in 0..s.candidates.len() {
                 let oi = s.candidates[ci] as usize;
                 for slot in 0..g.links.len() {
+                    if skip && s.still[slot] {
+                        continue;
+                    }
                     match self.link_hits_obstacle::<GROW>(slot, oi, grow(slot), s) {
                         Err(()) => return Err(Hit::Env { slot, obstacle: oi }),
                         Ok(n) => {
@@ -1962,8 +2003,12 @@ impl CollisionModel {
                 }
             }
         }
+        let skip = !GROW && s.skip_still;
         for (p, &(a, b)) in g.self_pairs.iter().enumerate() {
             let (a, b) = (a as usize, b as usize);
+            if skip && s.still[a] && s.still[b] {
+                continue;
+            }
             match self.pair_hits::<GROW>(a, b, if GROW { inflation.map_or(0.0, |e| e.pair[p]) } else { 0.0 }, s) {
                 Err(()) => return Err(Hit::Pair { a, b }),
                 Ok(n) => {
