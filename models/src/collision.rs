@@ -843,6 +843,8 @@ pub struct CollisionScratch {
     hints: Vec<narrow::Hint>,
     /// The model (its geometry and scene, by address) `hints` are of.
     hints_of: (usize, usize),
+    /// How many of `hints` are of a shape and an obstacle (the self pairs' follow, if any).
+    hints_env: usize,
     /// The items a certificate's grown checks on the general path found near, level after
     /// level (see [`CollisionModel::check_items`]): link slot `l` against obstacle `o` as
     /// `l * obstacles + o`, self pair `p` as `links * obstacles + p`.
@@ -854,6 +856,8 @@ pub struct CollisionScratch {
     /// against obstacles and pairs of two such links (edge probes from a free start only).
     still: Vec<bool>,
     skip_still: bool,
+    /// Per body, whether it is still (working memory of `still`).
+    still_bodies: Vec<bool>,
     spheres: SphereScratch,
 }
 
@@ -902,10 +906,12 @@ impl CollisionScratch {
             probe: Vec::new(),
             hints: Vec::new(),
             hints_of: (0, 0),
+            hints_env: 0,
             near_items: Vec::new(),
             record_near: false,
             still: Vec::new(),
             skip_still: false,
+            still_bodies: Vec::new(),
             spheres: SphereScratch::new(),
         }
     }
@@ -944,7 +950,12 @@ impl CollisionScratch {
 
 /// Robots with more shapes than this keep no separating directions for their self pairs (one
 /// per pair of shapes would be too many).
-const HINTED_SHAPES_MAX: usize = 256;
+const HINTED_SHAPES_MAX: usize = 128;
+
+/// Models with more pairs of a shape and an obstacle than this keep no separating directions
+/// for them (the scratch's directions are set to none at the start of every plan: about 0.4
+/// MB at most, with the self pairs').
+const HINTED_ENV_MAX: usize = 1 << 14;
 
 /// At most this many spare scratch spaces per thread (see [`CollisionModel::scratch`]).
 const SPARE_SCRATCHES: usize = 4;
@@ -1452,7 +1463,7 @@ impl CollisionModel {
             let mut points = std::mem::take(&mut s.probe);
             probe_points_into(a, end, delta, n, &mut points);
             // On the general path from a free start, the links no joint moves are skipped.
-            s.skip_still = a_free && self.fast.is_none() && self.still_links(a, end, delta, &mut s.still);
+            s.skip_still = a_free && self.fast.is_none() && self.still_links(a, end, delta, s);
             let hit = self.any_collides_settled(&points, s);
             s.skip_still = false;
             s.probe = points;
@@ -1620,11 +1631,13 @@ impl CollisionModel {
     /// from `a` by `delta` (and at `end`): no joint on its chain changes value there (to the
     /// bit: a point is `a + k delta`, so a joint of zero step keeps `a`'s value). Whether any
     /// link is still (and any moves: a probe that moves nothing skips nothing).
-    fn still_links(&self, a: &[f64], end: Option<&[f64]>, delta: &[f64], still: &mut Vec<bool>) -> bool {
+    fn still_links(&self, a: &[f64], end: Option<&[f64]>, delta: &[f64], s: &mut CollisionScratch) -> bool {
         let g = &*self.geom;
         let moves = |i: usize| delta.get(i).is_none_or(|&d| d != 0.0) || end.is_some_and(|e| e.get(i) != a.get(i));
         // Bodies come after their parents.
-        let mut body_still = vec![true; g.bodies.len()];
+        let body_still = &mut s.still_bodies;
+        body_still.clear();
+        body_still.resize(g.bodies.len(), true);
         for (b, body) in g.bodies.iter().enumerate().skip(1) {
             let own = match body.value {
                 Value::Dof(i) | Value::Mimic(i, ..) => !moves(i),
@@ -1632,6 +1645,7 @@ impl CollisionModel {
             };
             body_still[b] = own && body_still.get(body.parent).copied().unwrap_or(false);
         }
+        let still = &mut s.still;
         still.clear();
         still.extend(g.links.iter().map(|l| body_still.get(l.body).copied().unwrap_or(false)));
         still.iter().any(|&x| x) && still.iter().any(|&x| !x)
@@ -1764,16 +1778,18 @@ impl CollisionModel {
     }
 
     /// The scratch's separating directions made this model's (all none when they were another's
-    /// or are new): one per shape and obstacle, and, for robots of at most
-    /// [`HINTED_SHAPES_MAX`] shapes, one per pair of shapes.
+    /// or are new): one per shape and obstacle (when there are at most [`HINTED_ENV_MAX`] such
+    /// pairs), and, for robots of at most [`HINTED_SHAPES_MAX`] shapes, one per pair of shapes.
     #[inline]
     fn fit_hints(&self, s: &mut CollisionScratch) {
         let of = (Arc::as_ptr(&self.geom) as usize, Arc::as_ptr(&self.scene) as usize);
         if s.hints_of != of {
             let n = self.geom.shapes.len();
             let pairs = if n <= HINTED_SHAPES_MAX { n * n } else { 0 };
+            let env = n * self.scene.obstacles.len();
+            s.hints_env = if env <= HINTED_ENV_MAX { env } else { 0 };
             s.hints.clear();
-            s.hints.resize(n * self.scene.obstacles.len() + pairs, narrow::Hint::NONE);
+            s.hints.resize(s.hints_env + pairs, narrow::Hint::NONE);
             s.hints_of = of;
         }
     }
@@ -1826,7 +1842,8 @@ impl CollisionModel {
                 continue;
             }
             let kv = s.world[k].view();
-            let hint = s.hints.get_mut(k * self.scene.obstacles.len() + oi);
+            let at = k * self.scene.obstacles.len() + oi;
+            let hint = if at < s.hints_env { s.hints.get_mut(at) } else { None };
             let mut none = narrow::Hint::NONE;
             let hint = hint.unwrap_or(&mut none);
             // Grown, the proximity test answers the overlap test too (one GJK run where there
@@ -1865,7 +1882,7 @@ impl CollisionModel {
                     continue;
                 }
                 let (vi, vj) = (s.world[i].view(), s.world[j].view());
-                let hint = s.hints.get_mut(g.shapes.len() * self.scene.obstacles.len() + i * g.shapes.len() + j);
+                let hint = s.hints.get_mut(s.hints_env + i * g.shapes.len() + j);
                 let mut none = narrow::Hint::NONE;
                 let hint = hint.unwrap_or(&mut none);
                 // As in `link_hits_obstacle`.
