@@ -948,6 +948,24 @@ impl CollisionScratch {
     }
 }
 
+/// Two posed shapes grown by `e` (`GROW`), answered as [`CollisionModel::link_hits_obstacle`]
+/// answers a link: `Err(())` for an exact contact, `Ok(true)` when only the grown shapes may
+/// touch. Grown, one GJK run answers proximity and overlap together; `hint` is the pair's
+/// kept separating direction, if it has one.
+#[inline]
+fn shapes_hit<const GROW: bool>(a: &View, b: &View, e: f64, hint: Option<&mut narrow::Hint>) -> Result<bool, ()> {
+    let mut none = narrow::Hint::NONE;
+    let hint = hint.unwrap_or(&mut none);
+    if GROW && e > 0.0 {
+        return match narrow::proximity_from(a, b, e, hint) {
+            narrow::Proximity::Farther => Ok(false),
+            narrow::Proximity::Near => Ok(true),
+            narrow::Proximity::Touching => Err(()),
+        };
+    }
+    if narrow::intersects_from(a, b, hint) { Err(()) } else { Ok(false) }
+}
+
 /// Robots with more shapes than this keep no separating directions for their self pairs (one
 /// per pair of shapes would be too many).
 const HINTED_SHAPES_MAX: usize = 128;
@@ -1626,7 +1644,6 @@ impl CollisionModel {
         }
     }
 
-    /// Exact or inflated query, by either path.
     /// `still` := per link slot, whether its body keeps its pose at every point of the probe
     /// from `a` by `delta` (and at `end`): no joint on its chain changes value there (to the
     /// bit: a point is `a + k delta`, so a joint of zero step keeps `a`'s value). Whether any
@@ -1677,7 +1694,7 @@ impl CollisionModel {
         self.fit_hints(s);
         let g = &*self.geom;
         let n_obs = self.scene.obstacles.len();
-        let env = g.links.len() * n_obs;
+        let env = self.pair_item(0) as usize;
         let mut near = false;
         for i in a..b {
             let Some(&item) = s.near_items.get(i) else { break };
@@ -1702,6 +1719,7 @@ impl CollisionModel {
         if near { Check::Near } else { Check::Free }
     }
 
+    /// Exact or inflated query, by either path.
     fn check(&self, q: &[f64], inflation: Option<Inflation<'_>>, s: &mut CollisionScratch) -> Check {
         match &self.fast {
             Some(fast) => fast.check(q, &self.scene.obstacles, &self.scene.solids, inflation, &mut s.spheres),
@@ -1777,6 +1795,16 @@ impl CollisionModel {
         }
     }
 
+    /// The item of link slot `slot` against obstacle `oi` in `CollisionScratch::near_items`.
+    fn env_item(&self, slot: usize, oi: usize) -> u32 {
+        (slot * self.scene.obstacles.len() + oi) as u32
+    }
+
+    /// The item of self pair `p` in `CollisionScratch::near_items`.
+    fn pair_item(&self, p: usize) -> u32 {
+        (self.geom.links.len() * self.scene.obstacles.len() + p) as u32
+    }
+
     /// The scratch's separating directions made this model's (all none when they were another's
     /// or are new): one per shape and obstacle (when there are at most [`HINTED_ENV_MAX`] such
     /// pairs), and, for robots of at most [`HINTED_SHAPES_MAX`] shapes, one per pair of shapes.
@@ -1844,21 +1872,7 @@ impl CollisionModel {
             let kv = s.world[k].view();
             let at = k * self.scene.obstacles.len() + oi;
             let hint = if at < s.hints_env { s.hints.get_mut(at) } else { None };
-            let mut none = narrow::Hint::NONE;
-            let hint = hint.unwrap_or(&mut none);
-            // Grown, the proximity test answers the overlap test too (one GJK run where there
-            // were two).
-            if GROW && e > 0.0 {
-                match narrow::proximity_from(&kv, &ov, e, hint) {
-                    narrow::Proximity::Farther => {}
-                    narrow::Proximity::Near => near = true,
-                    narrow::Proximity::Touching => return Err(()),
-                }
-                continue;
-            }
-            if narrow::intersects_from(&kv, &ov, hint) {
-                return Err(());
-            }
+            near |= shapes_hit::<GROW>(&kv, &ov, e, hint)?;
         }
         Ok(near)
     }
@@ -1883,20 +1897,7 @@ impl CollisionModel {
                 }
                 let (vi, vj) = (s.world[i].view(), s.world[j].view());
                 let hint = s.hints.get_mut(s.hints_env + i * g.shapes.len() + j);
-                let mut none = narrow::Hint::NONE;
-                let hint = hint.unwrap_or(&mut none);
-                // As in `link_hits_obstacle`.
-                if GROW && grow > 0.0 {
-                    match narrow::proximity_from(&vi, &vj, grow, hint) {
-                        narrow::Proximity::Farther => {}
-                        narrow::Proximity::Near => near = true,
-                        narrow::Proximity::Touching => return Err(()),
-                    }
-                    continue;
-                }
-                if narrow::intersects_from(&vi, &vj, hint) {
-                    return Err(());
-                }
+                near |= shapes_hit::<GROW>(&vi, &vj, grow, hint)?;
             }
         }
         Ok(near)
@@ -1961,7 +1962,7 @@ impl CollisionModel {
                         }
                         Ok(n) => {
                             if GROW && n && s.record_near {
-                                s.near_items.push((slot * self.scene.obstacles.len()) as u32 + oi);
+                                s.near_items.push(self.env_item(slot, oi as usize));
                             }
                             near |= n;
                             true
@@ -2012,7 +2013,7 @@ impl CollisionModel {
                         Err(()) => return Err(Hit::Env { slot, obstacle: oi }),
                         Ok(n) => {
                             if GROW && n && s.record_near {
-                                s.near_items.push((slot * self.scene.obstacles.len() + oi) as u32);
+                                s.near_items.push(self.env_item(slot, oi));
                             }
                             near |= n;
                         }
@@ -2030,7 +2031,7 @@ impl CollisionModel {
                 Err(()) => return Err(Hit::Pair { a, b }),
                 Ok(n) => {
                     if GROW && n && s.record_near {
-                        s.near_items.push((g.links.len() * self.scene.obstacles.len() + p) as u32);
+                        s.near_items.push(self.pair_item(p));
                     }
                     near |= n;
                 }

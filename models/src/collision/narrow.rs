@@ -722,13 +722,10 @@ fn parry_proximity(a: &View, b: &View, e: f64, hint: &mut Hint) -> Result<(), Op
             let mut simplex = VoronoiSimplex::new();
             simplex.reset(CSOPoint::from_shapes(&pos12, ga, gb, &start));
             match gjk::closest_points(&pos12, ga, gb, e, false, &mut simplex) {
-                GJKResult::NoIntersection(dir) => {
-                    // Every point x of the shapes' difference has |x| >= -dir.x >=
-                    // -dir.support(dir). Farther only when that gap is over `e` (a NaN gap
-                    // proves nothing).
-                    let gap = -dir.dot(&CSOPoint::from_shapes(&pos12, ga, gb, &dir).point.coords);
-                    if gap.partial_cmp(&e) == Some(std::cmp::Ordering::Greater) { Ok(dir) } else { Err(None) }
-                }
+                // Farther only when the gap along GJK's direction, recomputed, is over `e` (a
+                // NaN gap proves nothing).
+                GJKResult::NoIntersection(dir) if axis_gap(&pos12, ga, gb, &dir) > e => Ok(dir),
+                GJKResult::NoIntersection(_) => Err(None),
                 GJKResult::Intersection => Err(Some(true)),
                 _ => Err(Some(false)),
             }
