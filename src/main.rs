@@ -391,6 +391,11 @@ enum BenchCommand {
         /// the other has twice its nodes (the default).
         #[arg(long)]
         no_balance: bool,
+        /// RRT-Connect with goal retreats: once an attempt has drawn --rrt-late-after samples,
+        /// each goal gets a chain of eight nodes pulling the hand 3 cm a node towards the first
+        /// joint of its chain (for goals deep in shelves; off by default)
+        #[arg(long)]
+        goal_retreat: bool,
         /// How RRT-Connect draws samples: uniform or halton.
         #[arg(long, default_value = "uniform")]
         sampler: embodied_planner::motion::Sampler,
@@ -661,6 +666,7 @@ fn run_bench(bench: BenchCommand) -> Result<(), AppError> {
             no_by_groups,
             serial_legs,
             no_balance,
+            goal_retreat,
             sampler,
             shard,
             jsonl,
@@ -685,6 +691,7 @@ fn run_bench(bench: BenchCommand) -> Result<(), AppError> {
             args.by_groups = !no_by_groups;
             args.parallel_legs = !serial_legs;
             args.balance = !no_balance;
+            args.goal_retreat = goal_retreat;
             args.sampler = sampler;
             let share = |p: f64| (0.0..=1.0).contains(&p);
             if let Some(r) = checked(rrt_range, |r| r.is_finite() && r > 0.0, "--rrt-range must be a positive number")?

@@ -593,3 +593,28 @@ fn attempt_length_restarts_and_probe_step_reach_the_planner_and_the_report() {
     let old: embodied::mbm::MbmSettings = serde_json::from_value(old).expect("an old report's settings");
     assert_eq!((old.max_samples, old.rrt_restarts, old.lazy_probe), (None, None, None));
 }
+
+/// Goal retreats are off by default and go into the report's settings and table when asked
+/// for; every problem is still solved with a verified path. A report written before they
+/// existed reads as without them.
+#[test]
+fn goal_retreats_are_recorded_in_the_report() {
+    let dir = TempDir::new("batch-goal-retreat");
+    let plain = run_to(&mbm_args(), &dir.join("plain.jsonl"));
+    assert!(!plain.settings.goal_retreat && !render_table(&plain).contains("goal retreats"));
+    let mut args = mbm_args();
+    args.goal_retreat = true;
+    let report = run_to(&args, &dir.join("retreat.jsonl"));
+    assert!(report.settings.goal_retreat);
+    let table = render_table(&report);
+    assert!(table.contains("with goal retreats"), "{table}");
+    let valid: Vec<_> = report.problems.iter().filter(|p| !p.status.is_invalid()).collect();
+    assert!(!valid.is_empty());
+    for p in valid {
+        assert!(p.solved && p.verified == Some(true), "{} {}: {:?}", p.family, p.index, p.status);
+    }
+    let mut old = serde_json::to_value(&report.settings).unwrap();
+    assert!(old.as_object_mut().unwrap().remove("goal_retreat").is_some());
+    let read: embodied::mbm::MbmSettings = serde_json::from_value(old).expect("an old report's settings");
+    assert!(!read.goal_retreat);
+}

@@ -76,6 +76,9 @@ pub struct MbmArgs {
     pub parallel_legs: bool,
     /// RRT-Connect grows the smaller tree while the other has twice its nodes.
     pub balance: bool,
+    /// RRT-Connect's goal retreats (the planner's default: off; see
+    /// `MotionSettings::rrt_goal_retreat`).
+    pub goal_retreat: bool,
     /// How RRT-Connect draws samples.
     pub sampler: Sampler,
     /// The share of RRT-Connect's samples drawn near a node of the tree about to grow (the
@@ -141,6 +144,7 @@ impl MbmArgs {
             by_groups: MotionSettings::default().rrt_by_groups,
             parallel_legs: MotionSettings::default().parallel_legs,
             balance: MotionSettings::default().rrt_balance,
+            goal_retreat: MotionSettings::default().rrt_goal_retreat,
             sampler: MotionSettings::default().sampler,
             rrt_local_bias: MotionSettings::default().rrt_local_bias,
             rrt_late_local_bias: MotionSettings::default().rrt_late_local_bias,
@@ -298,6 +302,10 @@ pub struct MbmSettings {
     pub parallel_legs: bool,
     /// Whether the smaller tree was grown while the other had twice its nodes.
     pub balance: bool,
+    /// Whether the goal's tree got retreat chains (absent in reports written before they
+    /// existed, which had none: read as false).
+    #[serde(default)]
+    pub goal_retreat: bool,
     /// How RRT-Connect drew its samples.
     pub sampler: Sampler,
     /// The share of RRT-Connect's samples drawn near a node of the growing tree (absent in
@@ -744,6 +752,7 @@ fn run_problem(
         rrt_by_groups: args.by_groups,
         parallel_legs: args.parallel_legs,
         rrt_balance: args.balance,
+        rrt_goal_retreat: args.goal_retreat,
         sampler: args.sampler,
         rrt_local_bias: args.rrt_local_bias,
         rrt_late_local_bias: args.rrt_late_local_bias,
@@ -910,6 +919,7 @@ fn settings_of(args: &MbmArgs, loaded: &Loaded) -> MbmSettings {
         by_groups: args.by_groups,
         parallel_legs: args.parallel_legs,
         balance: args.balance,
+        goal_retreat: args.goal_retreat,
         sampler: args.sampler,
         rrt_local_bias: args.rrt_local_bias,
         rrt_late_local_bias: args.rrt_late_local_bias,
@@ -1124,7 +1134,11 @@ pub fn render_table(report: &MbmReport) -> String {
         report.settings.algorithm,
         if report.settings.algorithm == PlannerKind::RrtConnect && report.settings.rrt_local_bias > 0.0 {
             let late = match report.settings.rrt_late_after.checked_add(1) {
-                Some(from) => format!(", {} from sample {from} of an attempt", report.settings.rrt_late_local_bias),
+                Some(from) => format!(
+                    ", {} from sample {from} of an attempt{}",
+                    report.settings.rrt_late_local_bias,
+                    if report.settings.goal_retreat { ", with goal retreats" } else { "" }
+                ),
                 None => String::new(),
             };
             let reach = report.settings.rrt_local_reach.map(|r| format!(", at most {r} rad")).unwrap_or_default();

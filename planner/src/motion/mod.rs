@@ -314,6 +314,18 @@ pub struct MotionSettings {
     pub rrt_late_local_bias: f64,
     /// RRT-Connect: samples of an attempt drawn before [`Self::rrt_late_local_bias`] applies.
     pub rrt_late_after: usize,
+    /// RRT-Connect: once an attempt has drawn [`Self::rrt_late_after`] samples, each goal gets a
+    /// chain of nodes in the goal's tree that pull the hand (the leaf link moved by the most
+    /// searched joints) straight towards the first joint of its chain, 3 cm a node by damped
+    /// least squares on its Jacobian, each edge checked as the tree's own are; a chain blocked
+    /// before its eighth node is left out. Off by default. A goal deep in a shelf is where the
+    /// goal's tree stays stuck (on the spherized Fetch's cage and bookshelves, from the goals to
+    /// an open configuration p50 1.9 ms, from the tucked start 0.29 ms). On VAMP's problems
+    /// (first 50 of every family, seeds 1-4, collision checks a problem, geometric mean of
+    /// per-problem ratios, on against off): Baxter (both arms) 0.73, Panda 0.96, Fetch 0.97,
+    /// UR5 1.00; in time not settled (see `docs/benchmarks.md`: the retreat's own Jacobians
+    /// and probes, about 25 µs a goal, weigh on problems just past 128 samples).
+    pub rrt_goal_retreat: bool,
     /// RRT-Connect: the half-width of [`Self::rrt_local_bias`]'s samples around their node, as
     /// a share of each joint's sampling width, at most [`Self::rrt_local_reach`]: 0.5 by
     /// default (1/π before). The two together: every joint of the Panda and the Fetch within half
@@ -406,6 +418,7 @@ impl Default for MotionSettings {
             rrt_local_bias: 0.5,
             rrt_late_local_bias: 0.9,
             rrt_late_after: 128,
+            rrt_goal_retreat: false,
             rrt_local_span: 0.5,
             rrt_local_reach: 2.0,
             racers: 1,
