@@ -631,11 +631,15 @@ fn goal_retreats<V: StateValidity>(
                     *x = x.clamp(l.lower, l.upper);
                 }
             }
+            // A step that is not a number ends the chain before any check.
+            if next.iter().any(|x| !x.is_finite()) {
+                break;
+            }
             let free = match probe {
                 Some(step) => validity.segment_probed(&q, &next, step, true),
                 None => validity.config_free(&next) && validity.segment_free(&q, &next),
             };
-            if !free || next.iter().any(|x| !x.is_finite()) {
+            if !free {
                 break;
             }
             chain.push(next.clone());
