@@ -988,6 +988,55 @@ fn probes_from_free_starts_skip_still_bodies_with_the_same_answer() {
     assert!(blocked > 200 && clear > 200, "{blocked} blocked, {clear} clear");
 }
 
+/// The frames a probe keeps for its still bodies serve a later probe only while those bodies'
+/// joints keep their values: probes whose held joints go back and forth between two sets of
+/// values (the other arm, or the first joints of a long chain, moving at random) answer as
+/// their points checked one by one, on both instruction sets.
+#[test]
+fn kept_frames_of_still_bodies_follow_the_held_values() {
+    let (mut blocked, mut clear) = (0, 0);
+    for (which, robot) in [two_sphere_arms(), snake()].iter().enumerate() {
+        let space = robot.config_space();
+        let dof = robot.dof();
+        // Held: the second arm, or the first half of the chain.
+        let held = |d: usize| if which == 0 { d >= dof / 2 } else { d < dof / 2 };
+        for seed in 0..6u64 {
+            let model = CollisionModel::new(robot, solid_clutter(seed + 40, 10));
+            let mut rng = Rng::new(seed * 31 + which as u64);
+            let mut s = model.scratch();
+            let mut baseline = model.scratch().with_baseline_vectors();
+            let sets: Vec<Vec<f64>> = (0..2).map(|_| robot.random_configuration(&mut rng)).collect();
+            for k in 0..60usize {
+                let hold = &sets[k % 2];
+                let free_start = (0..200).find_map(|_| {
+                    let mut q = robot.random_configuration(&mut rng);
+                    for d in (0..dof).filter(|&d| held(d)) {
+                        q[d] = hold[d];
+                    }
+                    (!model.collides_with(&q, &mut s)).then_some(q)
+                });
+                let Some(a) = free_start else { continue };
+                let mut b = robot.random_configuration(&mut rng);
+                for d in (0..dof).filter(|&d| held(d)) {
+                    b[d] = a[d];
+                }
+                let mut delta = Vec::new();
+                space.deltas_into(&a, &b, &mut delta);
+                let n = 1 + k % 24;
+                for end in [None, Some(&b[..])] {
+                    let points = probe_points(&a, end, &delta, n);
+                    let expected = points.chunks(dof).any(|q| model.collides_with(q, &mut s));
+                    let at = format!("robot {which}, seed {seed}, probe {k}, {n} steps, end {}", end.is_some());
+                    assert_eq!(model.probe_from_free_collides(&a, end, &delta, n, &mut s), expected, "{at}");
+                    assert_eq!(model.probe_from_free_collides(&a, end, &delta, n, &mut baseline), expected, "{at}");
+                    if expected { blocked += 1 } else { clear += 1 }
+                }
+            }
+        }
+    }
+    assert!(blocked > 100 && clear > 100, "{blocked} blocked, {clear} clear");
+}
+
 /// The batches settle nearly everything that is not within a hair of the question, so the
 /// certificate gains from them: on the UR5 among obstacles, batches of eight random free
 /// configurations are settled free, and a batch holding one colliding configuration among
