@@ -323,8 +323,10 @@ pub struct MotionSettings {
     /// an open configuration p50 1.9 ms, from the tucked start 0.29 ms). On VAMP's problems
     /// (first 50 of every family, seeds 1-4, collision checks a problem, geometric mean of
     /// per-problem ratios, on against off): Baxter (both arms) 0.73, Panda 0.96, Fetch 0.97,
-    /// UR5 1.00; in time not settled (see `docs/benchmarks.md`: the retreat's own Jacobians
-    /// and probes, about 25 µs a goal, weigh on problems just past 128 samples).
+    /// UR5 1.00. In time (each problem planned with and without in one process, the order
+    /// alternating, one core, seeds 1-3): Baxter 0.91 (within 1 ms 47% -> 61%), Panda 0.99,
+    /// Fetch 1.04, UR5 1.03, so it stays off: a cage's goal is left through the front opening,
+    /// which a straight retreat of the hand rarely follows (see `docs/benchmarks.md`).
     pub rrt_goal_retreat: bool,
     /// RRT-Connect: the half-width of [`Self::rrt_local_bias`]'s samples around their node, as
     /// a share of each joint's sampling width, at most [`Self::rrt_local_reach`]: 0.5 by
