@@ -316,17 +316,17 @@ pub struct MotionSettings {
     pub rrt_late_after: usize,
     /// RRT-Connect: once an attempt has drawn [`Self::rrt_late_after`] samples, each goal gets a
     /// chain of nodes in the goal's tree that pull the hand (the leaf link moved by the most
-    /// searched joints) straight towards the first joint of its chain, 3 cm a node by damped
-    /// least squares on its Jacobian, each edge checked as the tree's own are; a chain blocked
-    /// before its eighth node is left out. Off by default. A goal deep in a shelf is where the
-    /// goal's tree stays stuck (on the spherized Fetch's cage and bookshelves, from the goals to
-    /// an open configuration p50 1.9 ms, from the tucked start 0.29 ms). On VAMP's problems
-    /// (first 50 of every family, seeds 1-4, collision checks a problem, geometric mean of
-    /// per-problem ratios, on against off): Baxter (both arms) 0.73, Panda 0.96, Fetch 0.97,
-    /// UR5 1.00. In time (each problem planned with and without in one process, the order
-    /// alternating, one core, seeds 1-3): Baxter 0.91 (within 1 ms 47% -> 61%), Panda 0.99,
-    /// Fetch 1.04, UR5 1.03, so it stays off: a cage's goal is left through the front opening,
-    /// which a straight retreat of the hand rarely follows (see `docs/benchmarks.md`).
+    /// searched joints) straight towards the first joint of its chain, its orientation held, 3 cm a
+    /// node by damped least squares on its Jacobian, each edge checked as the tree's own are; a
+    /// chain blocked before its eighth node is left out. Off by default. A goal deep in a shelf is
+    /// where the goal's tree stays stuck (on the spherized Fetch's cage and bookshelves, from the
+    /// goals to an open configuration p50 1.9 ms, from the tucked start 0.29 ms). On VAMP's
+    /// problems (first 50 of every family, seeds 1-4, collision checks a problem, geometric mean of
+    /// per-problem ratios, on against off): Baxter (both arms) 0.73, Panda 0.96, Fetch 0.97, UR5
+    /// 1.00. In time (each problem planned with and without in one process, the order alternating,
+    /// one core, seeds 1-3): Baxter 0.91 (within 1 ms 47% -> 61%), Panda 0.99, Fetch 1.04, UR5
+    /// 1.03, so it stays off: a cage's goal is left through the front opening, which a straight
+    /// retreat of the hand rarely follows (see `docs/benchmarks.md`).
     pub rrt_goal_retreat: bool,
     /// RRT-Connect: the half-width of [`Self::rrt_local_bias`]'s samples around their node, as
     /// a share of each joint's sampling width, at most [`Self::rrt_local_reach`]: 0.5 by

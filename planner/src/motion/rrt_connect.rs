@@ -580,12 +580,13 @@ fn retreat_links(robot: &embodied_models::Robot, moving: Option<&[bool]>) -> Opt
     Some((hand, joints[anchor].child_link))
 }
 
-/// [`MotionSettings::rrt_goal_retreat`]: to each of the first `roots` nodes of `tree` (the
-/// goals), a chain of [`RETREAT_STEPS`] nodes moving the hand [`RETREAT_STEP`] a node
-/// towards the first joint of its chain, each step `J^T (J J^T + λ I)^{-1} v` for the linear velocity `v` (the joints
-/// not searched, `moving[d]` false, held), clamped to the position limits, each edge probed at
-/// `probe` (or certified when `None`), as the tree's own edges are. A chain blocked before its
-/// last node adds nothing. No robot with a moving leaf link, nothing.
+/// [`MotionSettings::rrt_goal_retreat`]: to each of the first `roots` nodes of `tree` (the goals),
+/// a chain of [`RETREAT_STEPS`] nodes moving the hand [`RETREAT_STEP`] a node towards the first
+/// joint of its chain, its orientation held: each step `J^T (J J^T + λ I)^{-1} (v, 0)` for the
+/// hand's linear step `v` and no turn (the joints not searched, `moving[d]` false, held), clamped
+/// to the position limits, each edge probed at `probe` (or certified when `None`), as the tree's
+/// own edges are. A chain blocked before its last node adds nothing. No robot with a moving leaf
+/// link, nothing.
 fn goal_retreats<V: StateValidity>(
     robot: &embodied_models::Robot,
     moving: Option<&[bool]>,
