@@ -283,139 +283,152 @@ enum Command {
     },
 }
 
+/// `embodied bench mbm`'s flags (a later flag takes the place of the same one given before:
+/// `--versus` adds its flags after the command's).
+#[derive(clap::Args, Debug, Clone)]
+#[command(args_override_self = true)]
+struct MbmCli {
+    #[arg(long)]
+    urdf: PathBuf,
+    #[arg(long)]
+    srdf: PathBuf,
+    /// Folder of family folders (e.g. the unpacked problems/).
+    #[arg(long)]
+    problems: PathBuf,
+    /// Print the whole report as JSON.
+    #[arg(long)]
+    json: bool,
+    /// Write {"problems": [{family, index, solved, planning_us, joint_names, path}]} here.
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Planning deadline per problem, milliseconds.
+    #[arg(long, default_value_t = 1000.0)]
+    deadline_ms: f64,
+    /// Only the first N problems of each family.
+    #[arg(long)]
+    limit: Option<usize>,
+    /// Only these families (folder names, comma separated, e.g. `box_ur5,cage_ur5`; default:
+    /// every family folder found).
+    #[arg(long, value_delimiter = ',', value_name = "NAMES")]
+    families: Vec<String>,
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// The planner after the straight segment: rrt-connect or lazy-prm.
+    #[arg(long, default_value = "rrt-connect")]
+    algorithm: embodied_planner::motion::PlannerKind,
+    /// Check the planner's edges by sampling at this resolution (rad) instead of certifying
+    /// them free for the whole continuum (the default).
+    #[arg(long)]
+    resolution: Option<f64>,
+    /// Random shortcut attempts per path after the greedy pass (more: shorter paths, slower).
+    #[arg(long)]
+    shortcut_attempts: Option<usize>,
+    /// The least share of the path's length a random shortcut must gain to be checked (0:
+    /// any; the planner's default 0.01)
+    #[arg(long)]
+    shortcut_min_gain: Option<f64>,
+    /// Shortcuts and straight segments longer than this (C-space distance) are screened by an
+    /// eight-point probe before their certificate (`inf`: never; the planner's default 2)
+    #[arg(long)]
+    screen_above: Option<f64>,
+    /// Planners racing per problem: `auto` (the default) as many as the cores this process
+    /// may run on, at most 2 (so 1 under `taskset -c 1`); 1: one planner; 2: two differently
+    /// seeded planners, the second on a thread of its own; the first path wins and stops the
+    /// other.
+    #[arg(long, default_value = "auto")]
+    threads: String,
+    /// With --threads above 1: how long the racer threads look for work after their last
+    /// racer before they sleep, ms (default 50; 0: at once; at most 10,000).
+    #[arg(long, value_name = "MS")]
+    racer_look_ms: Option<f64>,
+    /// RRT-Connect's largest step (rad).
+    #[arg(long)]
+    rrt_range: Option<f64>,
+    /// The share of RRT-Connect's samples drawn near a node of the tree about to grow, in
+    /// [0, 1] (default 0.5; 0: every sample over the whole joint box).
+    #[arg(long)]
+    rrt_local_bias: Option<f64>,
+    /// That share once an attempt has drawn --rrt-late-after samples, in [0, 1] (default
+    /// 0.9: a problem that needs that many is most often a narrow passage).
+    #[arg(long)]
+    rrt_late_local_bias: Option<f64>,
+    /// Samples of an RRT-Connect attempt before --rrt-late-local-bias applies (default 128).
+    #[arg(long)]
+    rrt_late_after: Option<usize>,
+    /// The half-width of those samples' box around their node, as a share of each joint's
+    /// sampling width, above 0 (default 0.5; at most --rrt-local-reach).
+    #[arg(long)]
+    rrt_local_span: Option<f64>,
+    /// The most a joint of those samples is drawn from its node's value, rad (m for a
+    /// prismatic joint), above 0 (default 2; `inf`: the span alone).
+    #[arg(long)]
+    rrt_local_reach: Option<f64>,
+    /// Samples an RRT-Connect attempt may draw before it starts again with new trees, at
+    /// least 1 (default 50,000).
+    #[arg(long, value_name = "N")]
+    max_samples: Option<usize>,
+    /// RRT-Connect attempts after the first (default 64): a problem with no path ends after
+    /// (1 + N) x --max-samples samples, or at the deadline.
+    #[arg(long, value_name = "N")]
+    rrt_restarts: Option<usize>,
+    /// With certified edges, RRT-Connect probes its tree edges at this step (rad, the
+    /// largest joint change between probed points) and certifies them once they lie on a
+    /// path; 0 certifies each as it is added (default 0.1).
+    #[arg(long, value_name = "RAD")]
+    lazy_probe: Option<f64>,
+    /// RRT-Connect without dynamic domain (Yershova et al. 2005; on by default).
+    #[arg(long)]
+    no_dynamic_domain: bool,
+    /// RRT-Connect searches every joint at once even on a robot of independent groups of
+    /// joints (two arms on a fixed torso), instead of first one group at a time.
+    #[arg(long)]
+    no_by_groups: bool,
+    /// With `--threads` above 1, a plan by groups of joints races seeds of the whole plan
+    /// instead of searching its legs two at a time (one on each thread; the default).
+    #[arg(long)]
+    serial_legs: bool,
+    /// RRT-Connect swaps its trees every iteration instead of growing the smaller one while
+    /// the other has twice its nodes (the default).
+    #[arg(long)]
+    no_balance: bool,
+    /// RRT-Connect with goal retreats: once an attempt has drawn --rrt-late-after samples,
+    /// each goal gets a chain of eight nodes pulling the hand 3 cm a node towards the first
+    /// joint of its chain (for goals deep in shelves; off by default)
+    #[arg(long)]
+    goal_retreat: bool,
+    /// How RRT-Connect draws samples: uniform or halton.
+    #[arg(long, default_value = "uniform")]
+    sampler: embodied_planner::motion::Sampler,
+    /// Plan only shard K of N of the problems (problem i, families and problems sorted, goes
+    /// to shard (i mod N) + 1); join the shards' --jsonl files with `embodied bench merge`.
+    #[arg(long, value_name = "K/N")]
+    shard: Option<embodied::batch::Shard>,
+    /// Write the results as JSON Lines here (`-`: standard output, the table then goes to
+    /// standard error): a header line (version, commit, machine, date, shard, settings),
+    /// then one line per problem and run.
+    #[arg(long, value_name = "FILE")]
+    jsonl: Option<PathBuf>,
+    /// Plan every problem N times (run r with seed --seed + r).
+    #[arg(long, default_value_t = 1, value_name = "N")]
+    runs: usize,
+    /// Write OMPL benchmark logs (the format ompl_benchmark_statistics.py reads for Planner
+    /// Arena) into this folder, one <family>_<NNNN>.log per problem with every run.
+    #[arg(long, value_name = "DIR")]
+    ompl_log: Option<PathBuf>,
+    /// Plan every problem twice, with the settings given (A) and with these flags added to them
+    /// (B; e.g. "--rrt-range 0.8 --goal-retreat"), in turns (A first on every other problem),
+    /// and compare B with A problem by problem: the ratios of planning time (geometric mean,
+    /// 95% interval, median, sums), collision checks and path lengths. For settings whose
+    /// difference is smaller than the machine's drift between two runs.
+    #[arg(long, value_name = "FLAGS", allow_hyphen_values = true)]
+    versus: Option<String>,
+}
+
 #[derive(Subcommand, Debug)]
 #[allow(clippy::large_enum_variant, reason = "parsed once per process from the command line")]
 enum BenchCommand {
     /// Plan every sceneNNNN.yaml/requestNNNN.yaml pair of each MotionBenchMaker family folder.
-    Mbm {
-        #[arg(long)]
-        urdf: PathBuf,
-        #[arg(long)]
-        srdf: PathBuf,
-        /// Folder of family folders (e.g. the unpacked problems/).
-        #[arg(long)]
-        problems: PathBuf,
-        /// Print the whole report as JSON.
-        #[arg(long)]
-        json: bool,
-        /// Write {"problems": [{family, index, solved, planning_us, joint_names, path}]} here.
-        #[arg(long)]
-        out: Option<PathBuf>,
-        /// Planning deadline per problem, milliseconds.
-        #[arg(long, default_value_t = 1000.0)]
-        deadline_ms: f64,
-        /// Only the first N problems of each family.
-        #[arg(long)]
-        limit: Option<usize>,
-        /// Only these families (folder names, comma separated, e.g. `box_ur5,cage_ur5`; default:
-        /// every family folder found).
-        #[arg(long, value_delimiter = ',', value_name = "NAMES")]
-        families: Vec<String>,
-        #[arg(long, default_value_t = 1)]
-        seed: u64,
-        /// The planner after the straight segment: rrt-connect or lazy-prm.
-        #[arg(long, default_value = "rrt-connect")]
-        algorithm: embodied_planner::motion::PlannerKind,
-        /// Check the planner's edges by sampling at this resolution (rad) instead of certifying
-        /// them free for the whole continuum (the default).
-        #[arg(long)]
-        resolution: Option<f64>,
-        /// Random shortcut attempts per path after the greedy pass (more: shorter paths, slower).
-        #[arg(long)]
-        shortcut_attempts: Option<usize>,
-        /// The least share of the path's length a random shortcut must gain to be checked (0:
-        /// any; the planner's default 0.01)
-        #[arg(long)]
-        shortcut_min_gain: Option<f64>,
-        /// Shortcuts and straight segments longer than this (C-space distance) are screened by an
-        /// eight-point probe before their certificate (`inf`: never; the planner's default 2)
-        #[arg(long)]
-        screen_above: Option<f64>,
-        /// Planners racing per problem: `auto` (the default) as many as the cores this process
-        /// may run on, at most 2 (so 1 under `taskset -c 1`); 1: one planner; 2: two differently
-        /// seeded planners, the second on a thread of its own; the first path wins and stops the
-        /// other.
-        #[arg(long, default_value = "auto")]
-        threads: String,
-        /// With --threads above 1: how long the racer threads look for work after their last
-        /// racer before they sleep, ms (default 50; 0: at once; at most 10,000).
-        #[arg(long, value_name = "MS")]
-        racer_look_ms: Option<f64>,
-        /// RRT-Connect's largest step (rad).
-        #[arg(long)]
-        rrt_range: Option<f64>,
-        /// The share of RRT-Connect's samples drawn near a node of the tree about to grow, in
-        /// [0, 1] (default 0.5; 0: every sample over the whole joint box).
-        #[arg(long)]
-        rrt_local_bias: Option<f64>,
-        /// That share once an attempt has drawn --rrt-late-after samples, in [0, 1] (default
-        /// 0.9: a problem that needs that many is most often a narrow passage).
-        #[arg(long)]
-        rrt_late_local_bias: Option<f64>,
-        /// Samples of an RRT-Connect attempt before --rrt-late-local-bias applies (default 128).
-        #[arg(long)]
-        rrt_late_after: Option<usize>,
-        /// The half-width of those samples' box around their node, as a share of each joint's
-        /// sampling width, above 0 (default 0.5; at most --rrt-local-reach).
-        #[arg(long)]
-        rrt_local_span: Option<f64>,
-        /// The most a joint of those samples is drawn from its node's value, rad (m for a
-        /// prismatic joint), above 0 (default 2; `inf`: the span alone).
-        #[arg(long)]
-        rrt_local_reach: Option<f64>,
-        /// Samples an RRT-Connect attempt may draw before it starts again with new trees, at
-        /// least 1 (default 50,000).
-        #[arg(long, value_name = "N")]
-        max_samples: Option<usize>,
-        /// RRT-Connect attempts after the first (default 64): a problem with no path ends after
-        /// (1 + N) x --max-samples samples, or at the deadline.
-        #[arg(long, value_name = "N")]
-        rrt_restarts: Option<usize>,
-        /// With certified edges, RRT-Connect probes its tree edges at this step (rad, the
-        /// largest joint change between probed points) and certifies them once they lie on a
-        /// path; 0 certifies each as it is added (default 0.1).
-        #[arg(long, value_name = "RAD")]
-        lazy_probe: Option<f64>,
-        /// RRT-Connect without dynamic domain (Yershova et al. 2005; on by default).
-        #[arg(long)]
-        no_dynamic_domain: bool,
-        /// RRT-Connect searches every joint at once even on a robot of independent groups of
-        /// joints (two arms on a fixed torso), instead of first one group at a time.
-        #[arg(long)]
-        no_by_groups: bool,
-        /// With `--threads` above 1, a plan by groups of joints races seeds of the whole plan
-        /// instead of searching its legs two at a time (one on each thread; the default).
-        #[arg(long)]
-        serial_legs: bool,
-        /// RRT-Connect swaps its trees every iteration instead of growing the smaller one while
-        /// the other has twice its nodes (the default).
-        #[arg(long)]
-        no_balance: bool,
-        /// RRT-Connect with goal retreats: once an attempt has drawn --rrt-late-after samples,
-        /// each goal gets a chain of eight nodes pulling the hand 3 cm a node towards the first
-        /// joint of its chain (for goals deep in shelves; off by default)
-        #[arg(long)]
-        goal_retreat: bool,
-        /// How RRT-Connect draws samples: uniform or halton.
-        #[arg(long, default_value = "uniform")]
-        sampler: embodied_planner::motion::Sampler,
-        /// Plan only shard K of N of the problems (problem i, families and problems sorted, goes
-        /// to shard (i mod N) + 1); join the shards' --jsonl files with `embodied bench merge`.
-        #[arg(long, value_name = "K/N")]
-        shard: Option<embodied::batch::Shard>,
-        /// Write the results as JSON Lines here (`-`: standard output, the table then goes to
-        /// standard error): a header line (version, commit, machine, date, shard, settings),
-        /// then one line per problem and run.
-        #[arg(long, value_name = "FILE")]
-        jsonl: Option<PathBuf>,
-        /// Plan every problem N times (run r with seed --seed + r).
-        #[arg(long, default_value_t = 1, value_name = "N")]
-        runs: usize,
-        /// Write OMPL benchmark logs (the format ompl_benchmark_statistics.py reads for Planner
-        /// Arena) into this folder, one <family>_<NNNN>.log per problem with every run.
-        #[arg(long, value_name = "DIR")]
-        ompl_log: Option<PathBuf>,
-    },
+    Mbm(MbmCli),
     /// Generate MotionBenchMaker-style UR5 problems (cage, bookshelf_tall, bookshelf_thin,
     /// table_under_pick) as <out>/<family>_ur5/sceneNNNN.yaml and requestNNNN.yaml, the files
     /// `bench mbm` reads; goals by inverse kinematics, kept only within the joint limits and
@@ -633,120 +646,173 @@ fn mbm_families(names: Vec<String>) -> Result<Option<Vec<String>>, AppError> {
     Ok((!wanted.is_empty()).then_some(wanted))
 }
 
+/// The benchmark's arguments from `bench mbm`'s flags (each value checked; the racer threads'
+/// look, a setting of the process, is set here).
+fn mbm_args(cli: &MbmCli) -> Result<embodied::mbm::MbmArgs, AppError> {
+    let MbmCli {
+        urdf,
+        srdf,
+        problems,
+        deadline_ms,
+        limit,
+        families,
+        seed,
+        algorithm,
+        resolution,
+        shortcut_attempts,
+        shortcut_min_gain,
+        screen_above,
+        threads,
+        racer_look_ms,
+        rrt_range,
+        rrt_local_bias,
+        rrt_late_local_bias,
+        rrt_late_after,
+        rrt_local_span,
+        rrt_local_reach,
+        max_samples,
+        rrt_restarts,
+        lazy_probe,
+        no_dynamic_domain,
+        no_by_groups,
+        serial_legs,
+        no_balance,
+        goal_retreat,
+        sampler,
+        shard,
+        runs,
+        ..
+    } = cli.clone();
+    let threads = racers_of(&threads)?;
+    if let Some(ms) = racer_look_ms {
+        if !(ms.is_finite() && ms >= 0.0) {
+            return Err(AppError::Usage(format!("--racer-look-ms must be a number of ms, at least 0, got {ms}")));
+        }
+        // At most 10 s (the planner's cap too), so that no value overflows here.
+        let look = std::time::Duration::from_secs_f64(ms.min(10_000.0) / 1000.0);
+        embodied_planner::motion::set_racer_look(look);
+    }
+    let mut args = embodied::mbm::MbmArgs::new(urdf, srdf, problems);
+    args.algorithm = algorithm;
+    args.threads = threads;
+    args.dynamic_domain = !no_dynamic_domain;
+    args.by_groups = !no_by_groups;
+    args.parallel_legs = !serial_legs;
+    args.balance = !no_balance;
+    args.goal_retreat = goal_retreat;
+    args.sampler = sampler;
+    let share = |p: f64| (0.0..=1.0).contains(&p);
+    if let Some(r) = checked(rrt_range, |r| r.is_finite() && r > 0.0, "--rrt-range must be a positive number")? {
+        args.rrt_range = r;
+    }
+    if let Some(p) = checked(rrt_local_bias, share, "--rrt-local-bias must be a share in [0, 1]")? {
+        args.rrt_local_bias = p;
+    }
+    if let Some(p) = checked(rrt_late_local_bias, share, "--rrt-late-local-bias must be a share in [0, 1]")? {
+        args.rrt_late_local_bias = p;
+    }
+    if let Some(n) = rrt_late_after {
+        args.rrt_late_after = n;
+    }
+    let says = "--rrt-local-span must be a positive share";
+    if let Some(w) = checked(rrt_local_span, |w| w.is_finite() && w > 0.0, says)? {
+        args.rrt_local_span = w;
+    }
+    let says = "--rrt-local-reach must be above 0 (rad, or `inf`)";
+    if let Some(r) = checked(rrt_local_reach, |r| r > 0.0, says)? {
+        args.rrt_local_reach = r;
+    }
+    if let Some(n) = checked(max_samples, |n| n > 0, "--max-samples must be at least 1")? {
+        args.max_samples = n;
+    }
+    if let Some(n) = rrt_restarts {
+        args.rrt_restarts = n;
+    }
+    let says = "--lazy-probe must be 0 (every tree edge certified as added) or a positive number of rad";
+    if let Some(step) = checked(lazy_probe, |s| s.is_finite() && s >= 0.0, says)? {
+        args.lazy_probe = step;
+    }
+    if let Some(r) = resolution {
+        args.resolution = r;
+        args.edge_check = embodied_planner::motion::EdgeCheck::Sampled;
+    }
+    if let Some(n) = shortcut_attempts {
+        args.shortcut_attempts = n;
+    }
+    let says = "--shortcut-min-gain must be zero or a positive number";
+    if let Some(g) = checked(shortcut_min_gain, |g| g.is_finite() && g >= 0.0, says)? {
+        args.shortcut_min_gain = g;
+    }
+    if let Some(l) = checked(screen_above, |l| l >= 0.0, "--screen-above must be zero, a positive number or inf")? {
+        args.screen_above = l;
+    }
+    args.deadline_ms = deadline_ms;
+    args.limit = limit;
+    args.families = mbm_families(families)?;
+    args.seed = seed;
+    args.runs = runs;
+    args.shard = shard.unwrap_or(embodied::batch::Shard::ALL);
+    Ok(args)
+}
+
+/// `bench mbm --versus FLAGS`: the command line again with `FLAGS` added at its end (in place
+/// of the same flags given before, see [`MbmCli`]) gives B's settings; every problem is planned
+/// with both in turns and the comparison printed.
+fn run_mbm_versus(cli: &MbmCli, args: &embodied::mbm::MbmArgs, flags: &str) -> Result<(), AppError> {
+    if cli.shard.is_some() || cli.jsonl.is_some() || cli.ompl_log.is_some() || cli.out.is_some() {
+        return Err(AppError::Usage(
+            "--versus reports both settings in one report: it takes no --shard, --jsonl, --ompl-log or --out".into(),
+        ));
+    }
+    let mut argv: Vec<std::ffi::OsString> = Vec::new();
+    let mut given = std::env::args_os();
+    while let Some(token) = given.next() {
+        if token == "--versus" {
+            given.next();
+        } else if !token.to_string_lossy().starts_with("--versus=") {
+            argv.push(token);
+        }
+    }
+    argv.extend(flags.split_whitespace().map(std::ffi::OsString::from));
+    let bad = |why: String| AppError::Usage(format!("--versus `{flags}`: {why}"));
+    let parsed = Cli::try_parse_from(&argv).map_err(|e| {
+        let text = e.to_string();
+        let first = text.lines().next().unwrap_or("");
+        bad(first.strip_prefix("error: ").unwrap_or(first).to_string())
+    })?;
+    let Command::Bench(bench) = parsed.command else { return Err(bad("not a bench mbm command".into())) };
+    let BenchCommand::Mbm(other) = *bench else { return Err(bad("not a bench mbm command".into())) };
+    if other.versus.is_some() {
+        return Err(bad("B cannot have a --versus of its own".into()));
+    }
+    if other.racer_look_ms != cli.racer_look_ms {
+        return Err(bad("--racer-look-ms is a setting of the whole process; it cannot differ between A and B".into()));
+    }
+    let b = mbm_args(&other)?;
+    let bar = if cli.json { indicatif::ProgressBar::hidden() } else { progress_bar() };
+    let report = embodied::mbm::versus::run_versus(args, &b, flags, &mut |done, total| {
+        bar.set_length(total as u64);
+        bar.set_position(done as u64);
+    });
+    bar.finish_and_clear();
+    let report = report?;
+    if cli.json {
+        outln!("{}", to_json(&report)?);
+    } else {
+        out!("{}", embodied::mbm::versus::render_versus(&report));
+    }
+    Ok(())
+}
+
 /// `embodied bench ...`.
 fn run_bench(bench: BenchCommand) -> Result<(), AppError> {
     match bench {
-        BenchCommand::Mbm {
-            urdf,
-            srdf,
-            problems,
-            json,
-            out,
-            deadline_ms,
-            limit,
-            families,
-            seed,
-            algorithm,
-            resolution,
-            shortcut_attempts,
-            shortcut_min_gain,
-            screen_above,
-            threads,
-            racer_look_ms,
-            rrt_range,
-            rrt_local_bias,
-            rrt_late_local_bias,
-            rrt_late_after,
-            rrt_local_span,
-            rrt_local_reach,
-            max_samples,
-            rrt_restarts,
-            lazy_probe,
-            no_dynamic_domain,
-            no_by_groups,
-            serial_legs,
-            no_balance,
-            goal_retreat,
-            sampler,
-            shard,
-            jsonl,
-            runs,
-            ompl_log,
-        } => {
-            let threads = racers_of(&threads)?;
-            if let Some(ms) = racer_look_ms {
-                if !(ms.is_finite() && ms >= 0.0) {
-                    return Err(AppError::Usage(format!(
-                        "--racer-look-ms must be a number of ms, at least 0, got {ms}"
-                    )));
-                }
-                // At most 10 s (the planner's cap too), so that no value overflows here.
-                let look = std::time::Duration::from_secs_f64(ms.min(10_000.0) / 1000.0);
-                embodied_planner::motion::set_racer_look(look);
+        BenchCommand::Mbm(cli) => {
+            let args = mbm_args(&cli)?;
+            if let Some(flags) = &cli.versus {
+                return run_mbm_versus(&cli, &args, flags);
             }
-            let mut args = embodied::mbm::MbmArgs::new(urdf, srdf, problems);
-            args.algorithm = algorithm;
-            args.threads = threads;
-            args.dynamic_domain = !no_dynamic_domain;
-            args.by_groups = !no_by_groups;
-            args.parallel_legs = !serial_legs;
-            args.balance = !no_balance;
-            args.goal_retreat = goal_retreat;
-            args.sampler = sampler;
-            let share = |p: f64| (0.0..=1.0).contains(&p);
-            if let Some(r) = checked(rrt_range, |r| r.is_finite() && r > 0.0, "--rrt-range must be a positive number")?
-            {
-                args.rrt_range = r;
-            }
-            if let Some(p) = checked(rrt_local_bias, share, "--rrt-local-bias must be a share in [0, 1]")? {
-                args.rrt_local_bias = p;
-            }
-            if let Some(p) = checked(rrt_late_local_bias, share, "--rrt-late-local-bias must be a share in [0, 1]")? {
-                args.rrt_late_local_bias = p;
-            }
-            if let Some(n) = rrt_late_after {
-                args.rrt_late_after = n;
-            }
-            let says = "--rrt-local-span must be a positive share";
-            if let Some(w) = checked(rrt_local_span, |w| w.is_finite() && w > 0.0, says)? {
-                args.rrt_local_span = w;
-            }
-            let says = "--rrt-local-reach must be above 0 (rad, or `inf`)";
-            if let Some(r) = checked(rrt_local_reach, |r| r > 0.0, says)? {
-                args.rrt_local_reach = r;
-            }
-            if let Some(n) = checked(max_samples, |n| n > 0, "--max-samples must be at least 1")? {
-                args.max_samples = n;
-            }
-            if let Some(n) = rrt_restarts {
-                args.rrt_restarts = n;
-            }
-            let says = "--lazy-probe must be 0 (every tree edge certified as added) or a positive number of rad";
-            if let Some(step) = checked(lazy_probe, |s| s.is_finite() && s >= 0.0, says)? {
-                args.lazy_probe = step;
-            }
-            if let Some(r) = resolution {
-                args.resolution = r;
-                args.edge_check = embodied_planner::motion::EdgeCheck::Sampled;
-            }
-            if let Some(n) = shortcut_attempts {
-                args.shortcut_attempts = n;
-            }
-            let says = "--shortcut-min-gain must be zero or a positive number";
-            if let Some(g) = checked(shortcut_min_gain, |g| g.is_finite() && g >= 0.0, says)? {
-                args.shortcut_min_gain = g;
-            }
-            if let Some(l) =
-                checked(screen_above, |l| l >= 0.0, "--screen-above must be zero, a positive number or inf")?
-            {
-                args.screen_above = l;
-            }
-            args.deadline_ms = deadline_ms;
-            args.limit = limit;
-            args.families = mbm_families(families)?;
-            args.seed = seed;
-            args.runs = runs;
-            args.shard = shard.unwrap_or(embodied::batch::Shard::ALL);
+            let MbmCli { json, out, jsonl, ompl_log, .. } = cli;
             let mut writer = jsonl.as_deref().map(embodied::batch::JsonlWriter::create).transpose()?;
             let bar = if json { indicatif::ProgressBar::hidden() } else { progress_bar() };
             let report = embodied::mbm::run_mbm_to(

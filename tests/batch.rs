@@ -618,3 +618,87 @@ fn goal_retreats_are_recorded_in_the_report() {
     let read: embodied::mbm::MbmSettings = serde_json::from_value(old).expect("an old report's settings");
     assert!(!read.goal_retreat);
 }
+
+/// `--versus FLAGS` plans every problem with the settings given (A) and with the flags added
+/// (B), and compares them: B keeps A's other flags, the same settings give identical paths,
+/// and flags that would change the problems, a second `--versus`, the process-wide racer look
+/// or a per-problem output are refused with the flag named.
+#[test]
+fn bench_mbm_versus_compares_two_settings_on_the_same_problems() {
+    let robot = root().join("models/tests/fixtures");
+    let s = |p: &Path| p.to_str().unwrap().to_string();
+    let (urdf, srdf, problems) =
+        (s(&robot.join("ur5_spherized.urdf")), s(&robot.join("ur5.srdf")), s(&root().join("tests/fixtures/mbm")));
+    let base = [
+        "bench",
+        "mbm",
+        "--urdf",
+        &urdf,
+        "--srdf",
+        &srdf,
+        "--problems",
+        &problems,
+        "--deadline-ms",
+        "20000",
+        "--limit",
+        "1",
+        "--rrt-range",
+        "0.7",
+        "--threads",
+        "1",
+    ];
+    let mut args = base.to_vec();
+    args.extend(["--json", "--versus", "--seed 3 --shortcut-attempts 0"]);
+    let (code, stdout, stderr) = embodied(&args);
+    assert_eq!(code, 0, "{stderr}");
+    let v: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+    assert_eq!(v["flags"], "--seed 3 --shortcut-attempts 0");
+    // B: A's range kept, its seed and shortcuts replaced.
+    assert_eq!(
+        (v["a"]["settings"]["rrt_range"].as_f64(), v["b"]["settings"]["rrt_range"].as_f64()),
+        (Some(0.7), Some(0.7))
+    );
+    assert_eq!((v["a"]["settings"]["seed"].as_u64(), v["b"]["settings"]["seed"].as_u64()), (Some(1), Some(3)));
+    assert_eq!(v["b"]["settings"]["shortcut_attempts"], 0);
+    assert_ne!(v["a"]["settings"]["shortcut_attempts"], 0);
+    let names = |side: &str| -> Vec<String> {
+        v[side]["problems"].as_array().unwrap().iter().map(|p| format!("{}/{}", p["family"], p["index"])).collect()
+    };
+    assert_eq!(names("a"), names("b"));
+    assert_eq!(names("a").len(), 2);
+    assert_eq!(v["overall"]["pairs"], 2);
+    assert_eq!(v["families"].as_array().unwrap().len(), 2);
+    assert!(v["overall"]["time_ratio"].as_f64().is_some_and(|r| r > 0.0), "{}", v["overall"]);
+
+    // The same settings: the same paths, checks and lengths (only the times differ).
+    let mut args = base.to_vec();
+    args.extend(["--versus", "--seed 1"]);
+    let (code, stdout, stderr) = embodied(&args);
+    assert_eq!(code, 0, "{stderr}");
+    assert!(stdout.contains("B against A") && stdout.contains("time B/A"), "{stdout}");
+    let overall = stdout.lines().rev().find(|l| l.starts_with("overall")).unwrap();
+    let cells: Vec<&str> = overall.split_whitespace().collect();
+    // overall, pairs, both, time, CI, median, sum, checks, path, <=1 ms A, <=1 ms B, changed
+    assert_eq!(cells.len(), 12, "{overall}");
+    // One of the two is invalid (its goal collides): one pair solved by both.
+    assert_eq!((cells[1], cells[2], cells[7], cells[8], cells[11]), ("2", "1", "1.000", "1.000", "0"), "{overall}");
+
+    for (flags, says) in [
+        ("--limit 2", "changes the problems"),
+        ("--bogus 1", "unexpected argument '--bogus'"),
+        ("--versus --seed", "B cannot have a --versus of its own"),
+        ("--racer-look-ms 5", "--racer-look-ms is a setting of the whole process"),
+        ("--rrt-range=0", "--rrt-range must be a positive number"),
+    ] {
+        let mut args = base.to_vec();
+        args.extend(["--versus", flags]);
+        let (code, _, stderr) = embodied(&args);
+        assert_eq!(code, 2, "{flags}: {stderr}");
+        assert!(stderr.contains(says), "{flags}: {stderr}");
+    }
+    let mut args = base.to_vec();
+    args.extend(["--jsonl", "-", "--versus", "--seed 2"]);
+    let (code, _, stderr) = embodied(&args);
+    assert_eq!(code, 2, "{stderr}");
+    assert!(stderr.contains("--versus reports both settings in one report"), "{stderr}");
+}

@@ -10,6 +10,11 @@
 //!
 //! Problems whose start or goal is in collision (or outside the joint limits) are reported as
 //! invalid, not as planner failures: MotionBenchMaker has a few by construction.
+//!
+//! [`versus`] plans every problem with two sets of settings in turns and compares them problem
+//! by problem.
+
+pub mod versus;
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -669,6 +674,8 @@ pub fn sample_problems(args: &MbmArgs, n: usize) -> Result<Vec<MbmProblem>, AppE
 struct Warned {
     /// Each message, in the order first seen, with how many times it came.
     seen: Vec<(String, usize)>,
+    /// Nothing written (the same problems' second reading, see [`versus`]).
+    silent: bool,
 }
 
 impl Warned {
@@ -677,7 +684,9 @@ impl Warned {
             match self.seen.iter_mut().find(|(m, _)| *m == w.message) {
                 Some((_, n)) => *n += 1,
                 None => {
-                    eprintln!("{w}");
+                    if !self.silent {
+                        eprintln!("{w}");
+                    }
                     self.seen.push((w.message.clone(), 1));
                 }
             }
@@ -685,6 +694,9 @@ impl Warned {
     }
 
     fn finish(&self) {
+        if self.silent {
+            return;
+        }
         for (message, n) in self.seen.iter().filter(|(_, n)| *n > 1) {
             eprintln!("warning: {} more problems: {message}", n - 1);
         }
@@ -828,15 +840,7 @@ pub fn run_mbm_to(
     on_progress: &mut dyn FnMut(usize, usize),
     mut jsonl: Option<&mut JsonlWriter>,
 ) -> Result<MbmReport, AppError> {
-    if !(args.deadline_ms > 0.0 && args.deadline_ms.is_finite()) {
-        return Err(AppError::Usage(format!("--deadline-ms must be a positive number, got {}", args.deadline_ms)));
-    }
-    if !(args.resolution > 0.0 && args.resolution.is_finite()) {
-        return Err(AppError::Usage(format!("the resolution must be a positive number, got {}", args.resolution)));
-    }
-    if args.runs == 0 || args.runs > u32::MAX as usize {
-        return Err(AppError::Usage(format!("--runs must be at least 1, got {}", args.runs)));
-    }
+    check_numbers(args)?;
     let loaded = load_robot(args)?;
     let problems = discover(args)?;
     let settings = settings_of(args, &loaded);
@@ -861,6 +865,20 @@ pub fn run_mbm_to(
     warned.finish();
     let shard = (args.shard != Shard::ALL).then_some(args.shard);
     Ok(assemble(crate::generator(), shard, settings, results))
+}
+
+/// The deadline, resolution and runs of `args` are usable: an error names the first that is not.
+fn check_numbers(args: &MbmArgs) -> Result<(), AppError> {
+    if !(args.deadline_ms > 0.0 && args.deadline_ms.is_finite()) {
+        return Err(AppError::Usage(format!("--deadline-ms must be a positive number, got {}", args.deadline_ms)));
+    }
+    if !(args.resolution > 0.0 && args.resolution.is_finite()) {
+        return Err(AppError::Usage(format!("the resolution must be a positive number, got {}", args.resolution)));
+    }
+    if args.runs == 0 || args.runs > u32::MAX as usize {
+        return Err(AppError::Usage(format!("--runs must be at least 1, got {}", args.runs)));
+    }
+    Ok(())
 }
 
 /// `family/NNNN` of every problem, in the batch's order.
@@ -1105,23 +1123,6 @@ pub fn render_table(report: &MbmReport) -> String {
     };
     let mut rows: Vec<Vec<String>> = report.families.iter().map(row).collect();
     rows.push(row(&report.overall));
-    let mut widths: Vec<usize> = header.iter().map(|h| h.len()).collect();
-    for r in &rows {
-        for (w, c) in widths.iter_mut().zip(r) {
-            *w = (*w).max(c.len());
-        }
-    }
-    let line = |cells: &[String]| -> String {
-        let mut s = String::new();
-        for (i, (c, w)) in cells.iter().zip(&widths).enumerate() {
-            if i == 0 {
-                s.push_str(&format!("{c:<w$}"));
-            } else {
-                s.push_str(&format!("  {c:>w$}"));
-            }
-        }
-        s.trim_end().to_string() + "\n"
-    };
     let edges = match report.settings.edge_check {
         EdgeCheck::Certified { tolerance } => format!("edges certified (tolerance {tolerance} m)"),
         EdgeCheck::Sampled => format!("edges sampled at {} rad", report.settings.resolution),
@@ -1155,14 +1156,7 @@ pub fn render_table(report: &MbmReport) -> String {
         if report.settings.runs > 1 { format!(", {} runs per problem", report.settings.runs) } else { String::new() },
         report.shard.map_or(String::new(), |s| format!(", shard {s}")),
     );
-    out.push_str(&line(&header.iter().map(|h| h.to_string()).collect::<Vec<_>>()));
-    for (i, r) in rows.iter().enumerate() {
-        if i + 1 == rows.len() {
-            out.push_str(&"-".repeat(widths.iter().sum::<usize>() + 2 * (widths.len() - 1)));
-            out.push('\n');
-        }
-        out.push_str(&line(r));
-    }
+    out.push_str(&aligned(&header, &rows));
     out.push_str(
         "solved = solved/valid problems; times are wall-clock plan_motion calls of solved problems; \
          <=1 ms = share of valid problems solved within 1 ms; path len = median\n",
@@ -1181,6 +1175,37 @@ pub fn render_table(report: &MbmReport) -> String {
         .collect();
     if !unsolved.is_empty() {
         out.push_str(&format!("unsolved: {}\n", unsolved.join(", ")));
+    }
+    out
+}
+
+/// `header` and `rows` in columns, the first left-aligned and the others right-aligned, with a
+/// rule above the last row (the overall one).
+pub(crate) fn aligned(header: &[&str], rows: &[Vec<String>]) -> String {
+    let mut widths: Vec<usize> = header.iter().map(|h| h.len()).collect();
+    for r in rows {
+        for (w, c) in widths.iter_mut().zip(r) {
+            *w = (*w).max(c.len());
+        }
+    }
+    let line = |cells: &[String]| -> String {
+        let mut s = String::new();
+        for (i, (c, w)) in cells.iter().zip(&widths).enumerate() {
+            if i == 0 {
+                s.push_str(&format!("{c:<w$}"));
+            } else {
+                s.push_str(&format!("  {c:>w$}"));
+            }
+        }
+        s.trim_end().to_string() + "\n"
+    };
+    let mut out = line(&header.iter().map(|h| h.to_string()).collect::<Vec<_>>());
+    for (i, r) in rows.iter().enumerate() {
+        if i + 1 == rows.len() {
+            out.push_str(&"-".repeat(widths.iter().sum::<usize>() + 2 * widths.len().saturating_sub(1)));
+            out.push('\n');
+        }
+        out.push_str(&line(r));
     }
     out
 }
