@@ -670,9 +670,10 @@ fn bench_mbm_versus_compares_two_settings_on_the_same_problems() {
     assert_eq!(v["families"].as_array().unwrap().len(), 2);
     assert!(v["overall"]["time_ratio"].as_f64().is_some_and(|r| r > 0.0), "{}", v["overall"]);
 
-    // The same settings: the same paths, checks and lengths (only the times differ).
+    // The same settings: the same paths, checks and lengths (only the times differ); the flag
+    // with its value after `=`.
     let mut args = base.to_vec();
-    args.extend(["--versus", "--seed 1"]);
+    args.push("--versus=--seed 1");
     let (code, stdout, stderr) = embodied(&args);
     assert_eq!(code, 0, "{stderr}");
     assert!(stdout.contains("B against A") && stdout.contains("time B/A"), "{stdout}");
