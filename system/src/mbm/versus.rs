@@ -20,6 +20,7 @@ use super::{
     run_problem, settings_of,
 };
 use crate::SystemError as AppError;
+use crate::batch::Shard;
 
 /// Two-sided 95% quantiles of Student's t for 1 to 30 degrees of freedom (standard tables);
 /// beyond, the normal quantile 1.96.
@@ -107,38 +108,38 @@ pub fn run_versus(
     let mine: Vec<_> = problems.iter().enumerate().filter(|(i, _)| a.shard.holds(*i)).map(|(_, p)| p).collect();
     let total = 2 * mine.len() * a.runs;
     on_progress(0, total);
-    let (mut ra, mut rb) = (Vec::with_capacity(total / 2), Vec::with_capacity(total / 2));
+    let sides = [(a, &loaded_a), (b, &loaded_b)];
+    let mut results: [Vec<ProblemResult>; 2] = [Vec::with_capacity(total / 2), Vec::with_capacity(total / 2)];
     // The problems' warnings once, from A's reading.
-    let (mut warned_a, mut warned_b) = (Warned::default(), Warned { silent: true, ..Warned::default() });
+    let mut warned = [Warned::default(), Warned { silent: true, ..Warned::default() }];
     // The process's first plans pay for what later ones find ready (pages touched, tables
     // built): the first problem planned once with each setting, untimed, so that this does not
     // weigh on the side that happens to go first.
     if let Some(first) = mine.first() {
         let mut quiet = Warned { silent: true, ..Warned::default() };
-        run_problem(a, &loaded_a, first, 0, &mut quiet)?;
-        run_problem(b, &loaded_b, first, 0, &mut quiet)?;
-    }
-    let mut k = 0usize;
-    for p in mine {
-        for run in 0..a.runs {
-            let run = run as u32;
-            if k.is_multiple_of(2) {
-                ra.push(run_problem(a, &loaded_a, p, run, &mut warned_a)?);
-                on_progress(ra.len() + rb.len(), total);
-                rb.push(run_problem(b, &loaded_b, p, run, &mut warned_b)?);
-            } else {
-                rb.push(run_problem(b, &loaded_b, p, run, &mut warned_b)?);
-                on_progress(ra.len() + rb.len(), total);
-                ra.push(run_problem(a, &loaded_a, p, run, &mut warned_a)?);
-            }
-            on_progress(ra.len() + rb.len(), total);
-            k += 1;
+        for (args, loaded) in sides {
+            run_problem(args, loaded, first, 0, &mut quiet)?;
         }
     }
-    warned_a.finish();
+    let mut done = 0;
+    for p in mine {
+        for run in 0..a.runs as u32 {
+            // The `done / 2`-th pair: A first when it is even.
+            let order = if (done / 2) % 2 == 0 { [0, 1] } else { [1, 0] };
+            for side in order {
+                let (args, loaded) = sides[side];
+                results[side].push(run_problem(args, loaded, p, run, &mut warned[side])?);
+                done += 1;
+                on_progress(done, total);
+            }
+        }
+    }
+    warned[0].finish();
+    let [ra, rb] = results;
     let generator = crate::generator();
-    let report_a = assemble(generator.clone(), None, settings_of(a, &loaded_a), ra);
-    let report_b = assemble(generator, None, settings_of(b, &loaded_b), rb);
+    let shard = (a.shard != Shard::ALL).then_some(a.shard);
+    let report_a = assemble(generator.clone(), shard, settings_of(a, &loaded_a), ra);
+    let report_b = assemble(generator, shard, settings_of(b, &loaded_b), rb);
     Ok(compare(flags, report_a, report_b))
 }
 
