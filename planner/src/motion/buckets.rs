@@ -11,6 +11,10 @@
 //! rebuild are scanned in the tree's own blocks; the buckets are rebuilt once those reach a
 //! quarter of the nodes in them (at least [`PENDING`]). That problem: 575 M -> 464 M (queries
 //! 205 M, rebuilds 22 M); leaves of 8 and 32 nodes 481 M and 468 M, rebuilt at an eighth 481 M.
+//! With rebuilds reading each node's values once (the Fetch's first 70 cage problems, seed 2:
+//! rebuilds 161 M -> 104 M, planning 7,118 M -> 7,067 M, every path the same), rebuilt at an
+//! eighth a query took 2,250 -> 2,175 instructions and at a sixteenth 2,266, each with other
+//! searches (8 of 70 paths changed): a quarter stays.
 //!
 //! *Approximate answers.* A cell is pruned when its bound (its largest gap to the query along a
 //! split, which is at most the difference along that joint to any of its nodes) times
@@ -78,6 +82,10 @@ pub(crate) struct Buckets {
     /// The lane of each node in `leaves` (`NONE` for a node cut before the rebuild).
     lane: Vec<u32>,
     stack: Vec<(u32, f64)>,
+    /// The built nodes' values node by node (`dof` each), kept for the next rebuild.
+    xs: Vec<f64>,
+    /// The living built nodes, kept for the next rebuild.
+    order: Vec<u32>,
     /// `(1 + ε)²`: a cell is pruned when its squared bound times this exceeds the best.
     loose: f64,
 }
@@ -96,6 +104,8 @@ impl Buckets {
             ids: Vec::new(),
             lane: Vec::new(),
             stack: Vec::new(),
+            xs: Vec::new(),
+            order: Vec::new(),
         }
     }
 
@@ -114,15 +124,28 @@ impl Buckets {
         self.ids.clear();
         self.lane.clear();
         self.lane.resize(self.built, NONE);
-        let mut order: Vec<u32> = (0..self.built as u32).filter(|&i| alive[i as usize]).collect();
-        if order.is_empty() {
-            return;
+        let mut order = std::mem::take(&mut self.order);
+        order.clear();
+        order.extend((0..self.built as u32).filter(|&i| alive[i as usize]));
+        if !order.is_empty() && dof > 0 {
+            // The nodes' values node by node, read once: the splits below read each many times
+            // (read through the blocks, a division and two bounds checks each time).
+            let mut xs = std::mem::take(&mut self.xs);
+            xs.clear();
+            for block in blocks.chunks_exact(dof).take(self.built / BLOCK) {
+                for l in 0..BLOCK {
+                    xs.extend(block.iter().map(|lanes| lanes[l]));
+                }
+            }
+            let _ = self.build(&mut order, &xs, dof);
+            self.xs = xs;
         }
-        let _ = self.build(&mut order, blocks, dof);
+        self.order = order;
     }
 
-    fn build(&mut self, idx: &mut [u32], blocks: &[[f64; BLOCK]], dof: usize) -> u32 {
-        let x = |i: u32, s: usize| blocks[i as usize / BLOCK * dof + s][i as usize % BLOCK];
+    /// The cells over nodes `idx`, their values node by node in `xs` (`dof` each).
+    fn build(&mut self, idx: &mut [u32], xs: &[f64], dof: usize) -> u32 {
+        let x = |i: u32, s: usize| xs[i as usize * dof + s];
         let at = self.cells.len() as u32;
         self.cells.push(Cell { split: 0, value: 0.0, child: [NONE; 2], first: 0, blocks: 0 });
         if idx.len() <= LEAF {
@@ -144,14 +167,14 @@ impl Buckets {
             self.cells[at as usize].blocks = blocks as u32;
             return at;
         }
-        let split = widest_joint(idx, dof, x);
+        let split = widest_joint(idx, xs, dof);
         let mid = idx.len() / 2;
         idx.select_nth_unstable_by(mid, |&a, &b| x(a, split).total_cmp(&x(b, split)));
         // Below `mid` at most the value, from `mid` at least.
         let value = x(idx[mid], split);
         let (left, right) = idx.split_at_mut(mid);
-        let l = self.build(left, blocks, dof);
-        let r = self.build(right, blocks, dof);
+        let l = self.build(left, xs, dof);
+        let r = self.build(right, xs, dof);
         self.cells[at as usize] = Cell { split: split as u32, value, child: [l, r], first: 0, blocks: 0 };
         at
     }
@@ -258,15 +281,23 @@ impl Buckets {
     }
 }
 
-/// The joint (of `dof`) along which the nodes `idx` spread widest, by their coordinates `x(node,
-/// joint)`; the first of equals.
-fn widest_joint(idx: &[u32], dof: usize, x: impl Fn(u32, usize) -> f64) -> usize {
+/// The joint (of `dof`) along which the nodes `idx` spread widest, their values node by node in
+/// `xs`; the first of equals.
+fn widest_joint(idx: &[u32], xs: &[f64], dof: usize) -> usize {
     let (mut split, mut widest) = (0, f64::NEG_INFINITY);
     for s in 0..dof {
-        let (lo, hi) = idx.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &i| {
-            let v = x(i, s);
-            (lo.min(v), hi.max(v))
-        });
+        // Comparisons, not `f64::min` and `max` with their NaN handling (a tree's values are
+        // finite; both pass a NaN over).
+        let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+        for &i in idx {
+            let v = xs.get(i as usize * dof + s).copied().unwrap_or(f64::NAN);
+            if v < lo {
+                lo = v;
+            }
+            if v > hi {
+                hi = v;
+            }
+        }
         if hi - lo > widest {
             (widest, split) = (hi - lo, s);
         }
