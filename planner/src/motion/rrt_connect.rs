@@ -28,6 +28,32 @@ const DD_MIN_RADIUS: f64 = 1.0;
 /// and shrinks by it when one fails again.
 const DD_ALPHA: f64 = 1e-4;
 
+/// Extensions from a root found trapped, while its tree is still its roots alone, before the
+/// tree steps from its roots at [`STUCK_ROOT_STEP`] of the range (see [`step_from`]).
+const STUCK_ROOT_TRAPS: u32 = 512;
+/// The share of the range a tree still stuck at its roots steps by (see [`step_from`]).
+const STUCK_ROOT_STEP: f64 = 0.3;
+
+/// The largest step of an extension from node `node` of a tree of `len` nodes whose first
+/// `roots` are its roots (the start, or the goals), `trapped` the extensions from that node
+/// found trapped so far: `range`, or [`STUCK_ROOT_STEP`] of it from a root trapped
+/// [`STUCK_ROOT_TRAPS`] times while the tree is still its roots alone.
+///
+/// A goal in a pocket (deep in a shelf, where every step of up to a radian is blocked) leaves
+/// its tree the goal alone while thousands of extensions from it fail, and balance gives that
+/// tree every sample; shorter steps find the way out. A tree that has grown at all keeps the
+/// range: shorter steps everywhere cost far more than they save (on VAMP's spherized Fetch
+/// problems, a node's steps halved after each trap: 3.4 times the time; after 256 traps in
+/// trees under 16 nodes: narrow passages between grown trees lost, see `docs/benchmarks.md`).
+/// On all 700 of VAMP's Fetch problems, three seeds: 255 of 2,037 runs changed, all on the
+/// bookshelves, their collision checks 25.8 M -> 14.6 M, samples 6.7 M -> 3.1 M, restarts
+/// 114 -> 45, the slowest run 935 -> 319 ms (per run a geometric mean of 0.98); the first 30
+/// problems of each family of the UR5, the Panda and the Baxter: 2, 0 and 12 of 630, 630 and
+/// 270 runs changed.
+fn step_from(range: f64, len: usize, roots: usize, node: usize, trapped: u32) -> f64 {
+    if len <= roots && node < roots && trapped >= STUCK_ROOT_TRAPS { range * STUCK_ROOT_STEP } else { range }
+}
+
 /// A tree of configurations stored flat (`dof` values per node), with parent links, and the
 /// index its nearest-neighbour queries run on.
 ///
@@ -61,6 +87,8 @@ struct Tree {
     /// Dynamic domain: samples farther than this from the node are not extended from it
     /// (infinite until an extension from the node fails).
     radius: Vec<f64>,
+    /// Extensions from each node found trapped (see [`step_from`]).
+    trapped: Vec<u32>,
     /// The k-d tree of buckets answering from [`SCAN_BELOW`] nodes; `None` when the tree
     /// answers by a plain scan of its nodes (the tests' reference).
     buckets: Option<Buckets>,
@@ -208,6 +236,7 @@ impl Tree {
             period,
             query: Vec::new(),
             radius: Vec::with_capacity(NODES),
+            trapped: Vec::with_capacity(NODES),
             buckets: (indexed && dof > 0).then(|| Buckets::new(dof, approx)),
         }
     }
@@ -241,6 +270,7 @@ impl Tree {
         self.certified.push(certified);
         self.alive.push(true);
         self.radius.push(f64::INFINITY);
+        self.trapped.push(0);
         if let Some(b) = &mut self.buckets
             && i + 1 >= SCAN_BELOW
             && b.stale(i + 1)
@@ -456,8 +486,11 @@ pub(crate) fn plan<V: StateValidity>(
             Some(a.nearest(&validity.space, &sample))
         };
         if let Some(near) = near {
-            match extend(a, validity, &sample, range, Some(near), &mut buf, probe, false) {
+            let a_roots = if start_is_a { 1 } else { goals.len() };
+            let step = step_from(range, a.len(), a_roots, near, a.trapped[near]);
+            match extend(a, validity, &sample, step, Some(near), &mut buf, probe, false) {
                 Step::Trapped => {
+                    a.trapped[near] = a.trapped[near].saturating_add(1);
                     if settings.rrt_dynamic_domain {
                         let r = &mut a.radius[near];
                         *r = if r.is_finite() { (*r * (1.0 - DD_ALPHA)).max(DD_MIN_RADIUS) } else { DD_RADIUS };
@@ -474,10 +507,14 @@ pub(crate) fn plan<V: StateValidity>(
         if let Some(new) = new {
             target.clear();
             target.extend_from_slice(a.node(new));
-            // Connect: b runs straight at the new node until it gets there or is blocked.
+            // Connect: b runs straight at the new node until it gets there or is blocked (from
+            // a tree stuck at its roots, by the shorter step).
+            let b_roots = if start_is_a { goals.len() } else { 1 };
             let mut from = None;
             loop {
-                match extend(b, validity, &target, range, from, &mut connect_buf, probe, true) {
+                let roots = 0..b_roots.min(b.len());
+                let b_step = roots.map(|r| step_from(range, b.len(), b_roots, r, b.trapped[r])).fold(range, f64::min);
+                match extend(b, validity, &target, b_step, from, &mut connect_buf, probe, true) {
                     Step::Reached(j) => {
                         let (si, gi) = if start_is_a { (new, j) } else { (j, new) };
                         // Path nodes as (in the start tree, index). The meeting configuration
@@ -894,6 +931,22 @@ mod tests {
     }
 
     /// Node `q` (child of `parent`) added to both trees, then node `victim` cut from both.
+    #[test]
+    fn only_a_tree_stuck_at_its_roots_steps_shorter() {
+        let t = STUCK_ROOT_TRAPS;
+        let short = 1.0 * STUCK_ROOT_STEP;
+        // A lone root trapped often enough: the shorter step; a hair less: the range.
+        assert_eq!(step_from(1.0, 1, 1, 0, t), short);
+        assert_eq!(step_from(1.0, 1, 1, 0, t - 1), 1.0);
+        // Two goals, the tree still the two: each root by its own count.
+        assert_eq!(step_from(1.0, 2, 2, 1, t), short);
+        assert_eq!(step_from(1.0, 2, 2, 0, 0), 1.0);
+        // A tree that has grown, or a node that is not a root: the range, however trapped.
+        assert_eq!(step_from(1.0, 2, 1, 0, u32::MAX), 1.0);
+        assert_eq!(step_from(1.0, 3, 2, 2, u32::MAX), 1.0);
+        const { assert!(STUCK_ROOT_STEP > 0.0 && STUCK_ROOT_STEP < 1.0) };
+    }
+
     fn grow_both(trees: [&mut Tree; 2], q: &[f64], parent: u32, victim: Option<usize>) {
         for t in trees {
             t.push(q, parent, false);
