@@ -930,7 +930,6 @@ mod tests {
         }
     }
 
-    /// Node `q` (child of `parent`) added to both trees, then node `victim` cut from both.
     #[test]
     fn only_a_tree_stuck_at_its_roots_steps_shorter() {
         let t = STUCK_ROOT_TRAPS;
@@ -947,6 +946,7 @@ mod tests {
         const { assert!(STUCK_ROOT_STEP > 0.0 && STUCK_ROOT_STEP < 1.0) };
     }
 
+    /// Node `q` (child of `parent`) added to both trees, then node `victim` cut from both.
     fn grow_both(trees: [&mut Tree; 2], q: &[f64], parent: u32, victim: Option<usize>) {
         for t in trees {
             t.push(q, parent, false);
